@@ -1,0 +1,268 @@
+"""Quasi-static linear thermo-elasticity: supports, solves and adjoint influence operators.
+
+    −∇·σ = 0,  σ = C : (ε(u) − α (T − T_ref) I)
+
+Displacements are in m.  Because the thermal load is linear in T, any linear
+output of the displacement, ``y = L u``, is a linear functional of the
+temperature: ``y = L K⁻¹ F (T − T_ref) = G (T − T_ref)``.  ``influence``
+computes the rows of G by one adjoint solve ``K z = Lᵀ`` per output, so a
+transient run needs no elastic solve per step.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from . import elastic_forms
+from .errors import FEAInputError, require_finite
+from .lagrange import LagrangeSpace, barycentric_gradients
+from .linsolve import factorize
+from .materials import per_tet
+
+#: Below this many free dofs a sparse direct factorisation is used, above it AMG.
+DIRECT_SOLVE_LIMIT = 20_000
+#: Relative residual required of the iterative solves.
+AMG_TOLERANCE = 1e-10
+
+AXES = "xyz"
+
+
+def rigid_body_modes(points):
+    """The six rigid-body displacement fields on ``points`` as a (3N, 6) array (3 translations, 3 rotations)."""
+    c = points - points.mean(axis=0)
+    R = np.zeros((len(points), 3, 6))
+    R[:, 0, 0] = R[:, 1, 1] = R[:, 2, 2] = 1.0
+    R[:, 1, 3], R[:, 2, 3] = -c[:, 2], c[:, 1]      # rotation about x
+    R[:, 0, 4], R[:, 2, 4] = c[:, 2], -c[:, 0]      # rotation about y
+    R[:, 0, 5], R[:, 1, 5] = -c[:, 1], c[:, 0]      # rotation about z
+    return R.reshape(-1, 6)
+
+
+class _StiffnessSolver:
+    """Solves K_ff x = b for many right-hand sides with one factorisation or one AMG hierarchy."""
+
+    def __init__(self, K_ff, near_nullspace, backend=None):
+        self.n = K_ff.shape[0]
+        if self.n <= DIRECT_SOLVE_LIMIT:
+            self.kind = "direct"
+            self._solve = factorize(K_ff, symmetric_positive_definite=True, backend=backend)
+        else:
+            import pyamg
+
+            self.kind = "amg"
+            self.K = sp.csr_matrix(K_ff)
+            # Energy-minimising prolongation with the rigid-body modes as near-null space
+            # halves the CG iterations of the default Jacobi smoothing on these meshes.
+            self.hierarchy = pyamg.smoothed_aggregation_solver(
+                self.K, B=near_nullspace, symmetry="symmetric", smooth="energy")
+
+    def __call__(self, b):
+        if self.kind == "direct":
+            return self._solve(b)
+        x = self.hierarchy.solve(b, tol=AMG_TOLERANCE, accel="cg", maxiter=1000)
+        relative = np.linalg.norm(b - self.K @ x) / max(np.linalg.norm(b), 1e-300)
+        if relative > 100 * AMG_TOLERANCE:
+            raise RuntimeError(f"AMG-CG stopped at relative residual {relative:.1e} "
+                               f"(required {AMG_TOLERANCE:.0e}); the elastic solve did not converge")
+        return x
+
+
+class ElasticProblem:
+    """Linear thermo-elastic problem on a :class:`~fea.mesh.TetMesh`.
+
+    Parameters
+    ----------
+    mesh : TetMesh
+    materials : mapping region → :class:`~fea.materials.Material` (E, ν, α used)
+    degree : 1 or 2, the displacement element
+    reference_temperature : T_ref in °C, the stress-free temperature
+    """
+
+    def __init__(self, mesh, materials, degree=2, reference_temperature=20.0, backend=None):
+        self.mesh = mesh
+        self.space = LagrangeSpace(mesh.points, mesh.tets, degree)
+        self.reference_temperature = float(require_finite("reference_temperature", reference_temperature))
+        E = per_tet(mesh, materials, "youngs_modulus")
+        nu = per_tet(mesh, materials, "poisson_ratio")
+        self.lame_lambda = E * nu / ((1 + nu) * (1 - 2 * nu))
+        self.lame_mu = E / (2 * (1 + nu))
+        self.thermal_stress_modulus = per_tet(mesh, materials, "thermal_stress_modulus")
+        self.backend = backend
+        self._constrained = {}     # dof -> description
+        self._stiffness = None
+        self._solver = None
+        self._load_operators = {}
+        self._grad_lambda, self._volumes = barycentric_gradients(mesh.points, mesh.tets)
+
+    # ---------------------------------------------------------------- supports
+    def _constrain(self, nodes, components, label):
+        for axis in components:
+            if axis not in AXES:
+                raise FEAInputError(f"{label}: component {axis!r} is not one of 'x', 'y', 'z'")
+            for node in np.atleast_1d(nodes):
+                self._constrained[3 * int(node) + AXES.index(axis)] = label
+        self._solver = None
+
+    def add_point_support(self, point, components="xyz", tolerance=1e-6, name=None):
+        """Fix displacement components at the mesh vertex at ``point`` (m).
+
+        The vertex must lie within ``tolerance`` m of the point, so a support
+        never lands silently somewhere else.
+        """
+        point = np.asarray(require_finite("support point", point), float)
+        d = np.linalg.norm(self.mesh.points - point, axis=1)
+        node = int(np.argmin(d))
+        label = name or f"support at {tuple(point)}"
+        if d[node] > tolerance:
+            raise FEAInputError(f"{label}: no mesh vertex within {tolerance} m (nearest {d[node]:.3e} m away)")
+        self._constrain(node, components, label)
+        return node
+
+    def add_kinematic_mount(self, first, second, third, tolerance=1e-6):
+        """A statically determinate 3-2-1 mount on three vertices that leaves free thermal growth unrestrained.
+
+        ``first`` is fixed in x, y, z; ``second`` in the two axes normal to
+        the line first→second; ``third`` in the axis normal to the plane of
+        the three points.  The line and the plane must be axis-aligned.
+        """
+        p = [np.asarray(x, float) for x in (first, second, third)]
+        line = _axis_of(p[1] - p[0], "the line from the first to the second mount point")
+        normal = _axis_of(np.cross(p[1] - p[0], p[2] - p[0]), "the normal of the mount plane")
+        self.add_point_support(p[0], "xyz", tolerance, "3-2-1 mount point 1")
+        self.add_point_support(p[1], AXES.replace(line, ""), tolerance, "3-2-1 mount point 2")
+        self.add_point_support(p[2], normal, tolerance, "3-2-1 mount point 3")
+
+    def add_fixed_face(self, group, components="xyz"):
+        """Fix the given displacement components on every node of a facet group."""
+        nodes = self.space.facet_nodes(*self.mesh.facet_group(group))
+        self._constrain(nodes, components, f"fixed face {group!r}")
+
+    def add_roller_face(self, group):
+        """Fix the normal displacement on a planar, axis-aligned facet group (it may slide in-plane)."""
+        tet, local = self.mesh.facet_group(group)
+        _, normals, _ = self.mesh.facet_geometry(tet, local)
+        axis = _axis_of(normals.mean(axis=0), f"roller face {group!r}")
+        if np.abs(normals[:, AXES.index(axis)]).min() < 1 - 1e-6:
+            raise FEAInputError(f"roller face {group!r} is not planar: its normals vary")
+        self._constrain(self.space.facet_nodes(tet, local), axis, f"roller face {group!r}")
+
+    # ---------------------------------------------------------------- assembly
+    @property
+    def n_dofs(self):
+        return 3 * self.space.n_nodes
+
+    @property
+    def stiffness(self):
+        """The stiffness matrix K (3N × 3N, N/m), assembled once."""
+        if self._stiffness is None:
+            self._stiffness = elastic_forms.elastic_stiffness(
+                self.space, self._grad_lambda, self._volumes, self.lame_lambda, self.lame_mu)
+        return self._stiffness
+
+    def thermal_load_operator(self, thermal_system=None):
+        """F with ``F (T − T_ref)`` the thermal load vector; T on the thermal nodes of ``thermal_system``."""
+        key = id(thermal_system)
+        if key not in self._load_operators:
+            if thermal_system is None:
+                tets, n = self.mesh.tets, self.mesh.n_nodes
+            else:
+                tets, n = thermal_system.tets, thermal_system.n_nodes
+            self._load_operators[key] = elastic_forms.thermal_load_operator(
+                self.space, self._grad_lambda, self._volumes, self.thermal_stress_modulus, tets, n)
+        return self._load_operators[key]
+
+    def _check_supports(self):
+        """Raise unless every connected body has its six rigid-body motions restrained."""
+        if not self._constrained:
+            raise FEAInputError("the elastic problem has no support: add a 3-2-1 mount, a fixed face or rollers")
+        n_nodes = self.space.n_nodes
+        en = self.space.element_nodes
+        adjacency = sp.coo_matrix((np.ones(en.size - len(en)),
+                                   (np.repeat(en[:, 0], en.shape[1] - 1), en[:, 1:].ravel())),
+                                  shape=(n_nodes, n_nodes))
+        n_bodies, body = connected_components(adjacency, directed=False)
+        dofs = np.fromiter(self._constrained, dtype=np.int64)
+        modes = rigid_body_modes(self.space.node_points)
+        names = ["translation x", "translation y", "translation z",
+                 "rotation about x", "rotation about y", "rotation about z"]
+        for b in range(n_bodies):
+            mine = dofs[body[dofs // 3] == b]
+            nodes = np.flatnonzero(body == b)
+            scale = np.ptp(self.space.node_points[nodes], axis=0).max() or 1.0
+            R = modes[mine] / np.array([1, 1, 1, scale, scale, scale])
+            gram = R.T @ R
+            values, vectors = np.linalg.eigh(gram)
+            free = values < 1e-10 * max(values.max(), 1.0)
+            if free.any():
+                motions = sorted({names[int(np.argmax(np.abs(vectors[:, k])))] for k in np.flatnonzero(free)})
+                where = f" (body {b + 1} of {n_bodies})" if n_bodies > 1 else ""
+                raise FEAInputError(f"the elastic supports are insufficient{where}: {', '.join(motions)} "
+                                    "is not restrained")
+
+    def _free_solver(self):
+        if self._solver is None:
+            self._check_supports()
+            fixed = np.fromiter(self._constrained, dtype=np.int64)
+            free = np.setdiff1d(np.arange(self.n_dofs), fixed)
+            K = self.stiffness
+            K_ff = sp.csr_matrix(K[free][:, free])
+            nullspace = rigid_body_modes(self.space.node_points)[free]
+            self._solver = (free, _StiffnessSolver(K_ff, nullspace, self.backend))
+        return self._solver
+
+    # ---------------------------------------------------------------- solves
+    def solve_load(self, load):
+        """Displacements (3N,) for a load vector (or (3N, k) block) in N, zero at the supports."""
+        free, solver = self._free_solver()
+        load = np.asarray(load, dtype=float)
+        out = np.zeros(load.shape)
+        if load.ndim == 1:
+            out[free] = solver(load[free])
+        else:
+            for k in range(load.shape[1]):
+                out[free, k] = solver(load[free, k])
+        return out
+
+    def displacement(self, temperature, thermal_system=None):
+        """Displacement field (N, 3) in m for a temperature on thermal nodes (°C), by a direct solve."""
+        T = require_finite("temperature", temperature)
+        F = self.thermal_load_operator(thermal_system)
+        return self.solve_load(F @ (T - self.reference_temperature)).reshape(-1, 3)
+
+    def stress(self, displacement, temperature, thermal_system=None):
+        """Element-mean stress tensors (m, 3, 3) in Pa."""
+        tets = self.mesh.tets if thermal_system is None else thermal_system.tets
+        excess = np.asarray(temperature)[tets].mean(axis=1) - self.reference_temperature
+        return elastic_forms.element_stress(self.space, self._grad_lambda, np.ravel(displacement), excess,
+                                            self.lame_lambda, self.lame_mu, self.thermal_stress_modulus)
+
+    def point_rows(self, points, components, names=None, snap_distance=0.0):
+        """Sparse rows (k × 3N) evaluating displacement ``components[i]`` at ``points[i]``."""
+        tet, lam = self.mesh.locate(points, names=names, snap_distance=snap_distance)
+        values = self.space.shape_values(lam)                       # (k, nb)
+        comp = np.array([AXES.index(c) for c in components])
+        cols = 3 * self.space.element_nodes[tet] + comp[:, None]
+        rows = np.repeat(np.arange(len(tet)), values.shape[1])
+        return sp.csr_matrix((values.ravel(), (rows, cols.ravel())), shape=(len(tet), self.n_dofs))
+
+    def influence(self, rows, thermal_system=None):
+        """Adjoint influence matrix G (k × n_thermal) with ``rows @ u = G @ (T − T_ref)``.
+
+        One adjoint solve ``K z = rowᵀ`` per output row; units are those of
+        the rows per kelvin (m/K for displacement rows).
+        """
+        rows = sp.csr_matrix(rows)
+        Z = self.solve_load(rows.T.toarray())                       # K symmetric: adjoint = forward
+        return np.asarray((self.thermal_load_operator(thermal_system).T @ Z).T)
+
+
+def _axis_of(vector, label):
+    v = np.asarray(vector, float)
+    norm = np.linalg.norm(v)
+    if norm == 0:
+        raise FEAInputError(f"{label} is degenerate (the points coincide or are collinear)")
+    k = int(np.argmax(np.abs(v)))
+    if abs(v[k]) < (1 - 1e-9) * norm:
+        raise FEAInputError(f"{label} is not aligned with an axis: direction {tuple(np.round(v / norm, 4))}")
+    return AXES[k]

@@ -1,0 +1,36 @@
+"""The error type raised for bad input to the solver."""
+
+
+class FEAInputError(ValueError):
+    """Bad input to the FE solver: the message names the item and the value.
+
+    It derives from ``ValueError`` so callers that already guard against bad
+    values catch it, while the message, not a traceback from inside numpy or
+    scipy, tells the user what to fix.
+    """
+
+
+def require_finite(name, values):
+    """Raise :class:`FEAInputError` if ``values`` holds a NaN or an infinity."""
+    import numpy as np
+
+    arr = np.asarray(values, dtype=float)
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        index = tuple(int(i) for i in np.argwhere(bad)[0])
+        where = f" at index {index}" if arr.ndim else ""
+        raise FEAInputError(f"{name} must be finite, got {arr[bad][0]!r}{where}")
+    return arr
+
+
+def require_positive(name, value):
+    """Raise :class:`FEAInputError` unless ``value`` is a finite number > 0."""
+    import math
+
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise FEAInputError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(number) or number <= 0.0:
+        raise FEAInputError(f"{name} must be positive, got {value!r}")
+    return number

@@ -1,0 +1,359 @@
+"""Heat-conduction problems: materials, boundary conditions and sources → a linear thermal system.
+
+The assembled system is the semi-discrete, linear time-invariant model
+
+    M dT/dt + A T = B u(t) − r(T)
+
+with ``M`` the heat-capacity matrix (J/K), ``A`` conduction plus convection,
+linearised radiation and joint conductance (W/K), ``B`` the input matrix
+whose columns are the load vectors of named inputs (ambient temperatures in
+°C, powers in W, flux densities in W/m²) and ``r`` the part of full T⁴
+radiation the linearisation misses (zero unless full radiation is asked for).
+Fixed temperatures are eliminated.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from skfem import Basis, ElementTetP1, FacetBasis, MeshTet
+
+from . import heat_forms as forms
+from .contact import Joint, interface_matrix, joint_facets, split_nodes
+from .errors import FEAInputError, require_positive
+from .materials import per_tet
+from .mesh import LOCAL_FACES
+
+#: Units of each kind of input.
+INPUT_UNITS = {
+    "ambient": "°C",
+    "ambient_gradient": "K/m",
+    "power": "W",
+    "flux_density": "W/m²",
+    "temperature": "°C",
+}
+
+
+@dataclass
+class RadiationTerm:
+    """Full T⁴ radiation of one facet group, handled as a correction to its linearisation."""
+
+    group: str
+    basis: FacetBasis
+    emissivity: float
+    radiative_coefficient: float
+    ambient_column: int
+
+    def _fields(self, T, u):
+        return dict(temperature=self.basis.interpolate(T), ambient=float(u[self.ambient_column]),
+                    emissivity=self.emissivity, radiative_coefficient=self.radiative_coefficient)
+
+    def excess(self, T, u):
+        """Vector ∫ [εσ(T⁴ − T_amb⁴) − h_r (T − T_amb)] φ in W."""
+        return forms.radiation_excess.assemble(self.basis, **self._fields(T, u))
+
+    def tangent(self, T, u):
+        """Jacobian of :meth:`excess` with respect to T, W/K."""
+        return forms.radiation_tangent.assemble(self.basis, **self._fields(T, u))
+
+    def power_in(self, T, u):
+        """Net radiative power into the body, W (negative when it cools)."""
+        T_q = self.basis.interpolate(T)
+        T_amb = float(u[self.ambient_column])
+        flux = self.emissivity * forms.STEFAN_BOLTZMANN * (
+            (T_amb + forms.KELVIN) ** 4 - (T_q + forms.KELVIN) ** 4)
+        return float(np.sum(flux * self.basis.dx))
+
+
+@dataclass
+class ThermalSystem:
+    """The assembled linear thermal model ``M Ṫ + A T = B u − r(T)`` (see module docstring).
+
+    Temperatures live on *thermal nodes*: the mesh nodes, with those on joint
+    interfaces duplicated per side.  ``node_of`` maps each thermal node to
+    its mesh node and ``tets`` is the connectivity in thermal numbering.
+    """
+
+    mass: sp.csr_matrix
+    stiffness: sp.csr_matrix
+    input_matrix: sp.csr_matrix
+    input_names: list
+    input_units: list
+    mesh: object
+    tets: np.ndarray
+    node_of: np.ndarray
+    fixed_nodes: np.ndarray
+    fixed_matrix: sp.csr_matrix
+    radiation: list = field(default_factory=list)
+    heat_flows: dict = field(default_factory=dict)
+    constant_inputs: dict = field(default_factory=dict)
+
+    @property
+    def n_nodes(self):
+        return self.mass.shape[0]
+
+    @property
+    def n_inputs(self):
+        return len(self.input_names)
+
+    @property
+    def points(self):
+        """Coordinates of the thermal nodes, m."""
+        return self.mesh.points[self.node_of]
+
+    def input_index(self, name):
+        try:
+            return self.input_names.index(name)
+        except ValueError:
+            raise FEAInputError(f"unknown input {name!r}; inputs: {self.input_names}") from None
+
+    def fixed_values(self, u):
+        """Temperatures of the fixed nodes for input vector ``u``, °C."""
+        return self.fixed_matrix @ u
+
+    def stored_energy(self, T):
+        """∫ ρc T dV in J (relative to 0 °C)."""
+        return float(np.sum(self.mass @ T))
+
+    def power_in(self, T, u):
+        """Heat flow into the body through each load, W, keyed by load name."""
+        flows = {name: float(r_u @ u - r_T @ T) for name, (r_T, r_u) in self.heat_flows.items()}
+        for term in self.radiation:
+            flows[f"radiation:{term.group}"] = term.power_in(T, u)
+        return flows
+
+    def nodal_field(self, T):
+        """Temperature on mesh nodes (mean over the sides of split joint nodes), °C."""
+        total = np.bincount(self.node_of, weights=T, minlength=self.mesh.n_nodes)
+        count = np.bincount(self.node_of, minlength=self.mesh.n_nodes)
+        return total / np.maximum(count, 1)
+
+    def point_weights(self, points, names=None, snap_distance=0.0):
+        """Sparse (k × n) matrix giving the P1 temperature at ``points`` (barycentric)."""
+        tet, w = self.mesh.locate(points, names=names, snap_distance=snap_distance)
+        rows = np.repeat(np.arange(len(tet)), 4)
+        return sp.csr_matrix((w.ravel(), (rows, self.tets[tet].ravel())), shape=(len(tet), self.n_nodes))
+
+
+class HeatProblem:
+    """Collects materials, loads and boundary conditions, then assembles a :class:`ThermalSystem`.
+
+    Every time-varying quantity is a named *input*; its value over time is
+    supplied when the system is solved (see :mod:`fea.inputs`).  Numbers
+    given where an input name is expected are constant inputs.
+
+    Example
+    -------
+    >>> problem = HeatProblem(mesh, {0: CAST_IRON})          # doctest: +SKIP
+    >>> problem.add_convection("outside", 8.0, ambient="room")
+    >>> problem.add_heat_flux("bearing", power="bearing_W")
+    >>> system = problem.assemble()
+    """
+
+    def __init__(self, mesh, materials):
+        self.mesh = mesh
+        self.conductivity = per_tet(mesh, materials, "conductivity")
+        self.heat_capacity = per_tet(mesh, materials, "volumetric_heat_capacity")
+        self._inputs = {}
+        self._constants = {}
+        self._convection = []
+        self._fluxes = []
+        self._volume_sources = []
+        self._fixed = []
+        self._radiation = []
+        self._joints = []
+
+    # ---------------------------------------------------------------- inputs
+    def _input(self, name_or_value, kind, owner):
+        if isinstance(name_or_value, str):
+            name = name_or_value
+        else:
+            value = float(name_or_value)
+            if not np.isfinite(value):
+                raise FEAInputError(f"{owner}: value must be finite, got {name_or_value!r}")
+            name = f"const:{owner}"
+            self._constants[name] = value
+        known = self._inputs.get(name)
+        if known is not None and known != kind:
+            raise FEAInputError(f"input {name!r} is used as {known} and as {kind}")
+        self._inputs[name] = kind
+        return name
+
+    def _check_group(self, group):
+        self.mesh.facet_group(group)
+        return group
+
+    # ---------------------------------------------------------------- loads
+    def add_convection(self, group, convection_coefficient, ambient="ambient",
+                       ambient_gradient=None, reference_height=0.0):
+        """Convection ``h (T_amb − T)`` into the body on a facet group.
+
+        ``convection_coefficient`` h in W/(m² K).  ``ambient`` names the input
+        giving the ambient temperature (°C).  ``ambient_gradient`` optionally
+        names an input in K/m for vertical stratification:
+        ``T_amb(z) = ambient + gradient · (z − reference_height)``.
+        """
+        h = require_positive(f"convection coefficient on {group!r}", convection_coefficient)
+        self._check_group(group)
+        amb = self._input(ambient, "ambient", f"ambient of {group}")
+        grad = None if ambient_gradient is None else self._input(ambient_gradient, "ambient_gradient",
+                                                                 f"gradient of {group}")
+        self._convection.append((group, h, amb, grad, float(reference_height)))
+
+    def add_heat_flux(self, group, power=None, flux_density=None):
+        """Heat into the body over a facet group: total ``power`` (W, spread by area) or ``flux_density`` (W/m²)."""
+        if (power is None) == (flux_density is None):
+            raise FEAInputError(f"heat flux on {group!r}: give exactly one of power (W) or flux_density (W/m²)")
+        self._check_group(group)
+        if power is not None:
+            self._fluxes.append((group, self._input(power, "power", f"power on {group}"), True))
+        else:
+            self._fluxes.append((group, self._input(flux_density, "flux_density", f"flux on {group}"), False))
+
+    def add_volumetric_source(self, name, tets, power):
+        """Heat generated in tetrahedra ``tets`` (indices), total ``power`` in W spread uniformly by volume."""
+        tets = np.asarray(tets, dtype=np.int64)
+        if tets.size == 0:
+            raise FEAInputError(f"volumetric source {name!r} covers no tetrahedron")
+        self._volume_sources.append((name, tets, self._input(power, "power", f"source {name}")))
+
+    def add_fixed_temperature(self, group, temperature):
+        """Prescribe the temperature (°C) on a facet group's nodes."""
+        self._check_group(group)
+        self._fixed.append((group, self._input(temperature, "temperature", f"fixed T on {group}")))
+
+    def add_radiation(self, group, emissivity, ambient="ambient", linearise_about=None):
+        """Radiation to surroundings at the ambient temperature on a facet group.
+
+        With ``linearise_about`` (°C) the exchange is the linear
+        ``h_r (T − T_amb)``, h_r = 4εσ(T₀ + 273.15)³.  Without it the full
+        ``εσ (T⁴ − T_amb⁴)`` (kelvin) is solved by Newton iterations that
+        start from that linearisation about 20 °C.
+        """
+        eps = require_positive(f"emissivity on {group!r}", emissivity)
+        if eps > 1.0:
+            raise FEAInputError(f"emissivity on {group!r} must be at most 1, got {emissivity!r}")
+        self._check_group(group)
+        amb = self._input(ambient, "ambient", f"radiation ambient of {group}")
+        full = linearise_about is None
+        T0 = 20.0 if full else float(linearise_about)
+        h_r = 4.0 * eps * forms.STEFAN_BOLTZMANN * (T0 + forms.KELVIN) ** 3
+        self._radiation.append((group, eps, amb, h_r, full))
+
+    def add_contact(self, region_a, region_b, conductance):
+        """A joint between two regions with contact conductance h_c in W/(m² K)."""
+        self._joints.append(Joint(region_a, region_b, conductance))
+
+    # ---------------------------------------------------------------- assembly
+    def assemble(self):
+        """Assemble M, A, B once and return the :class:`ThermalSystem`."""
+        mesh = self.mesh
+        pairs = joint_facets(mesh, self._joints)
+        if pairs:
+            tets, node_of = split_nodes(mesh, pairs)
+        else:
+            tets, node_of = mesh.tets, np.arange(mesh.n_nodes)
+        n = len(node_of)
+        skmesh = MeshTet(np.ascontiguousarray(mesh.points[node_of].T), np.ascontiguousarray(tets.T))
+        element = ElementTetP1()
+        cell = Basis(skmesh, element, intorder=2)
+        nqp = cell.X.shape[1]
+        K = forms.conduction.assemble(cell, conductivity=np.repeat(self.conductivity[:, None], nqp, 1))
+        M = forms.capacity.assemble(cell, heat_capacity=np.repeat(self.heat_capacity[:, None], nqp, 1))
+        A = K + interface_matrix(mesh, pairs, tets, n)
+
+        names = list(self._inputs)
+        col = {name: i for i, name in enumerate(names)}
+        B = sp.lil_matrix((n, len(names)))
+        flows = {}
+        facet_index = _skfem_facets(skmesh, mesh, tets)
+
+        def facet_basis(group):
+            return FacetBasis(skmesh, element, facets=facet_index(*mesh.facet_group(group)), intorder=2)
+
+        for group, h, amb, grad, z_ref in self._convection:
+            fb = facet_basis(group)
+            H = forms.convection.assemble(fb, convection_coefficient=h)
+            A = A + H
+            b = forms.weighted_load.assemble(fb, weight=h)
+            B[:, col[amb]] += b[:, None]
+            r_u = np.zeros(len(names))
+            r_u[col[amb]] = b.sum()
+            if grad is not None:
+                bz = forms.weighted_load.assemble(fb, weight=h * (fb.global_coordinates().value[2] - z_ref))
+                B[:, col[grad]] += bz[:, None]
+                r_u[col[grad]] = bz.sum()
+            key = f"convection:{group}"
+            r_T_old, r_u_old = flows.get(key, (0.0, 0.0))
+            flows[key] = (r_T_old + np.asarray(H.sum(axis=0)).ravel(), r_u_old + r_u)
+
+        for group, name, total in self._fluxes:
+            fb = facet_basis(group)
+            b = forms.unit_load.assemble(fb)
+            if total:
+                b = b / b.sum()
+            B[:, col[name]] += b[:, None]
+            r_u = np.zeros(len(names))
+            r_u[col[name]] = b.sum()
+            flows[f"flux:{group}"] = (np.zeros(n), r_u)
+
+        for name, sel, power in self._volume_sources:
+            b = forms.unit_load.assemble(Basis(skmesh, element, elements=sel, intorder=2))
+            B[:, col[power]] += (b / b.sum())[:, None]
+            r_u = np.zeros(len(names))
+            r_u[col[power]] = 1.0
+            flows[f"source:{name}"] = (np.zeros(n), r_u)
+
+        radiation = []
+        for group, eps, amb, h_r, full in self._radiation:
+            fb = facet_basis(group)
+            H = forms.convection.assemble(fb, convection_coefficient=h_r)
+            A = A + H
+            b = forms.weighted_load.assemble(fb, weight=h_r)
+            B[:, col[amb]] += b[:, None]
+            if full:
+                radiation.append(RadiationTerm(group, fb, eps, h_r, col[amb]))
+            else:
+                r_u = np.zeros(len(names))
+                r_u[col[amb]] = b.sum()
+                flows[f"radiation:{group}"] = (np.asarray(H.sum(axis=0)).ravel(), r_u)
+
+        fixed_rows, fixed_cols = [], []
+        for group, name in self._fixed:
+            tet, loc = mesh.facet_group(group)
+            nodes = np.unique(tets[tet[:, None], LOCAL_FACES[loc]])
+            fixed_rows.append(nodes)
+            fixed_cols.append(np.full(len(nodes), col[name]))
+        if fixed_rows:
+            nodes = np.concatenate(fixed_rows)
+            cols = np.concatenate(fixed_cols)
+            # A node on two fixed groups takes the value of the last one given.
+            nodes, last = np.unique(nodes[::-1], return_index=True)
+            cols = cols[::-1][last]
+        else:
+            nodes, cols = np.zeros(0, np.int64), np.zeros(0, np.int64)
+        fixed_matrix = sp.csr_matrix((np.ones(len(nodes)), (np.arange(len(nodes)), cols)),
+                                     shape=(len(nodes), len(names)))
+        return ThermalSystem(
+            mass=sp.csr_matrix(M), stiffness=sp.csr_matrix(A), input_matrix=sp.csr_matrix(B),
+            input_names=names, input_units=[INPUT_UNITS[self._inputs[k]] for k in names],
+            mesh=mesh, tets=tets, node_of=node_of, fixed_nodes=nodes, fixed_matrix=fixed_matrix,
+            radiation=radiation, heat_flows=flows, constant_inputs=dict(self._constants),
+        )
+
+
+def _skfem_facets(skmesh, mesh, thermal_tets):
+    """Return a function mapping our (tet, local face) pairs to scikit-fem facet indices."""
+    t2f = skmesh.t2f
+    facets = np.sort(skmesh.facets, axis=0)
+
+    def index(tet, local):
+        ours = np.sort(thermal_tets[tet[:, None], LOCAL_FACES[local]], axis=1)
+        cand = t2f[:, tet]                                   # (4, k)
+        match = np.all(facets[:, cand].transpose(1, 2, 0) == ours[None], axis=2)  # (4, k)
+        if not match.any(axis=0).all():
+            raise FEAInputError("internal: a boundary facet has no scikit-fem facet")
+        return cand[np.argmax(match, axis=0), np.arange(len(tet))]
+
+    return index

@@ -1,0 +1,205 @@
+"""Time integration of a thermal system by the θ-method, and its steady state.
+
+    (M/Δt + θA) Tⁿ⁺¹ = (M/Δt − (1−θ)A) Tⁿ + B (θuⁿ⁺¹ + (1−θ)uⁿ) − θ r(Tⁿ⁺¹) − (1−θ) r(Tⁿ)
+
+θ = 1 is backward Euler, θ = ½ Crank–Nicolson.  The left-hand matrix is
+factorised once per distinct step size and kept in a cache, so a run with a
+constant step factorises once and a change of step reuses earlier factors.
+Full T⁴ radiation (the ``r`` term) is solved per step by chord iterations
+with the cached factor, switching to Newton with a fresh tangent if the chord
+contracts too slowly.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from .errors import FEAInputError
+from .linsolve import factorize
+
+#: Absolute change (K) below which the radiation iterations stop.
+NONLINEAR_TOLERANCE_K = 1e-9
+NONLINEAR_MAX_ITERATIONS = 50
+
+
+@dataclass
+class TransientResult:
+    """Outputs at the requested times, and any fields that were asked for.
+
+    ``outputs`` has one row per entry of ``times_s`` (the initial state
+    included) and one column per output; ``fields`` maps a time in s to the
+    temperature on thermal nodes (°C).
+    """
+
+    times_s: np.ndarray
+    outputs: np.ndarray | None
+    output_names: list
+    final_temperature: np.ndarray
+    fields: dict = field(default_factory=dict)
+    factorisations: int = 0
+
+
+class ThermalSolver:
+    """θ-method and steady-state solver for a :class:`~fea.heat.ThermalSystem`.
+
+    Parameters
+    ----------
+    system : ThermalSystem
+    theta : 1.0 (backward Euler) or 0.5 (Crank–Nicolson), or any value in [½, 1]
+    backend : sparse direct solver backend (see :mod:`fea.linsolve`)
+    """
+
+    def __init__(self, system, theta=1.0, backend=None):
+        if not 0.5 <= float(theta) <= 1.0:
+            raise FEAInputError(f"theta must lie in [0.5, 1] for an unconditionally stable scheme, got {theta!r}")
+        self.system = system
+        self.theta = float(theta)
+        self.backend = backend
+        n = system.n_nodes
+        self.fixed = system.fixed_nodes
+        self.free = np.setdiff1d(np.arange(n), self.fixed)
+        self._cache = {}
+        self.factorisations = 0
+
+    # ---------------------------------------------------------------- factors
+    def _restrict(self, matrix):
+        if len(self.fixed) == 0:
+            return sp.csc_matrix(matrix), None
+        m = sp.csr_matrix(matrix)
+        return sp.csc_matrix(m[self.free][:, self.free]), sp.csr_matrix(m[self.free][:, self.fixed])
+
+    def _factors(self, dt):
+        key = "steady" if dt is None else float(np.float64(dt).round(9))
+        if key not in self._cache:
+            s = self.system
+            if dt is None:
+                lhs, explicit = s.stiffness, None
+            else:
+                lhs = s.mass / dt + self.theta * s.stiffness
+                explicit = sp.csr_matrix(s.mass / dt - (1.0 - self.theta) * s.stiffness)
+            lhs = sp.csr_matrix(lhs)
+            lhs_ff, lhs_fd = self._restrict(lhs)
+            try:
+                solve = factorize(lhs_ff, symmetric_positive_definite=True, backend=self.backend)
+            except RuntimeError as exc:  # SuperLU: "Factor is exactly singular"
+                raise FEAInputError(
+                    "the thermal system is singular: no convection, radiation or fixed temperature "
+                    f"sets the temperature level ({exc})") from None
+            self.factorisations += 1
+            self._cache[key] = (lhs, lhs_ff, lhs_fd, explicit, solve)
+        return self._cache[key]
+
+    # ---------------------------------------------------------------- one solve
+    def _radiation(self, T, u):
+        r = np.zeros(self.system.n_nodes)
+        for term in self.system.radiation:
+            r += term.excess(T, u)
+        return r
+
+    def _solve(self, factors, rhs, g_new, weight, u_new, T_guess):
+        """Solve ``lhs T + weight·r(T) = rhs`` with fixed values ``g_new``."""
+        lhs, lhs_ff, lhs_fd, _, solve = factors
+        T = T_guess.copy()
+        if len(self.fixed):
+            T[self.fixed] = g_new
+            rhs_f = rhs[self.free] - lhs_fd @ g_new
+        else:
+            rhs_f = rhs
+        if not self.system.radiation:
+            T[self.free] = solve(rhs_f)
+            return T
+        previous = np.inf
+        tangent_solve = None
+        for _ in range(NONLINEAR_MAX_ITERATIONS):
+            residual = (lhs @ T + weight * self._radiation(T, u_new) - rhs)[self.free]
+            step = (tangent_solve or solve)(residual)
+            T[self.free] -= step
+            change = float(np.abs(step).max())
+            if change < NONLINEAR_TOLERANCE_K:
+                return T
+            if tangent_solve is None and change > 0.5 * previous:
+                tangent = lhs.copy()
+                for term in self.system.radiation:
+                    tangent = tangent + weight * term.tangent(T, u_new)
+                tangent_ff, _ = self._restrict(tangent)
+                tangent_solve = factorize(tangent_ff, symmetric_positive_definite=True, backend=self.backend)
+            previous = change
+        raise FEAInputError(
+            f"radiation iterations did not converge in {NONLINEAR_MAX_ITERATIONS} steps "
+            f"(last change {change:.2e} K); use a smaller time step")
+
+    # ---------------------------------------------------------------- public API
+    def steady_state(self, u, T_guess=None):
+        """Steady temperature (°C) for the constant input vector ``u``."""
+        u = np.asarray(u, dtype=float)
+        factors = self._factors(None)
+        rhs = self.system.input_matrix @ u
+        T0 = np.full(self.system.n_nodes, float(np.mean(u))) if T_guess is None else T_guess
+        return self._solve(factors, rhs, self.system.fixed_values(u), 1.0, u, T0)
+
+    def step(self, T, u_old, u_new, dt):
+        """Advance the temperature ``T`` (°C) by one step of ``dt`` s."""
+        factors = self._factors(dt)
+        th = self.theta
+        rhs = factors[3] @ T + self.system.input_matrix @ (th * u_new + (1.0 - th) * u_old)
+        if self.system.radiation and th < 1.0:
+            rhs -= (1.0 - th) * self._radiation(T, u_old)
+        return self._solve(factors, rhs, self.system.fixed_values(u_new), th, u_new, T)
+
+    def run(self, T0, times_s, schedule, outputs=None, field_times_s=(), max_step_s=None, progress=None):
+        """Integrate from ``times_s[0]`` through ``times_s``; record outputs at each time.
+
+        Parameters
+        ----------
+        T0 : initial temperature on thermal nodes (°C), or a number for a uniform start
+        times_s : increasing output times, s; the first is the initial time
+        schedule : :class:`~fea.inputs.InputSchedule` (or any object with ``sample(times)``)
+        outputs : :class:`~fea.outputs.OutputOperator` evaluated at every output time
+        field_times_s : times whose full temperature field is kept
+        max_step_s : split output intervals into equal sub-steps no longer than this
+        progress : optional callable ``progress(done, total)``
+        """
+        times = np.asarray(times_s, dtype=float)
+        if times.ndim != 1 or len(times) < 1:
+            raise FEAInputError("times_s must be a 1-D array with at least the initial time")
+        if np.any(np.diff(times) <= 0):
+            i = int(np.flatnonzero(np.diff(times) <= 0)[0])
+            raise FEAInputError(f"times must increase strictly: t[{i + 1}] = {times[i + 1]} s follows t[{i}] = {times[i]} s")
+        n = self.system.n_nodes
+        T = np.full(n, float(T0)) if np.ndim(T0) == 0 else np.array(T0, dtype=float)
+        if T.shape != (n,):
+            raise FEAInputError(f"initial temperature has shape {T.shape}, the system has {n} nodes")
+        if not np.isfinite(T).all():
+            raise FEAInputError("initial temperature holds a NaN or an infinity")
+        intervals = np.diff(times)
+        substeps = np.ones(len(intervals), dtype=int) if max_step_s is None else \
+            np.maximum(1, np.ceil(intervals / float(max_step_s) - 1e-9).astype(int))
+        step_times = np.concatenate([[times[0]]] + [
+            times[k] + intervals[k] * np.arange(1, s + 1) / s for k, s in enumerate(substeps)])
+        u_all = schedule.sample(step_times)
+        if len(self.fixed):
+            T[self.fixed] = self.system.fixed_values(u_all[0])
+        wanted = {int(np.argmin(np.abs(times - float(t)))) for t in field_times_s}
+        record = outputs is not None
+        history = np.empty((len(times), outputs.n_outputs)) if record else None
+        fields = {}
+        if record:
+            history[0] = outputs.apply(T)
+        if 0 in wanted:
+            fields[float(times[0])] = T.copy()
+        j = 0
+        for k, s in enumerate(substeps):
+            dt = intervals[k] / s
+            for _ in range(s):
+                T = self.step(T, u_all[j], u_all[j + 1], dt)
+                j += 1
+            if record:
+                history[k + 1] = outputs.apply(T)
+            if k + 1 in wanted:
+                fields[float(times[k + 1])] = T.copy()
+            if progress is not None:
+                progress(k + 1, len(intervals))
+        return TransientResult(times, history, list(outputs.names) if record else [], T, fields,
+                               self.factorisations)

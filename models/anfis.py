@@ -1,0 +1,407 @@
+"""First-order Takagi–Sugeno ANFIS with Gaussian membership functions (Jang 1993; thesis §3.3).
+
+Layers, for inputs x ∈ R^d and rules r = 1..R:
+
+1. ``μ_{r,d}(x_d) = exp(-(x_d - c_{r,d})² / (2 σ_{r,d}²))``
+2. firing strength ``w_r = Π_d μ_{r,d}(x_d)``
+3. normalisation ``w̄_r = w_r / Σ_s w_s``
+4. consequents ``f_r = p_r · x + q_r``
+5. output ``F = Σ_r w̄_r f_r``
+
+Structure: ``init="grid"`` gives ``n_mfs`` MFs per input and one rule per
+combination (R = n_mfs^d); ``init="fcm"`` gives genfis3-style multivariate
+rules, one per fuzzy c-means cluster of the joint input–output data, each
+with its own MF per input (the thesis's ANFIS-FCM).
+
+Training is Jang's hybrid rule: the consequents are always the least-squares
+solution for the current premises, and the premises (centres and widths)
+move by one of two documented updates (``premise_update``):
+
+* ``"jang"`` (default, as MATLAB ``anfis``): a normalised steepest-descent
+  step, the premise vector moves by κ along ``-∇E/‖∇E‖``. κ starts at
+  ``step_size`` (0.01), grows ×``step_increase`` (1.1) after four
+  consecutive error decreases and shrinks ×``step_decrease`` (0.9) after two
+  consecutive increase–decrease oscillations.
+* ``"levenberg-marquardt"``: a damped Gauss–Newton step on the premise
+  Jacobian (consequents held fixed while it is formed); a step is kept only
+  if the training error falls, the damping shrinks ×1/3 on success and grows
+  ×4 on failure. Jang's first-order rule stalls on some problems with
+  Gaussian MFs (on the two-input sinc it sits at RMSE ≈ 0.034, a plateau of
+  the symmetric solution); this update leaves it in tens of epochs.
+
+Every premise step is followed by a least-squares solve, so training ends
+with a final LSE after the last premise step and the consequents are never
+one step stale. With a checking set, the parameters of the epoch with the
+lowest checking RMSE are kept.
+
+Conventions:
+
+* Inputs are standardised internally, ``z = (x - x_mean_) / x_scale_``; the
+  premise parameters ``mf_centers_``, ``mf_sigmas_`` and consequents
+  ``consequents_`` live in z units, so the step size is scale-free.
+  :meth:`ANFISRegressor.membership_parameters` returns them in input units.
+* The least-squares solve adds a Tikhonov term ``ridge × mean(diag ΦᵀΦ) × I``
+  (default 1e-8): it only guards against singular normal equations when rules
+  barely fire or inputs are collinear.
+* **Outside the training range** the firing strengths are normalised in
+  log-space with a max-shift, ``w̄ = exp(log w - max log w) / Σ …``, so w̄
+  never becomes 0/0: far from the data the rule whose MFs are nearest (in
+  σ-scaled distance) dominates and the output is that rule's linear
+  consequent, a linear extrapolation, never a silent 0.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import scipy.linalg
+from sklearn.base import BaseEstimator, RegressorMixin
+from sklearn.utils.validation import check_is_fitted
+
+from ._validation import check_n_features, check_positive_int, validate_x, validate_xy
+from .fcm import FuzzyCMeans
+
+_SIGMA_FLOOR = 1e-3  # z units; keeps a Gaussian MF from collapsing to a spike
+
+
+def _standardise(X):
+    mean = X.mean(axis=0)
+    scale = X.std(axis=0)
+    scale[scale == 0.0] = 1.0
+    return mean, scale
+
+
+def _log_firing(Z, centers, sigmas, rule_mfs):
+    """log w_r for every sample, (n_samples, n_rules); centres/σ are (d, n_mfs)."""
+    cols = np.arange(Z.shape[1])
+    c = centers[cols, rule_mfs]  # (R, d)
+    s = sigmas[cols, rule_mfs]
+    u = (Z[:, None, :] - c[None]) / s[None]
+    return -0.5 * np.einsum("nrd,nrd->nr", u, u)
+
+
+def _normalised_firing(Z, centers, sigmas, rule_mfs):
+    """w̄ via a max-shift in log space, so the nearest rule dominates far outside the data."""
+    log_w = _log_firing(Z, centers, sigmas, rule_mfs)
+    log_w -= log_w.max(axis=1, keepdims=True)
+    w = np.exp(log_w)
+    return w / w.sum(axis=1, keepdims=True)
+
+
+def _with_bias(Z):
+    return np.hstack([Z, np.ones((Z.shape[0], 1))])
+
+
+def _output(wbar, Z1, consequents):
+    f = Z1 @ consequents.T  # (n, R)
+    return np.einsum("nr,nr->n", wbar, f), f
+
+
+def _least_squares(wbar, Z1, y, ridge):
+    """Consequents (R, d+1) minimising ‖Φθ - y‖² + ridge·mean(diag ΦᵀΦ)‖θ‖²."""
+    n, R = wbar.shape
+    phi = (wbar[:, :, None] * Z1[:, None, :]).reshape(n, -1)
+    gram = phi.T @ phi
+    gram[np.diag_indices_from(gram)] += ridge * max(np.trace(gram) / gram.shape[0], 1e-300)
+    theta = scipy.linalg.solve(gram, phi.T @ y, assume_a="pos")
+    return theta.reshape(R, Z1.shape[1])
+
+
+def _premise_jacobian(Z, wbar, f, F, centers, sigmas, rule_mfs):
+    """∂F_n/∂[centres, σ] with the consequents held fixed, shape (n_samples, 2·d·n_mfs).
+
+    Uses ∂F/∂log w_r = w̄_r (f_r - F) and, for a Gaussian MF,
+    ∂log w_r/∂c = (z - c)/σ², ∂log w_r/∂σ = (z - c)²/σ³. Rules that share an
+    MF (grid partition) add their contributions to the same column.
+    """
+    n, d = Z.shape
+    cols = np.arange(d)
+    c = centers[cols, rule_mfs]  # (R, d)
+    s = sigmas[cols, rule_mfs]
+    a = wbar * (f - F[:, None])  # (n, R)
+    u = Z[:, None, :] - c[None]  # (n, R, d)
+    share = np.zeros(rule_mfs.shape + (centers.shape[1],))  # rule r uses MF m of input d
+    share[np.arange(rule_mfs.shape[0])[:, None], cols[None, :], rule_mfs] = 1.0
+    j_c = np.einsum("nr,nrd,rdm->ndm", a, u / s**2, share)
+    j_s = np.einsum("nr,nrd,rdm->ndm", a, u * u / s**3, share)
+    return np.hstack([j_c.reshape(n, -1), j_s.reshape(n, -1)])
+
+
+def _adapt_step(step, errors, increase, decrease):
+    """Jang's step-size rule on the last five training errors."""
+    if len(errors) < 5:
+        return step
+    e = errors[-5:]
+    d = np.diff(e)
+    if np.all(d < 0):
+        return step * increase
+    if d[0] > 0 and d[1] < 0 and d[2] > 0 and d[3] < 0:
+        return step * decrease
+    return step
+
+
+class ANFISRegressor(RegressorMixin, BaseEstimator):
+    """First-order Sugeno ANFIS with Gaussian MFs and hybrid learning.
+
+    Parameters
+    ----------
+    init : {"fcm", "grid"}, default "fcm"
+        Rule-base construction: multivariate FCM (one rule per cluster) or
+        grid partition (``n_mfs`` per input, ``n_mfs**n_features`` rules).
+    n_rules : int, default 3
+        Number of FCM clusters/rules (``init="fcm"``; thesis Machine B: 3).
+    n_mfs : int, default 2
+        MFs per input (``init="grid"``).
+    epochs : int, default 100
+        Premise steps; each is followed by a least-squares solve.
+    step_size, step_increase, step_decrease : float
+        ``"jang"`` only: initial normalised step κ (z units) and its
+        ×1.1 / ×0.9 adaptation.
+    ridge : float, default 1e-8
+        Relative Tikhonov term of the consequent least squares.
+    validation_fraction : float or None
+        If no checking set is passed to ``fit``, hold out this final
+        (chronologically last) fraction of the training rows as one.
+    n_iter_no_change : int or None
+        Stop when the checking error has not improved for this many epochs.
+    error_goal : float, default 0.0
+        Stop once the training RMSE is at or below this value.
+    fcm_m : float, default 2.0
+        FCM fuzziness for ``init="fcm"``.
+    premise_update : {"jang", "levenberg-marquardt"}, default "jang"
+        Premise learning rule (see the module docstring).
+    random_state : int, RandomState or None
+        Seeds the FCM initialisation (grid init is deterministic).
+
+    Attributes
+    ----------
+    x_mean_, x_scale_ : (n_features,) input standardisation
+    mf_centers_, mf_sigmas_ : (n_features, n_mfs) Gaussian MF parameters in z units
+    rule_mfs_ : (n_rules, n_features) int, which MF of each input a rule uses
+    consequents_ : (n_rules, n_features + 1) ``[p_r, q_r]`` in z units
+    training_rmse_, checking_rmse_ : (n_epochs,) history (checking is empty without a set)
+    best_epoch_ : epoch whose parameters were kept
+    n_iter_ : premise steps taken
+    """
+
+    def __init__(
+        self,
+        init="fcm",
+        n_rules=3,
+        n_mfs=2,
+        epochs=100,
+        step_size=0.01,
+        step_increase=1.1,
+        step_decrease=0.9,
+        ridge=1e-8,
+        validation_fraction=None,
+        n_iter_no_change=None,
+        error_goal=0.0,
+        fcm_m=2.0,
+        premise_update="jang",
+        random_state=None,
+    ):
+        self.init = init
+        self.n_rules = n_rules
+        self.n_mfs = n_mfs
+        self.epochs = epochs
+        self.step_size = step_size
+        self.step_increase = step_increase
+        self.step_decrease = step_decrease
+        self.ridge = ridge
+        self.validation_fraction = validation_fraction
+        self.n_iter_no_change = n_iter_no_change
+        self.error_goal = error_goal
+        self.fcm_m = fcm_m
+        self.premise_update = premise_update
+        self.random_state = random_state
+
+    # ----------------------------------------------------------------- init
+    def _initial_premises(self, Z, y):
+        d = Z.shape[1]
+        if self.init == "grid":
+            n_mfs = check_positive_int(self.n_mfs, "n_mfs")
+            lo, hi = Z.min(axis=0), Z.max(axis=0)
+            if n_mfs == 1:
+                centers = ((lo + hi) / 2.0)[:, None]
+                sigmas = np.maximum(hi - lo, 1.0)[:, None]
+            else:
+                centers = lo[:, None] + (hi - lo)[:, None] * np.linspace(0.0, 1.0, n_mfs)[None]
+                # neighbouring MFs cross at μ = 0.5
+                spacing = (hi - lo) / (n_mfs - 1)
+                sigmas = np.repeat((spacing / (2.0 * np.sqrt(2.0 * np.log(2.0))))[:, None], n_mfs, 1)
+            rule_mfs = np.array(list(itertools.product(range(n_mfs), repeat=d)), dtype=np.intp)
+        elif self.init == "fcm":
+            n_rules = check_positive_int(self.n_rules, "n_rules")
+            y_mean, y_scale = _standardise(y[:, None])
+            data = np.hstack([Z, (y[:, None] - y_mean) / y_scale])
+            fcm = FuzzyCMeans(n_clusters=n_rules, m=self.fcm_m, random_state=self.random_state).fit(data)
+            centers = fcm.cluster_centers_[:, :d].T.copy()  # (d, R)
+            um = fcm.membership_**self.fcm_m  # (n, R)
+            spread = np.einsum("nr,nrd->rd", um, (Z[:, None, :] - centers.T[None]) ** 2)
+            sigmas = np.sqrt(spread / um.sum(axis=0)[:, None]).T
+            rule_mfs = np.repeat(np.arange(n_rules, dtype=np.intp)[:, None], d, axis=1)
+        else:
+            raise ValueError(f"init must be 'fcm' or 'grid', got {self.init!r}.")
+        return centers, np.maximum(sigmas, _SIGMA_FLOOR), rule_mfs
+
+    def _n_rules_for(self, d):
+        if self.init == "grid":
+            return check_positive_int(self.n_mfs, "n_mfs") ** d
+        return check_positive_int(self.n_rules, "n_rules")
+
+    # ------------------------------------------------------------------ fit
+    def fit(self, X, y, X_check=None, y_check=None):
+        """Train on ``X`` (n_samples, n_features), ``y`` (n_samples,).
+
+        ``X_check``/``y_check`` form the checking set for early stopping
+        (best-on-checking parameters are kept); see ``validation_fraction``.
+        """
+        X, y = validate_xy(X, y, what="ANFISRegressor")
+        if X_check is None and y_check is None and self.validation_fraction:
+            n_check = int(round(X.shape[0] * self.validation_fraction))
+            if not 0 < n_check < X.shape[0]:
+                raise ValueError(f"validation_fraction={self.validation_fraction!r} leaves no data.")
+            X, X_check, y, y_check = X[:-n_check], X[-n_check:], y[:-n_check], y[-n_check:]
+        n_params = self._n_rules_for(X.shape[1]) * (X.shape[1] + 1)
+        validate_xy(X, y, min_samples=n_params, what=f"ANFISRegressor ({n_params} consequent parameters)")
+        has_check = X_check is not None or y_check is not None
+        if has_check:
+            X_check, y_check = validate_xy(X_check, y_check, what="the ANFIS checking set")
+            if X_check.shape[1] != X.shape[1]:
+                raise ValueError(f"X_check has {X_check.shape[1]} features but X has {X.shape[1]}.")
+        if self.premise_update not in ("jang", "levenberg-marquardt"):
+            raise ValueError(
+                f"premise_update must be 'jang' or 'levenberg-marquardt', got {self.premise_update!r}."
+            )
+        epochs = check_positive_int(self.epochs, "epochs", minimum=0)
+
+        self.x_mean_, self.x_scale_ = _standardise(X)
+        Z = (X - self.x_mean_) / self.x_scale_
+        Z1 = _with_bias(Z)
+        centers, sigmas, rule_mfs = self._initial_premises(Z, y)
+
+        def evaluate(centers, sigmas):
+            wbar = _normalised_firing(Z, centers, sigmas, rule_mfs)
+            theta = _least_squares(wbar, Z1, y, self.ridge)
+            F, f = _output(wbar, Z1, theta)
+            return wbar, theta, F, f, float(np.sqrt(np.mean((F - y) ** 2)))
+
+        if has_check:
+            Zc = (X_check - self.x_mean_) / self.x_scale_
+            Zc1 = _with_bias(Zc)
+
+        wbar, theta, F, f, rmse = evaluate(centers, sigmas)
+        train_hist, check_hist = [rmse], []
+        step, damping = float(self.step_size), 1e-3
+        best = None
+        epoch = 0
+        while True:
+            score = train_hist[-1]
+            if has_check:
+                wc = _normalised_firing(Zc, centers, sigmas, rule_mfs)
+                check_hist.append(float(np.sqrt(np.mean((_output(wc, Zc1, theta)[0] - y_check) ** 2))))
+                score = check_hist[-1]
+            if best is None or score <= best[0] or not has_check:
+                best = (score, epoch, centers, sigmas, theta)
+            stalled = (
+                has_check
+                and self.n_iter_no_change is not None
+                and epoch - best[1] >= self.n_iter_no_change
+            )
+            if epoch == epochs or train_hist[-1] <= self.error_goal or stalled:
+                break
+            J = _premise_jacobian(Z, wbar, f, F, centers, sigmas, rule_mfs)
+            if self.premise_update == "jang":
+                step = _adapt_step(step, train_hist, self.step_increase, self.step_decrease)
+                gradient = J.T @ (F - y)
+                norm = np.linalg.norm(gradient)
+                if norm == 0.0:
+                    break
+                centers, sigmas = self._moved(centers, sigmas, -step * gradient / norm)
+                wbar, theta, F, f, rmse = evaluate(centers, sigmas)
+            else:
+                moved = self._levenberg_marquardt_step(J, F - y, centers, sigmas, damping, evaluate, rmse)
+                if moved is None:
+                    break
+                centers, sigmas, (wbar, theta, F, f, rmse), damping = moved
+            train_hist.append(rmse)
+            epoch += 1
+
+        _, self.best_epoch_, self.mf_centers_, self.mf_sigmas_, self.consequents_ = best
+        self.rule_mfs_ = rule_mfs
+        self.training_rmse_ = np.asarray(train_hist)
+        self.checking_rmse_ = np.asarray(check_hist)
+        self.n_iter_ = epoch
+        self.n_features_in_ = X.shape[1]
+        return self
+
+    @staticmethod
+    def _moved(centers, sigmas, delta):
+        """Premises shifted by ``delta`` = [Δcentres, Δσ] (flat), σ kept above the floor."""
+        k = centers.size
+        return (
+            centers + delta[:k].reshape(centers.shape),
+            np.maximum(sigmas + delta[k:].reshape(sigmas.shape), _SIGMA_FLOOR),
+        )
+
+    def _levenberg_marquardt_step(self, J, residual, centers, sigmas, damping, evaluate, rmse):
+        """One accepted LM step, or None when 30 damping increases (×4 each) give no decrease."""
+        H = J.T @ J
+        g = J.T @ residual
+        # Marquardt scaling with a floor, so MFs that barely fire still get damped
+        scale = np.diag(H) + 1e-3 * max(np.trace(H) / H.shape[0], 1e-300)
+        for _ in range(30):
+            delta = np.linalg.solve(H + damping * np.diag(scale), -g)
+            trial = self._moved(centers, sigmas, delta)
+            state = evaluate(*trial)
+            if state[-1] < rmse:
+                return trial[0], trial[1], state, max(damping / 3.0, 1e-12)
+            damping *= 4.0
+        return None
+
+    # -------------------------------------------------------------- predict
+    def _z(self, X):
+        check_is_fitted(self, "consequents_")
+        X = validate_x(X, what="ANFISRegressor")
+        check_n_features(self, X)
+        return (X - self.x_mean_) / self.x_scale_
+
+    def normalised_firing_strengths(self, X) -> np.ndarray:
+        """w̄ (n_samples, n_rules) for ``X``; rows sum to 1 everywhere (see module doc)."""
+        return _normalised_firing(self._z(X), self.mf_centers_, self.mf_sigmas_, self.rule_mfs_)
+
+    def predict(self, X) -> np.ndarray:
+        """Sugeno output ``Σ w̄_r f_r`` for each row of ``X``."""
+        Z = self._z(X)
+        wbar = _normalised_firing(Z, self.mf_centers_, self.mf_sigmas_, self.rule_mfs_)
+        return _output(wbar, _with_bias(Z), self.consequents_)[0]
+
+    # ------------------------------------------------------------ listing
+    def membership_parameters(self):
+        """Gaussian MF centres and σ in input units, each (n_features, n_mfs)."""
+        check_is_fitted(self, "consequents_")
+        centers = self.x_mean_[:, None] + self.x_scale_[:, None] * self.mf_centers_
+        return centers, self.x_scale_[:, None] * self.mf_sigmas_
+
+    def rules_text(self, feature_names=None, output_name="out1") -> list[str]:
+        """Linguistic rules as in thesis Table 5-6, one string per rule.
+
+        FCM rules read ``If (T05 is T05cluster1) and … then (out1 is out1cluster1)``;
+        grid rules name MFs ``<input>mf<k>`` as MATLAB does.
+        """
+        check_is_fitted(self, "consequents_")
+        names = (
+            [f"in{j + 1}" for j in range(self.n_features_in_)]
+            if feature_names is None
+            else [str(n) for n in feature_names]
+        )
+        if len(names) != self.n_features_in_:
+            raise ValueError(f"expected {self.n_features_in_} feature names, got {len(names)}.")
+        term = "cluster" if self.init == "fcm" else "mf"
+        lines = []
+        for r, mfs in enumerate(self.rule_mfs_, start=1):
+            premise = " and ".join(f"({n} is {n}{term}{k + 1})" for n, k in zip(names, mfs))
+            lines.append(f"{r}. If {premise} then ({output_name} is {output_name}{term}{r})")
+        return lines

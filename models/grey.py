@@ -1,0 +1,211 @@
+"""Grey-system building blocks: AGO/IAGO, GM(1,1), GM(0,N) and GM(1,N) (thesis §3.4, §3.7).
+
+Conventions shared by every grey estimator in ``models``
+--------------------------------------------------------
+* ``X`` is (n_samples, n_features) and ``y`` is (n_samples,), both
+  **time-ordered** at a constant sampling interval; time is the sample index
+  k = 1..n, so coefficients are per sample.
+* Both are **zero-referenced**: the first sample is subtracted
+  (``x⁰(k) = x(k) - x(1)``, thesis Table 5-9), so signed changes of
+  temperature and displacement are modelled. ``predict(X)`` zero-references
+  its own ``X`` to its first row and returns ``y_reference_ + Δŷ``, where
+  ``y_reference_`` is the first training target. To continue a training run
+  (the thesis's "calibrate on the first stage, predict the rest"), pass the
+  whole input history from the training start and read off the tail.
+* These are time-series models: predictions depend on sample order and on
+  where the series starts, so scikit-learn's sample-order and subset
+  invariance checks do not apply to them (see ``tests/test_models_sklearn.py``).
+* Least squares uses ``lstsq`` (optionally with a relative ridge), never
+  ``(BᵀB)⁻¹``: the regressors are cumulative sums and highly collinear.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.signal import lfilter
+from sklearn.base import BaseEstimator, RegressorMixin
+from sklearn.utils.validation import check_is_fitted
+
+from ._validation import check_n_features, validate_series, validate_x, validate_xy
+
+
+def ago(x, axis: int = 0) -> np.ndarray:
+    """First-order accumulated generating operation ``x¹(k) = Σ_{j≤k} x⁰(j)`` (Eq 3.11)."""
+    return np.cumsum(np.asarray(x, dtype=np.float64), axis=axis)
+
+
+def iago(x1, axis: int = 0) -> np.ndarray:
+    """Inverse AGO ``x⁰(k) = x¹(k) - x¹(k-1)``, ``x⁰(1) = x¹(1)`` (Eq 3.12)."""
+    x1 = np.asarray(x1, dtype=np.float64)
+    return np.diff(x1, axis=axis, prepend=np.zeros_like(np.take(x1, [0], axis=axis)))
+
+
+def background_values(x1, axis: int = 0) -> np.ndarray:
+    """Mean-sequence ``z¹(k) = ½(x¹(k-1) + x¹(k))`` for k = 2..n (n-1 values)."""
+    x1 = np.asarray(x1, dtype=np.float64)
+    n = x1.shape[axis]
+    return 0.5 * (np.take(x1, range(n - 1), axis=axis) + np.take(x1, range(1, n), axis=axis))
+
+
+def grey_least_squares(B, Y, ridge: float = 0.0) -> np.ndarray:
+    """Solve ``B θ ≈ Y`` by lstsq, with a ridge ``ridge × mean(diag BᵀB)`` if ridge > 0."""
+    B = np.asarray(B, dtype=np.float64)
+    Y = np.asarray(Y, dtype=np.float64)
+    if ridge > 0.0:
+        lam = ridge * np.mean(np.sum(B * B, axis=0))
+        B = np.vstack([B, np.sqrt(lam) * np.eye(B.shape[1])])
+        Y = np.concatenate([Y, np.zeros(B.shape[1])])
+    return np.linalg.lstsq(B, Y, rcond=None)[0]
+
+
+def zero_reference(a) -> np.ndarray:
+    """Subtract the first sample (row) so every series starts at 0."""
+    a = np.asarray(a, dtype=np.float64)
+    return a - a[:1]
+
+
+# --------------------------------------------------------------------- GM(1,1)
+@dataclass(frozen=True)
+class GM11:
+    """GM(1,1): ``x⁰(k) + a z¹(k) = b``, whitened ``dx¹/dt + a x¹ = b``.
+
+    ``development_coefficient`` is a (per sample), ``grey_input`` is b (units
+    of x per sample). Fit with :meth:`fit`; :meth:`predict` returns the
+    time-response ``x̂⁰(1..n)`` restored by IAGO from
+    ``x̂¹(k+1) = (x⁰(1) - b/a) e^{-ak} + b/a``. GM(1,1) is a univariate
+    forecaster on the raw (not zero-referenced) series, as in the textbooks.
+    """
+
+    development_coefficient: float
+    grey_input: float
+    initial_value: float
+
+    @classmethod
+    def fit(cls, series) -> "GM11":
+        """Least-squares ``[a, b]`` from ``Y = [x⁰(2..n)]``, ``B = [-z¹(k), 1]``."""
+        x0 = validate_series(series, min_samples=3, what="GM(1,1) (2 parameters)")
+        z = background_values(ago(x0))
+        a, b = grey_least_squares(np.column_stack([-z, np.ones_like(z)]), x0[1:])
+        if a == 0.0:
+            raise ValueError("GM(1,1) development coefficient is 0: the series has no trend.")
+        return cls(float(a), float(b), float(x0[0]))
+
+    def predict(self, n_samples: int) -> np.ndarray:
+        """Model values ``x̂⁰(1..n_samples)`` (fit range and beyond)."""
+        a, b = self.development_coefficient, self.grey_input
+        k = np.arange(n_samples, dtype=np.float64)
+        x1 = (self.initial_value - b / a) * np.exp(-a * k) + b / a
+        return iago(x1)
+
+
+# -------------------------------------------------------- GM(0,N) and GM(1,N)
+def gm0n_influence(X, y, ridge: float = 0.0) -> np.ndarray:
+    """GM(0,N) influence weights θ_j (Eqs 3.21–3.25) of each column of X on y.
+
+    ``z₁¹(k) = Σ_j θ_j x_j¹(k)``, k = 2..n, on zero-referenced AGO series;
+    rank sensors by ``|θ_j|`` (thesis §4.3).
+    """
+    return GM0NRegressor(ridge=ridge).fit(X, y).coef_
+
+
+def gm1n_influence(X, y, ridge: float = 0.0) -> np.ndarray:
+    """GM(1,N) driving coefficients b_j (Eqs 3.27–3.30), the influence of each column on y."""
+    return GM1NRegressor(ridge=ridge).fit(X, y).coef_
+
+
+class GreySeriesRegressor(RegressorMixin, BaseEstimator):
+    """Base of the grey time-series estimators: zero-referencing, validation, tags.
+
+    Subclasses implement ``_fit_changes(X0, y0)`` and ``_predict_changes(X0)``
+    on zero-referenced arrays and set ``_n_parameters(n_features)``.
+    """
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        # grey models are fitted on short, time-ordered series; generic random
+        # data gives them low scores by design
+        tags.regressor_tags.poor_score = True
+        return tags
+
+    def _n_parameters(self, n_features: int) -> int:
+        raise NotImplementedError
+
+    def fit(self, X, y):
+        """Fit on time-ordered ``X`` (n_samples, n_features) and ``y`` (n_samples,)."""
+        X, y = validate_xy(X, y, what=type(self).__name__)
+        n_params = self._n_parameters(X.shape[1])
+        # k = 2..n gives n - 1 equations for n_params unknowns
+        validate_xy(X, y, min_samples=n_params + 1, what=f"{type(self).__name__} ({n_params} parameters)")
+        self.y_reference_ = float(y[0])
+        self.n_features_in_ = X.shape[1]
+        self._fit_changes(zero_reference(X), zero_reference(y))
+        return self
+
+    def predict(self, X) -> np.ndarray:
+        """``y_reference_ +`` the predicted change from the first row of ``X``."""
+        check_is_fitted(self, "y_reference_")
+        X = validate_x(X, what=type(self).__name__)
+        check_n_features(self, X)
+        return self.y_reference_ + self._predict_changes(zero_reference(X))
+
+
+class GM0NRegressor(GreySeriesRegressor):
+    """GM(0,N) predictor: ``x̂₁¹(k) = Σ_j θ_j x_j¹(k)``, restored by IAGO.
+
+    Since IAGO of a weighted sum of AGO series is the same weighted sum of
+    the original series, the prediction is ``Δŷ = X⁰ θ``: a zero-intercept
+    linear model whose weights are estimated in the AGO domain.
+
+    Attributes: ``coef_`` (θ, n_features), ``y_reference_``.
+    """
+
+    def __init__(self, ridge=0.0):
+        self.ridge = ridge
+
+    def _n_parameters(self, n_features):
+        return n_features
+
+    def _fit_changes(self, X0, y0):
+        self.coef_ = grey_least_squares(ago(X0)[1:], background_values(ago(y0)), self.ridge)
+
+    def _predict_changes(self, X0):
+        return X0 @ self.coef_
+
+
+class GM1NRegressor(GreySeriesRegressor):
+    """GM(1,N) predictor from the grey difference equation itself.
+
+    Least squares with the corrected design matrix
+    ``B = [-z₁¹(k), x₂¹(k) … x_N¹(k)]``, k = 2..n (Eqs 3.27–3.30; the thesis
+    misprints the sign and one column), for the development coefficient a
+    and driving coefficients b_j. Prediction:
+
+    ``x₁⁰(k) + a·½(x₁¹(k-1) + x₁¹(k)) = F(k)``, ``F(k) = Σ_j b_j x_j¹(k)``,
+    solved recursively: ``x₁¹(k) = ρ x₁¹(k-1) + F(k)/(1 + a/2)`` with
+    ``ρ = (1 - a/2)/(1 + a/2)``, then IAGO. This avoids the textbook
+    time-response formula, which assumes constant drivers.
+
+    Attributes: ``development_coefficient_`` (a), ``coef_`` (b, n_features).
+    """
+
+    def __init__(self, ridge=0.0):
+        self.ridge = ridge
+
+    def _n_parameters(self, n_features):
+        return n_features + 1
+
+    def _fit_changes(self, X0, y0):
+        X1, y1 = ago(X0), ago(y0)
+        B = np.column_stack([-background_values(y1), X1[1:]])
+        theta = grey_least_squares(B, y0[1:], self.ridge)
+        self.development_coefficient_ = float(theta[0])
+        self.coef_ = theta[1:]
+
+    def _predict_changes(self, X0):
+        a = self.development_coefficient_
+        drive = ago(X0) @ self.coef_
+        with np.errstate(over="ignore", invalid="ignore"):
+            x1 = lfilter([1.0 / (1.0 + a / 2.0)], [1.0, -(1.0 - a / 2.0) / (1.0 + a / 2.0)], drive)
+        return iago(x1)
