@@ -19,7 +19,7 @@ def require_finite(name, values):
     if bad.any():
         index = tuple(int(i) for i in np.argwhere(bad)[0])
         where = f" at index {index}" if arr.ndim else ""
-        raise FEAInputError(f"{name} must be finite, got {arr[bad][0]!r}{where}")
+        raise FEAInputError(f"{name} must be finite, got {float(arr[bad][0])!r}{where}")
     return arr
 
 

@@ -120,7 +120,8 @@ class ThermalSystem:
         """Heat flow into the body through each load, W, keyed by load name."""
         flows = {name: float(r_u @ u - r_T @ T) for name, (r_T, r_u) in self.heat_flows.items()}
         for term in self.radiation:
-            flows[f"radiation:{term.group}"] = term.power_in(T, u)
+            key = f"radiation:{term.group}"
+            flows[key] = flows.get(key, 0.0) + term.power_in(T, u)
         return flows
 
     def nodal_field(self, T):
@@ -257,67 +258,103 @@ class HeatProblem:
         n = len(node_of)
         skmesh = MeshTet(np.ascontiguousarray(mesh.points[node_of].T), np.ascontiguousarray(tets.T))
         element = ElementTetP1()
+        # P1 gradients and the conductivity are constant per tetrahedron: one point integrates
+        # conduction exactly; the consistent mass needs the degree-2 rule.
+        centroid = Basis(skmesh, element, intorder=1)
         cell = Basis(skmesh, element, intorder=2)
-        nqp = cell.X.shape[1]
-        K = forms.conduction.assemble(cell, conductivity=np.repeat(self.conductivity[:, None], nqp, 1))
-        M = forms.capacity.assemble(cell, heat_capacity=np.repeat(self.heat_capacity[:, None], nqp, 1))
+        K = forms.conduction.assemble(centroid, conductivity=np.repeat(
+            self.conductivity[:, None], centroid.X.shape[1], 1))
+        M = forms.capacity.assemble(cell, heat_capacity=np.repeat(self.heat_capacity[:, None], cell.X.shape[1], 1))
         A = K + interface_matrix(mesh, pairs, tets, n)
 
         names = list(self._inputs)
         col = {name: i for i, name in enumerate(names)}
-        B = sp.lil_matrix((n, len(names)))
+        B = np.zeros((n, len(names)))
         flows = {}
-        facet_index = _skfem_facets(skmesh, mesh, tets)
+
+        def add_flow(key, r_T, r_u):
+            # Loads of one kind on one group (or sources of one name) share a key: sum them.
+            r_T_old, r_u_old = flows.get(key, (0.0, 0.0))
+            flows[key] = (r_T_old + r_T, r_u_old + r_u)
+
+        facet_bases = {}
+        used = [g[0] for g in self._convection] + [g[0] for g in self._fluxes] + [g[0] for g in self._radiation]
+        if used:
+            # The facet forms are assembled on a mesh of only the tetrahedra under the facets used,
+            # with its own compact node numbering: scikit-fem then finds the facets of a few
+            # thousand elements instead of the whole mesh.  lift() maps the results back.
+            under = np.unique(np.concatenate([mesh.facet_group(g)[0] for g in used]))
+            facet_nodes, local_tets = np.unique(tets[under], return_inverse=True)
+            facet_mesh = MeshTet(np.ascontiguousarray(skmesh.p[:, facet_nodes]),
+                                 np.ascontiguousarray(local_tets.reshape(-1, 4).T))
+            element_of = np.full(len(tets), -1)
+            element_of[under] = np.arange(len(under))
+            facet_index = _skfem_facets(facet_mesh, mesh, tets, element_of, facet_nodes)
 
         def facet_basis(group):
-            return FacetBasis(skmesh, element, facets=facet_index(*mesh.facet_group(group)), intorder=2)
+            if group not in facet_bases:
+                facet_bases[group] = FacetBasis(facet_mesh, element, intorder=2,
+                                                facets=facet_index(*mesh.facet_group(group)))
+            return facet_bases[group]
+
+        def lift(local):
+            """A facet-mesh vector or matrix in the thermal node numbering."""
+            if sp.issparse(local):
+                local = local.tocoo()
+                return sp.csr_matrix((local.data, (facet_nodes[local.row], facet_nodes[local.col])), shape=(n, n))
+            out = np.zeros(n)
+            out[facet_nodes] = local
+            return out
+
+        def full_facet_basis(group):
+            """A facet basis on the whole mesh, for terms evaluated on thermal-node fields later."""
+            return FacetBasis(skmesh, element, intorder=2,
+                              facets=_skfem_facets(skmesh, mesh, tets)(*mesh.facet_group(group)))
 
         for group, h, amb, grad, z_ref in self._convection:
             fb = facet_basis(group)
-            H = forms.convection.assemble(fb, convection_coefficient=h)
+            H = lift(forms.convection.assemble(fb, convection_coefficient=h))
             A = A + H
-            b = forms.weighted_load.assemble(fb, weight=h)
-            B[:, col[amb]] += b[:, None]
+            b = lift(forms.weighted_load.assemble(fb, weight=h))
+            B[:, col[amb]] += b
             r_u = np.zeros(len(names))
             r_u[col[amb]] = b.sum()
             if grad is not None:
-                bz = forms.weighted_load.assemble(fb, weight=h * (fb.global_coordinates().value[2] - z_ref))
-                B[:, col[grad]] += bz[:, None]
+                bz = lift(forms.weighted_load.assemble(fb, weight=h * (np.asarray(fb.global_coordinates())[2] - z_ref)))
+                B[:, col[grad]] += bz
                 r_u[col[grad]] = bz.sum()
-            key = f"convection:{group}"
-            r_T_old, r_u_old = flows.get(key, (0.0, 0.0))
-            flows[key] = (r_T_old + np.asarray(H.sum(axis=0)).ravel(), r_u_old + r_u)
+            add_flow(f"convection:{group}", np.asarray(H.sum(axis=0)).ravel(), r_u)
 
         for group, name, total in self._fluxes:
             fb = facet_basis(group)
-            b = forms.unit_load.assemble(fb)
+            b = lift(forms.unit_load.assemble(fb))
             if total:
                 b = b / b.sum()
-            B[:, col[name]] += b[:, None]
+            B[:, col[name]] += b
             r_u = np.zeros(len(names))
             r_u[col[name]] = b.sum()
-            flows[f"flux:{group}"] = (np.zeros(n), r_u)
+            add_flow(f"flux:{group}", np.zeros(n), r_u)
 
         for name, sel, power in self._volume_sources:
             b = forms.unit_load.assemble(Basis(skmesh, element, elements=sel, intorder=2))
-            B[:, col[power]] += (b / b.sum())[:, None]
+            B[:, col[power]] += b / b.sum()
             r_u = np.zeros(len(names))
             r_u[col[power]] = 1.0
-            flows[f"source:{name}"] = (np.zeros(n), r_u)
+            add_flow(f"source:{name}", np.zeros(n), r_u)
 
         radiation = []
         for group, eps, amb, h_r, full in self._radiation:
             fb = facet_basis(group)
-            H = forms.convection.assemble(fb, convection_coefficient=h_r)
+            H = lift(forms.convection.assemble(fb, convection_coefficient=h_r))
             A = A + H
-            b = forms.weighted_load.assemble(fb, weight=h_r)
-            B[:, col[amb]] += b[:, None]
+            b = lift(forms.weighted_load.assemble(fb, weight=h_r))
+            B[:, col[amb]] += b
             if full:
-                radiation.append(RadiationTerm(group, fb, eps, h_r, col[amb]))
+                radiation.append(RadiationTerm(group, full_facet_basis(group), eps, h_r, col[amb]))
             else:
                 r_u = np.zeros(len(names))
                 r_u[col[amb]] = b.sum()
-                flows[f"radiation:{group}"] = (np.asarray(H.sum(axis=0)).ravel(), r_u)
+                add_flow(f"radiation:{group}", np.asarray(H.sum(axis=0)).ravel(), r_u)
 
         fixed_rows, fixed_cols = [], []
         for group, name in self._fixed:
@@ -343,14 +380,18 @@ class HeatProblem:
         )
 
 
-def _skfem_facets(skmesh, mesh, thermal_tets):
-    """Return a function mapping our (tet, local face) pairs to scikit-fem facet indices."""
+def _skfem_facets(skmesh, mesh, thermal_tets, element_of=None, node_of=None):
+    """Return a function mapping our (tet, local face) pairs to scikit-fem facet indices.
+
+    When ``skmesh`` holds only some of our tetrahedra, ``element_of`` maps our
+    tetrahedra to its elements and ``node_of`` its nodes to thermal nodes.
+    """
     t2f = skmesh.t2f
-    facets = np.sort(skmesh.facets, axis=0)
+    facets = np.sort(skmesh.facets if node_of is None else node_of[skmesh.facets], axis=0)
 
     def index(tet, local):
         ours = np.sort(thermal_tets[tet[:, None], LOCAL_FACES[local]], axis=1)
-        cand = t2f[:, tet]                                   # (4, k)
+        cand = t2f[:, tet if element_of is None else element_of[tet]]      # (4, k)
         match = np.all(facets[:, cand].transpose(1, 2, 0) == ours[None], axis=2)  # (4, k)
         if not match.any(axis=0).all():
             raise FEAInputError("internal: a boundary facet has no scikit-fem facet")

@@ -8,6 +8,7 @@ environment variable ``THERMAL_TWIN_SOLVER`` (``cholmod``, ``pardiso``,
 """
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import os
 
@@ -18,6 +19,23 @@ import scipy.sparse.linalg as sla
 from .errors import FEAInputError
 
 BACKENDS = ("cholmod", "pardiso", "superlu")
+
+
+@contextlib.contextmanager
+def blas_threads(n):
+    """Limit the BLAS thread pools to ``n`` threads inside the block (a no-op without threadpoolctl).
+
+    Many small dense operations, as in an AMG setup, run far slower with a
+    multi-threaded OpenBLAS than with one thread, and much slower still when
+    another process competes for the cores.
+    """
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        yield
+        return
+    with threadpool_limits(limits=n, user_api="blas"):
+        yield
 
 
 def available_backends():

@@ -250,6 +250,16 @@ class TetMesh:
         self.facet_groups[name] = (tet[mask], local[mask])
         return self.facet_groups[name]
 
+    def set_facet_group(self, name, tet, local):
+        """Store an explicitly computed group of boundary facets ``(tet, local_face)``."""
+        tet, local = np.asarray(tet, dtype=np.int64), np.asarray(local, dtype=np.int64)
+        if tet.size == 0:
+            raise FEAInputError(f"facet group {name!r} is empty")
+        if tet.shape != local.shape or local.min() < 0 or local.max() > 3 or tet.max() >= self.n_tets:
+            raise FEAInputError(f"facet group {name!r}: invalid (tet, local face) arrays")
+        self.facet_groups[name] = (tet, local)
+        return self.facet_groups[name]
+
     def facet_group(self, name):
         """The ``(tet, local_face)`` arrays of a named group."""
         try:
@@ -321,7 +331,7 @@ class TetMesh:
                 if distance > snap_distance:
                     label = names[i] if names is not None else f"point {i}"
                     raise FEAInputError(
-                        f"{label} at {tuple(np.round(x, 6))} m lies outside the mesh "
+                        f"{label} at {tuple(round(float(v), 6) for v in x)} m lies outside the mesh "
                         f"(nearest tetrahedron {distance * 1e3:.3f} mm away, snap distance "
                         f"{snap_distance * 1e3:.3f} mm)"
                     )

@@ -59,23 +59,103 @@ class AxialStrain:
 UNITS = {PointTemperature: "°C", PointDisplacement: "m", RelativeDisplacement: "m", AxialStrain: "1"}
 
 
-@dataclass
 class OutputOperator:
-    """``y = matrix @ T + offset`` for a list of named outputs."""
+    """``y = matrix @ T + offset`` for a list of named outputs.
 
-    names: list
-    units: list
-    matrix: sp.csr_matrix
-    offset: np.ndarray
+    Some rows may be *deferred*: still being computed by a background worker
+    (see ``build_output_operator(..., concurrent=True)``).  ``matrix``,
+    ``offset``, :meth:`apply` and :meth:`subset` wait for them; a time loop
+    that wants to go on meanwhile uses :meth:`poll`, :meth:`apply_available`
+    and :attr:`deferred_rows` (as :meth:`fea.transient.ThermalSolver.run`
+    does).
+    """
+
+    def __init__(self, names, units, matrix, offset, deferred=None):
+        self.names = list(names)
+        self.units = list(units)
+        self._matrix = sp.csr_matrix(matrix)
+        self._offset = np.asarray(offset, dtype=float)
+        self._deferred = deferred       # (rows, Background job, finish(result) -> (row block, offsets))
+        #: Facts about how the rows were computed (elastic timings, iterations), once available.
+        self.stats = {}
+
+    def __repr__(self):
+        state = f", {len(self.deferred_rows)} rows deferred" if self._deferred else ""
+        return f"OutputOperator({self.names}{state})"
+
+    def __getstate__(self):
+        self.resolve()
+        return self.__dict__
 
     @property
     def n_outputs(self):
         return len(self.names)
 
+    # ------------------------------------------------------------------ deferred rows
+    @property
+    def deferred_rows(self):
+        """Indices of the rows not yet available (empty once complete)."""
+        return np.array([], dtype=int) if self._deferred is None else self._deferred[0]
+
+    def poll(self):
+        """True when every row is available; takes in finished background rows without blocking."""
+        if self._deferred is not None and self._deferred[1].done():
+            self.resolve()
+        return self._deferred is None
+
+    def resolve(self):
+        """Wait for deferred rows (re-raising the background job's error, if any)."""
+        if self._deferred is None:
+            return self
+        rows, job, finish = self._deferred
+        block, offsets = finish(job.result())
+        if job.forked:
+            self.stats["worker_peak_rss_bytes"] = job.worker_peak_rss_bytes
+        matrix = self._matrix.tolil()
+        matrix[rows] = block
+        self._matrix = matrix.tocsr()
+        self._offset = self._offset.copy()
+        self._offset[rows] = offsets
+        self._deferred = None
+        return self
+
+    @property
+    def background(self):
+        """The background job computing deferred rows, or None."""
+        return None if self._deferred is None else self._deferred[1]
+
+    # ------------------------------------------------------------------ values
+    @property
+    def matrix(self):
+        self.resolve()
+        return self._matrix
+
+    @matrix.setter
+    def matrix(self, value):
+        self.resolve()
+        self._matrix = sp.csr_matrix(value)
+
+    @property
+    def offset(self):
+        self.resolve()
+        return self._offset
+
+    @offset.setter
+    def offset(self, value):
+        self.resolve()
+        self._offset = np.asarray(value, dtype=float)
+
     def apply(self, T):
         """Outputs for one temperature vector (n,) or a block (n, k) → (p,) or (p, k)."""
         y = self.matrix @ T
         return y + (self.offset if np.ndim(T) == 1 else self.offset[:, None])
+
+    def apply_available(self, T):
+        """Like :meth:`apply`, without waiting: deferred rows are NaN."""
+        y = self._matrix @ T
+        y = y + (self._offset if np.ndim(T) == 1 else self._offset[:, None])
+        y[self.deferred_rows] = np.nan
+        return y
 
     def subset(self, names):
         """The operator restricted to the named outputs, in the given order."""
@@ -90,7 +170,7 @@ class OutputOperator:
             raise FEAInputError(f"unknown output {name!r}; outputs: {self.names}") from None
 
 
-def build_output_operator(specs, thermal_system, elastic=None, snap_distance=0.0):
+def build_output_operator(specs, thermal_system, elastic=None, snap_distance=0.0, concurrent=False):
     """Precompute the operator for a list of output specifications.
 
     Displacement and strain outputs need ``elastic`` (an
@@ -98,14 +178,26 @@ def build_output_operator(specs, thermal_system, elastic=None, snap_distance=0.0
     adjoint solve each, all sharing one factorisation or AMG hierarchy.
     ``snap_distance`` (m) lets points that sit just outside a curved or
     faceted surface snap onto it.
+
+    With ``concurrent=True`` those adjoint rows are computed in a forked
+    worker process (:mod:`fea.background`) and the operator is returned at
+    once with them *deferred*: a :class:`~fea.transient.ThermalSolver` run
+    proceeds on the other core and fills in the deferred outputs when the
+    rows arrive, and anything that needs the full operator waits for them.
+    Bad specifications (points outside the mesh, missing supports) still
+    raise here.  Without ``fork`` (Windows) the rows are computed at once.
     """
     names = [s.name for s in specs]
     dupes = sorted({n for n in names if names.count(n) > 1})
     if dupes:
         raise FEAInputError(f"duplicate output names: {dupes}")
+    for s in specs:
+        if type(s) not in UNITS:
+            raise FEAInputError(f"unknown output specification {s!r}")
     n = thermal_system.n_nodes
     rows = [None] * len(specs)
     offset = np.zeros(len(specs))
+    stats = {}
     temps = [i for i, s in enumerate(specs) if isinstance(s, PointTemperature)]
     if temps:
         W = thermal_system.point_weights([specs[i].point for i in temps],
@@ -113,19 +205,40 @@ def build_output_operator(specs, thermal_system, elastic=None, snap_distance=0.0
         for k, i in enumerate(temps):
             rows[i] = W[k]
     mech = [i for i, s in enumerate(specs) if not isinstance(s, PointTemperature)]
+    deferred = None
     if mech:
         if elastic is None:
             raise FEAInputError(f"outputs {[specs[i].name for i in mech]} need an elastic problem")
         L = sp.vstack([_displacement_rows(specs[i], elastic, snap_distance) for i in mech]).tocsr()
-        G = elastic.influence(L, thermal_system)
-        for k, i in enumerate(mech):
-            rows[i] = sp.csr_matrix(G[k])
-            offset[i] = -elastic.reference_temperature * G[k].sum()
-    for i, s in enumerate(specs):
-        if type(s) not in UNITS:
-            raise FEAInputError(f"unknown output specification {s!r}")
+        t_ref = elastic.reference_temperature
+
+        def finish(result):
+            G, elastic_stats = result
+            stats.update(elastic_stats)
+            return sp.csr_matrix(G), -t_ref * G.sum(axis=1)
+
+        if concurrent:
+            from .background import start
+
+            elastic._check_supports()       # raise bad supports here, not later from the worker
+            job = start(_influence_with_stats, elastic, L, thermal_system)
+            deferred = (np.array(mech), job, finish)
+            for i in mech:
+                rows[i] = sp.csr_matrix((1, n))
+        else:
+            block, offsets = finish(_influence_with_stats(elastic, L, thermal_system))
+            for k, i in enumerate(mech):
+                rows[i] = block[k]
+                offset[i] = offsets[k]
     matrix = sp.vstack(rows).tocsr() if rows else sp.csr_matrix((0, n))
-    return OutputOperator(names, [UNITS[type(s)] for s in specs], matrix, offset)
+    operator = OutputOperator(names, [UNITS[type(s)] for s in specs], matrix, offset, deferred)
+    operator.stats = stats
+    return operator
+
+
+def _influence_with_stats(elastic, rows, thermal_system):
+    G = elastic.influence(rows, thermal_system)
+    return G, dict(elastic.stats)
 
 
 def _displacement_rows(spec, elastic, snap):

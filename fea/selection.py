@@ -75,7 +75,7 @@ class Plane(Selector):
         """Plane ``x_axis = value`` (axis 'x', 'y' or 'z')."""
         n = np.zeros(3)
         n["xyz".index(axis)] = sign
-        return cls(tuple(n), sign * float(value), tolerance, outward)
+        return cls(tuple(float(v) for v in n), sign * float(value), tolerance, outward)
 
     def mask(self, centroids, normals, vertices):
         n = np.asarray(self.normal, float)

@@ -15,13 +15,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
-from .errors import FEAInputError
+from .errors import FEAInputError, require_finite
 from .linsolve import factorize
 
 #: Absolute change (K) below which the radiation iterations stop.
 NONLINEAR_TOLERANCE_K = 1e-9
 NONLINEAR_MAX_ITERATIONS = 50
+#: Most memory (bytes) that temperature snapshots may take while output rows are computed in the background.
+DEFERRED_BUFFER_BYTES = 256 * 2**20
 
 
 @dataclass
@@ -75,6 +78,7 @@ class ThermalSolver:
         if key not in self._cache:
             s = self.system
             if dt is None:
+                self._check_temperature_level()
                 lhs, explicit = s.stiffness, None
             else:
                 lhs = s.mass / dt + self.theta * s.stiffness
@@ -90,6 +94,27 @@ class ThermalSolver:
             self.factorisations += 1
             self._cache[key] = (lhs, lhs_ff, lhs_fd, explicit, solve)
         return self._cache[key]
+
+    def _check_temperature_level(self):
+        """Raise unless every conducting body has a fixed temperature or a term like h(T_amb − T).
+
+        Without one, the steady matrix is singular; SuperLU without pivoting does not
+        always notice and returns a field of order 1e14 °C instead.
+        """
+        A = sp.csr_matrix(self.system.stiffness)
+        n_bodies, body = connected_components(A, directed=False)
+        anchored = np.zeros(n_bodies, bool)
+        anchored[body[self.fixed]] = True
+        level = np.bincount(body, weights=np.asarray(A.sum(axis=1)).ravel(), minlength=n_bodies)
+        scale = np.bincount(body, weights=np.abs(A.diagonal()), minlength=n_bodies)
+        floating = np.flatnonzero(~anchored & (level <= 1e-12 * scale))
+        if len(floating):
+            nodes = np.flatnonzero(body == floating[0])
+            where = tuple(round(float(v), 6) for v in self.system.points[nodes[0]])
+            raise FEAInputError(
+                f"the thermal system is singular at steady state: {len(floating)} of {n_bodies} bodies "
+                f"(e.g. the one with {len(nodes)} nodes, including node {int(nodes[0])} at {where} m) "
+                "have no convection, radiation or fixed temperature to set their temperature level")
 
     # ---------------------------------------------------------------- one solve
     def _radiation(self, T, u):
@@ -156,7 +181,9 @@ class ThermalSolver:
         T0 : initial temperature on thermal nodes (°C), or a number for a uniform start
         times_s : increasing output times, s; the first is the initial time
         schedule : :class:`~fea.inputs.InputSchedule` (or any object with ``sample(times)``)
-        outputs : :class:`~fea.outputs.OutputOperator` evaluated at every output time
+        outputs : :class:`~fea.outputs.OutputOperator` evaluated at every output time; rows that
+            are still computed in the background (``build_output_operator(concurrent=True)``)
+            are filled in when they arrive, so the run overlaps with their computation
         field_times_s : times whose full temperature field is kept
         max_step_s : split output intervals into equal sub-steps no longer than this
         progress : optional callable ``progress(done, total)``
@@ -171,8 +198,7 @@ class ThermalSolver:
         T = np.full(n, float(T0)) if np.ndim(T0) == 0 else np.array(T0, dtype=float)
         if T.shape != (n,):
             raise FEAInputError(f"initial temperature has shape {T.shape}, the system has {n} nodes")
-        if not np.isfinite(T).all():
-            raise FEAInputError("initial temperature holds a NaN or an infinity")
+        require_finite("initial temperature", T)
         intervals = np.diff(times)
         substeps = np.ones(len(intervals), dtype=int) if max_step_s is None else \
             np.maximum(1, np.ceil(intervals / float(max_step_s) - 1e-9).astype(int))
@@ -184,9 +210,10 @@ class ThermalSolver:
         wanted = {int(np.argmin(np.abs(times - float(t)))) for t in field_times_s}
         record = outputs is not None
         history = np.empty((len(times), outputs.n_outputs)) if record else None
+        recorder = _Recorder(outputs, history) if record else None
         fields = {}
         if record:
-            history[0] = outputs.apply(T)
+            recorder.record(0, T)
         if 0 in wanted:
             fields[float(times[0])] = T.copy()
         j = 0
@@ -196,10 +223,53 @@ class ThermalSolver:
                 T = self.step(T, u_all[j], u_all[j + 1], dt)
                 j += 1
             if record:
-                history[k + 1] = outputs.apply(T)
+                recorder.record(k + 1, T)
             if k + 1 in wanted:
                 fields[float(times[k + 1])] = T.copy()
             if progress is not None:
                 progress(k + 1, len(intervals))
+        if record:
+            recorder.finish()
         return TransientResult(times, history, list(outputs.names) if record else [], T, fields,
                                self.factorisations)
+
+
+class _Recorder:
+    """Fills the output history, holding temperatures back for rows still computed in the background.
+
+    While an :class:`~fea.outputs.OutputOperator` has deferred rows (see
+    ``build_output_operator(concurrent=True)``), the available outputs are
+    recorded at once and the temperature snapshots are kept; as soon as the
+    rows arrive the kept snapshots are evaluated in one block product and
+    dropped.  If the snapshots would exceed :data:`DEFERRED_BUFFER_BYTES`
+    the run waits for the rows instead.
+    """
+
+    def __init__(self, outputs, history):
+        self.outputs, self.history = outputs, history
+        self.rows = outputs.deferred_rows
+        self.buffer, self.steps = [], []
+
+    def record(self, k, T):
+        if len(self.rows) == 0 or self.outputs.poll():
+            self._flush()
+            self.history[k] = self.outputs.apply(T)
+            return
+        self.history[k] = self.outputs.apply_available(T)
+        self.buffer.append(T.copy())
+        self.steps.append(k)
+        if len(self.buffer) * T.nbytes > DEFERRED_BUFFER_BYTES:
+            self.outputs.resolve()
+            self._flush()
+
+    def _flush(self):
+        if self.buffer:
+            block = np.column_stack(self.buffer)
+            values = self.outputs.matrix[self.rows] @ block + self.outputs.offset[self.rows, None]
+            self.history[np.ix_(self.steps, self.rows)] = values.T
+            self.buffer, self.steps = [], []
+
+    def finish(self):
+        if len(self.rows):
+            self.outputs.resolve()
+            self._flush()

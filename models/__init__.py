@@ -1,1 +1,63 @@
+"""Data-driven thermal-error models: array in, array out (no ``fea``/``twin`` imports).
 
+Estimators follow the scikit-learn contract (``fit``/``predict``,
+``get_params``/``set_params``, seeded ``random_state``). Grey estimators are
+time-series models of zero-referenced series (see :mod:`models.grey`).
+"""
+
+from .ago_anfis import AGOANFISRegressor
+from .anfis import ANFISRegressor
+from .fcm import FuzzyCMeans, partition_coefficient, xie_beni_index
+from .gmc import GMCRegressor, convolution_response
+from .gnnmci import GNNMCIRegressor, network_layers, network_output
+from .grey import (
+    GM0NRegressor,
+    GM1NRegressor,
+    GM11,
+    ago,
+    background_values,
+    gm0n_influence,
+    gm1n_influence,
+    iago,
+)
+from .metrics import improvement_percent, max_abs_residual, nse, pearson_r, rmse
+from .persistence import load_model, save_model
+from .pso import PSOResult, particle_swarm_minimize
+from .regression import ANNRegressor, MLRRegressor, PCRRegressor, make_ann_pipeline
+from .selection import SensorSelection, select_sensors
+
+__all__ = [
+    "AGOANFISRegressor",
+    "ANFISRegressor",
+    "ANNRegressor",
+    "FuzzyCMeans",
+    "GM0NRegressor",
+    "GM11",
+    "GM1NRegressor",
+    "GMCRegressor",
+    "GNNMCIRegressor",
+    "MLRRegressor",
+    "PCRRegressor",
+    "PSOResult",
+    "SensorSelection",
+    "ago",
+    "background_values",
+    "convolution_response",
+    "gm0n_influence",
+    "gm1n_influence",
+    "iago",
+    "improvement_percent",
+    "load_model",
+    "make_ann_pipeline",
+    "max_abs_residual",
+    "network_layers",
+    "network_output",
+    "nse",
+    "particle_swarm_minimize",
+    "partition_coefficient",
+    "pearson_r",
+    "rmse",
+    "save_model",
+    "select_sensors",
+    "xie_beni_index",
+]

@@ -42,8 +42,9 @@ def validate_series(x, *, min_samples: int, what: str):
 def require_samples(n_samples: int, min_samples: int, what: str) -> None:
     """Raise ``ValueError`` when there are fewer samples than ``what`` needs."""
     if n_samples < min_samples:
+        noun = "sample" if n_samples == 1 else "samples"
         raise ValueError(
-            f"{what} needs at least {min_samples} samples, got {n_samples} "
+            f"{what} needs at least {min_samples} samples, got {n_samples} {noun} "
             "(fewer samples than parameters to estimate)."
         )
 
@@ -53,7 +54,7 @@ def check_n_features(estimator, X) -> None:
     if X.shape[1] != estimator.n_features_in_:
         raise ValueError(
             f"X has {X.shape[1]} features, but {type(estimator).__name__} "
-            f"was fitted with {estimator.n_features_in_} features."
+            f"is expecting {estimator.n_features_in_} features as input."
         )
 
 

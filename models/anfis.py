@@ -121,10 +121,13 @@ def _premise_jacobian(Z, wbar, f, F, centers, sigmas, rule_mfs):
     s = sigmas[cols, rule_mfs]
     a = wbar * (f - F[:, None])  # (n, R)
     u = Z[:, None, :] - c[None]  # (n, R, d)
-    share = np.zeros(rule_mfs.shape + (centers.shape[1],))  # rule r uses MF m of input d
-    share[np.arange(rule_mfs.shape[0])[:, None], cols[None, :], rule_mfs] = 1.0
-    j_c = np.einsum("nr,nrd,rdm->ndm", a, u / s**2, share)
-    j_s = np.einsum("nr,nrd,rdm->ndm", a, u * u / s**3, share)
+    share = np.zeros((d,) + rule_mfs.shape[:1] + (centers.shape[1],))  # input d: rule r uses MF m
+    share[cols[None, :], np.arange(rule_mfs.shape[0])[:, None], rule_mfs] = 1.0
+    g_c = a[:, :, None] * u / s**2  # ∂F/∂c_{r,d} per rule, (n, R, d)
+    g_s = g_c * u / s  # ∂F/∂σ_{r,d}
+    # sum the rules sharing each MF: one (n, R) @ (R, n_mfs) product per input
+    j_c = np.matmul(g_c.transpose(2, 0, 1), share).transpose(1, 0, 2)
+    j_s = np.matmul(g_s.transpose(2, 0, 1), share).transpose(1, 0, 2)
     return np.hstack([j_c.reshape(n, -1), j_s.reshape(n, -1)])
 
 

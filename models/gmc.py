@@ -23,8 +23,13 @@ Calibration:
 * ``"pso"`` – particle swarm on ``[b₁, …, b_N, u]`` minimising the SSE of the
   de-accumulated output (Eq 3.17), 90 particles × 100 epochs, c1 = c2 = 2,
   ω 0.9 → 0.4 (thesis §6.3.2). Unless ``pso_bounds`` is given, the search
-  box is the LS estimate ± (2|θ_LS| + 0.1 max|θ_LS|) and one particle starts
-  at the LS estimate, so PSO refines LS towards the output-error optimum.
+  box is the LS estimate ± (2|θ_LS| + 0.1 max|θ_LS|) with b₁ ≥ 0 (stable),
+  and one particle starts at the LS estimate (clipped into the box), so PSO
+  refines LS towards the output-error optimum.
+
+The LS estimate itself is not constrained: on collinear inputs it can give
+b₁ < 0, an unstable model whose prediction grows without bound; the
+``development_coefficient_`` attribute tells.
 """
 
 from __future__ import annotations
@@ -65,13 +70,18 @@ def deaccumulated_response(f, development_coefficient: float) -> np.ndarray:
     return iago(convolution_response(f, development_coefficient))
 
 
-def pso_search_box(theta_ls, bounds=None) -> np.ndarray:
-    """PSO bounds (dim, 2): ``bounds`` if given, else θ_LS ± (2|θ_LS| + 0.1 max|θ_LS|)."""
-    if bounds is not None:
-        return np.asarray(bounds, dtype=np.float64)
+def pso_search_box(theta_ls) -> np.ndarray:
+    """Default PSO bounds (dim, 2) around ``θ_LS = [b₁, …]``: θ_LS ± (2|θ_LS| + 0.1 max|θ_LS|).
+
+    The development coefficient b₁ is kept in [0, …): a thermal response
+    decays, and b₁ < 0 gives an exponentially growing output that explodes
+    on any long prediction.
+    """
     theta_ls = np.asarray(theta_ls, dtype=np.float64)
     half = 2.0 * np.abs(theta_ls) + 0.1 * max(np.max(np.abs(theta_ls)), 1e-12)
-    return np.column_stack([theta_ls - half, theta_ls + half])
+    box = np.column_stack([theta_ls - half, theta_ls + half])
+    box[0] = [max(box[0, 0], 0.0), max(box[0, 1], 1e-3)]
+    return box
 
 
 def tien_least_squares(X0, y0, ridge: float = 0.0) -> np.ndarray:
@@ -79,6 +89,23 @@ def tien_least_squares(X0, y0, ridge: float = 0.0) -> np.ndarray:
     Z = background_values(ago(X0))
     B = np.column_stack([-background_values(ago(y0)), Z, np.ones(Z.shape[0])])
     return grey_least_squares(B, y0[1:], ridge)
+
+
+def run_swarm(estimator, objective, box, start):
+    """PSO with the estimator's swarm settings (``n_particles``, ``epochs``, ``c1``,
+    ``c2``, ``inertia``, ``random_state``); one particle at ``start`` if
+    ``estimator.init_from_ls``."""
+    return particle_swarm_minimize(
+        objective,
+        box,
+        n_particles=estimator.n_particles,
+        max_iter=estimator.epochs,
+        inertia=tuple(estimator.inertia),
+        c1=estimator.c1,
+        c2=estimator.c2,
+        initial_positions=np.asarray(start)[None] if estimator.init_from_ls else None,
+        random_state=estimator.random_state,
+    )
 
 
 class GMCRegressor(GreySeriesRegressor):
@@ -91,10 +118,11 @@ class GMCRegressor(GreySeriesRegressor):
     calibration : {"ls", "pso"}, default "ls"
     ridge : float, default 0.0
         Relative ridge of the LS solve (see ``grey_least_squares``).
-    n_particles, max_iter, c1, c2, inertia :
+    n_particles, epochs, c1, c2, inertia :
         PSO settings (thesis: 90, 100, 2, 2, (0.9, 0.4)).
     pso_bounds : array-like (n_features + 2, 2) or None
-        Search box for ``[b₁, b₂..b_N, u]``; None centres it on the LS estimate.
+        Search box for ``[b₁, b₂..b_N, u]``; None centres it on the LS
+        estimate (see :func:`pso_search_box`).
     init_from_ls : bool, default True
         Start one particle at the LS estimate.
     random_state : int, RandomState or None
@@ -105,6 +133,7 @@ class GMCRegressor(GreySeriesRegressor):
     development_coefficient_ : b₁ (1/sample)
     coef_ : (n_features,) driving coefficients b₂..b_N
     control_ : u
+    n_iter_ : PSO epochs run (``calibration="pso"`` only)
     y_reference_ : first training target
     """
 
@@ -114,7 +143,7 @@ class GMCRegressor(GreySeriesRegressor):
         calibration="ls",
         ridge=0.0,
         n_particles=90,
-        max_iter=100,
+        epochs=100,
         c1=2.0,
         c2=2.0,
         inertia=(0.9, 0.4),
@@ -126,7 +155,7 @@ class GMCRegressor(GreySeriesRegressor):
         self.calibration = calibration
         self.ridge = ridge
         self.n_particles = n_particles
-        self.max_iter = max_iter
+        self.epochs = epochs
         self.c1 = c1
         self.c2 = c2
         self.inertia = inertia
@@ -152,22 +181,15 @@ class GMCRegressor(GreySeriesRegressor):
             def sse(particles):
                 drive = X1 @ particles[:, 1:-1].T + particles[:, -1]  # (n, P)
                 out = np.empty(particles.shape[0])
-                for p, b1 in enumerate(particles[:, 0]):
-                    out[p] = np.sum((deaccumulated_response(drive[:, p], b1) - y0) ** 2)
+                with np.errstate(over="ignore", invalid="ignore"):  # unstable b₁ → inf, never best
+                    for p, b1 in enumerate(particles[:, 0]):
+                        out[p] = np.sum((deaccumulated_response(drive[:, p], b1) - y0) ** 2)
                 return out
 
-            result = particle_swarm_minimize(
-                sse,
-                pso_search_box(theta, self.pso_bounds),
-                n_particles=self.n_particles,
-                max_iter=self.max_iter,
-                inertia=tuple(self.inertia),
-                c1=self.c1,
-                c2=self.c2,
-                initial_positions=theta[None] if self.init_from_ls else None,
-                random_state=self.random_state,
-            )
+            box = pso_search_box(theta) if self.pso_bounds is None else np.asarray(self.pso_bounds, float)
+            result = run_swarm(self, sse, box, theta)
             theta = result.position
+            self.n_iter_ = result.n_iter
         self.development_coefficient_ = float(theta[0])
         self.coef_ = theta[1:-1].copy()
         self.control_ = float(theta[-1])

@@ -33,9 +33,21 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import expit
 
-from .gmc import convolution_response, pso_search_box, tien_least_squares
+from .gmc import convolution_response, pso_search_box, run_swarm, tien_least_squares
 from .grey import GreySeriesRegressor, ago, iago
-from .pso import particle_swarm_minimize
+
+
+def network_output(weights, X1) -> np.ndarray:
+    """Layer-D output x̂₁¹ in the algebraically reduced form of Eq A.4 (b · w₃ = 1).
+
+    ``-w₂₁ e^{-w₁₁ k} + conv(Σ_j w₂ⱼ x_j¹ + w₂ᵤ)``: one convolution per weight
+    vector instead of one per input, which is what PSO evaluates.
+    """
+    weights = np.asarray(weights, dtype=np.float64)
+    w11, w21, w2 = weights[0], weights[1], weights[2:]
+    k = np.arange(X1.shape[0], dtype=np.float64)
+    drive = X1 @ w2[:-1] + w2[-1]
+    return -w21 * np.exp(-w11 * k) + convolution_response(drive, w11, "midpoint")
 
 
 def network_layers(weights, X1) -> dict[str, np.ndarray]:
@@ -43,6 +55,8 @@ def network_layers(weights, X1) -> dict[str, np.ndarray]:
 
     ``X1`` is the (n, n_inputs) AGO input. Returns ``a``, ``b`` (n,),
     ``c`` (n, n_inputs + 2) and ``d`` (n,), the network estimate of x̂₁¹.
+    This is the thesis's layer-by-layer mapping, for inspection;
+    :func:`network_output` gives the same ``d`` faster.
     """
     weights = np.asarray(weights, dtype=np.float64)
     w11, w21, w2 = weights[0], weights[1], weights[2:]
@@ -62,12 +76,12 @@ class GNNMCIRegressor(GreySeriesRegressor):
 
     Parameters
     ----------
-    n_particles, max_iter, c1, c2, inertia :
+    n_particles, epochs, c1, c2, inertia :
         PSO settings (thesis §5.4: 90, 100, 1.5, 2, (0.9, 0.4)).
     pso_bounds : array-like (n_features + 3, 2) or None
         Box for ``[w₁₁, w₂₁, w₂₂..w₂ₙ, w₂ᵤ]``. None centres it on the Tien
-        least-squares estimate (as :class:`~models.gmc.GMCRegressor`) with
-        w₂₁ in ±(0.1 max|θ_LS|) and w₁₁ clipped at 0.
+        least-squares estimate (:func:`~models.gmc.pso_search_box`, w₁₁ ≥ 0)
+        with w₂₁ in ±(0.1 max|θ_LS|).
     init_from_ls : bool, default True
         Start one particle at the least-squares weights.
     random_state : int, RandomState or None
@@ -76,13 +90,14 @@ class GNNMCIRegressor(GreySeriesRegressor):
     ----------
     weights_ : (n_features + 3,) ``[w₁₁, w₂₁, w₂₂..w₂ₙ, w₂ᵤ]``
     development_coefficient_ : w₁₁
+    n_iter_ : PSO epochs run
     y_reference_ : first training target
     """
 
     def __init__(
         self,
         n_particles=90,
-        max_iter=100,
+        epochs=100,
         c1=1.5,
         c2=2.0,
         inertia=(0.9, 0.4),
@@ -91,7 +106,7 @@ class GNNMCIRegressor(GreySeriesRegressor):
         random_state=None,
     ):
         self.n_particles = n_particles
-        self.max_iter = max_iter
+        self.epochs = epochs
         self.c1 = c1
         self.c2 = c2
         self.inertia = inertia
@@ -105,33 +120,24 @@ class GNNMCIRegressor(GreySeriesRegressor):
     def _fit_changes(self, X0, y0):
         X1 = ago(X0)
         theta = tien_least_squares(X0, y0)  # [b₁, b₂..b_N, u]
-        start = np.concatenate([[max(theta[0], 0.0), 0.0], theta[1:]])
+        start = np.concatenate([[theta[0], 0.0], theta[1:]])  # clipped into the box by PSO
         if self.pso_bounds is None:
             box = pso_search_box(theta)
             w21_half = 0.1 * max(np.max(np.abs(theta)), 1e-12)
             box = np.vstack([box[:1], [[-w21_half, w21_half]], box[1:]])
-            box[0] = [0.0, max(box[0, 1], 1e-3)]
         else:
             box = np.asarray(self.pso_bounds, dtype=np.float64)
             if box[0, 0] < 0.0:
                 raise ValueError("GNNMCI needs a development coefficient w11 >= 0 (pso_bounds[0]).")
 
         def sse(particles):
-            return np.array([np.sum((iago(network_layers(w, X1)["d"]) - y0) ** 2) for w in particles])
+            with np.errstate(over="ignore", invalid="ignore"):
+                return np.array([np.sum((iago(network_output(w, X1)) - y0) ** 2) for w in particles])
 
-        result = particle_swarm_minimize(
-            sse,
-            box,
-            n_particles=self.n_particles,
-            max_iter=self.max_iter,
-            inertia=tuple(self.inertia),
-            c1=self.c1,
-            c2=self.c2,
-            initial_positions=start[None] if self.init_from_ls else None,
-            random_state=self.random_state,
-        )
+        result = run_swarm(self, sse, box, start)
         self.weights_ = result.position
+        self.n_iter_ = result.n_iter
         self.development_coefficient_ = float(result.position[0])
 
     def _predict_changes(self, X0):
-        return iago(network_layers(self.weights_, ago(X0))["d"])
+        return iago(network_output(self.weights_, ago(X0)))

@@ -24,6 +24,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 from scipy.signal import lfilter
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.utils.validation import check_is_fitted
@@ -50,13 +51,18 @@ def background_values(x1, axis: int = 0) -> np.ndarray:
 
 
 def grey_least_squares(B, Y, ridge: float = 0.0) -> np.ndarray:
-    """Solve ``B θ ≈ Y`` by lstsq, with a ridge ``ridge × mean(diag BᵀB)`` if ridge > 0."""
+    """Solve ``B θ ≈ Y``: lstsq if ``ridge == 0``, else ``(BᵀB + λI)θ = BᵀY``.
+
+    ``λ = ridge × mean(diag BᵀB)`` is relative, so the ridge does not depend
+    on units; with a ridge the (then positive definite) normal equations are
+    solved directly, which is fast for thousands of candidate sensors.
+    """
     B = np.asarray(B, dtype=np.float64)
     Y = np.asarray(Y, dtype=np.float64)
     if ridge > 0.0:
-        lam = ridge * np.mean(np.sum(B * B, axis=0))
-        B = np.vstack([B, np.sqrt(lam) * np.eye(B.shape[1])])
-        Y = np.concatenate([Y, np.zeros(B.shape[1])])
+        gram = B.T @ B
+        gram[np.diag_indices_from(gram)] += ridge * max(np.trace(gram) / gram.shape[0], 1e-300)
+        return scipy.linalg.solve(gram, B.T @ Y, assume_a="pos")
     return np.linalg.lstsq(B, Y, rcond=None)[0]
 
 
@@ -101,18 +107,37 @@ class GM11:
 
 
 # -------------------------------------------------------- GM(0,N) and GM(1,N)
+def _gm0n_theta(X0, y0, ridge):
+    """θ of ``z₁¹(k) = Σ_j θ_j x_j¹(k)``, k = 2..n (Eq 3.25), zero-referenced input."""
+    return grey_least_squares(ago(X0)[1:], background_values(ago(y0)), ridge)
+
+
+def _gm1n_theta(X0, y0, ridge):
+    """``[a, b₂..b_N]`` of ``x₁⁰(k) + a z₁¹(k) = Σ_j b_j x_j¹(k)`` with ``B = [-z₁¹, x_j¹]``."""
+    B = np.column_stack([-background_values(ago(y0)), ago(X0)[1:]])
+    return grey_least_squares(B, y0[1:], ridge)
+
+
+def _influence(theta_fn, n_extra, X, y, ridge, what):
+    X, y = validate_xy(X, y, min_samples=3, what=what)
+    if ridge == 0.0:  # unregularised: one equation per parameter at least
+        n_params = X.shape[1] + n_extra
+        validate_xy(X, y, min_samples=n_params + 1, what=f"{what} ({n_params} parameters)")
+    return theta_fn(zero_reference(X), zero_reference(y), ridge)
+
+
 def gm0n_influence(X, y, ridge: float = 0.0) -> np.ndarray:
     """GM(0,N) influence weights θ_j (Eqs 3.21–3.25) of each column of X on y.
 
-    ``z₁¹(k) = Σ_j θ_j x_j¹(k)``, k = 2..n, on zero-referenced AGO series;
-    rank sensors by ``|θ_j|`` (thesis §4.3).
+    Zero-referenced AGO series; rank sensors by ``|θ_j|`` (thesis §4.3). With
+    ``ridge > 0`` more sensors than samples are allowed.
     """
-    return GM0NRegressor(ridge=ridge).fit(X, y).coef_
+    return _influence(_gm0n_theta, 0, X, y, ridge, "GM(0,N)")
 
 
 def gm1n_influence(X, y, ridge: float = 0.0) -> np.ndarray:
     """GM(1,N) driving coefficients b_j (Eqs 3.27–3.30), the influence of each column on y."""
-    return GM1NRegressor(ridge=ridge).fit(X, y).coef_
+    return _influence(_gm1n_theta, 1, X, y, ridge, "GM(1,N)")[1:]
 
 
 class GreySeriesRegressor(RegressorMixin, BaseEstimator):
@@ -168,7 +193,7 @@ class GM0NRegressor(GreySeriesRegressor):
         return n_features
 
     def _fit_changes(self, X0, y0):
-        self.coef_ = grey_least_squares(ago(X0)[1:], background_values(ago(y0)), self.ridge)
+        self.coef_ = _gm0n_theta(X0, y0, self.ridge)
 
     def _predict_changes(self, X0):
         return X0 @ self.coef_
@@ -197,9 +222,7 @@ class GM1NRegressor(GreySeriesRegressor):
         return n_features + 1
 
     def _fit_changes(self, X0, y0):
-        X1, y1 = ago(X0), ago(y0)
-        B = np.column_stack([-background_values(y1), X1[1:]])
-        theta = grey_least_squares(B, y0[1:], self.ridge)
+        theta = _gm1n_theta(X0, y0, self.ridge)
         self.development_coefficient_ = float(theta[0])
         self.coef_ = theta[1:]
 

@@ -1,0 +1,156 @@
+"""The geometry part of a machine definition (TOML): parts, their shapes and the mesh settings.
+
+A machine file holds more than geometry (materials, sources, sensors); this
+module reads only ``[mesh]`` and ``[[parts]]``.  See
+``meshes/machines/vmc_ram.toml`` for the format.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .shapes import Box, Cylinder, HollowBox, StlPart
+from .tomlspec import DefinitionError, Table, read_toml
+
+MACHINES_DIR = Path(__file__).resolve().parent / "machines"
+
+#: Target tetrahedron edge length when a definition gives none, m.
+DEFAULT_MESH_SIZE_M = 0.045
+
+PART_KEYS = {"name", "shape", "bounds", "wall", "ribs", "base", "axis", "radius", "length",
+             "file", "scale", "offset", "material", "label"}
+
+
+@dataclass(frozen=True)
+class Part:
+    """A named solid with a shape and (for the twin) a material name."""
+
+    name: str
+    shape: object
+    material: str
+    label: str = ""
+
+
+@dataclass
+class MachineGeometry:
+    """Parts in priority order (a later part wins where two overlap) and mesh settings."""
+
+    name: str
+    parts: list
+    mesh_size_m: float = DEFAULT_MESH_SIZE_M
+    envelope_epsilon: float = 1e-4
+    optimisation_iterations: int = 10
+    source: str = ""
+    extras: dict = field(default_factory=dict)
+
+    def part_names(self):
+        return [p.name for p in self.parts]
+
+    def digest(self, mesh_size_m):
+        """Hash of everything that changes the mesh: shapes, STL contents, settings and mesher version."""
+        import pytetwild
+
+        from .builder import BUILDER_VERSION
+
+        payload = {
+            "parts": [[p.name, type(p.shape).__name__, _shape_state(p.shape)] for p in self.parts],
+            "size": round(float(mesh_size_m), 9),
+            "epsilon": self.envelope_epsilon,
+            "iterations": self.optimisation_iterations,
+            "pytetwild": getattr(pytetwild, "__version__", "?"),
+            "builder": BUILDER_VERSION,
+        }
+        text = json.dumps(payload, sort_keys=True, default=str)
+        return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _shape_state(shape):
+    if isinstance(shape, StlPart):
+        return {"sha256": shape.file_digest(), "scale": shape.scale, "offset": shape.offset}
+    return shape.__dict__
+
+
+def machine_path(machine):
+    """Resolve a machine name (e.g. ``vmc_ram``) or a path to its TOML file."""
+    path = Path(machine)
+    if path.suffix == ".toml" or path.exists():
+        if not path.exists():
+            raise DefinitionError(f"{path}: machine file not found")
+        return path
+    candidate = MACHINES_DIR / f"{machine}.toml"
+    if not candidate.exists():
+        known = sorted(p.stem for p in MACHINES_DIR.glob("*.toml"))
+        raise DefinitionError(f"unknown machine {machine!r}; available: {known}")
+    return candidate
+
+
+def available_machines():
+    return sorted(p.stem for p in MACHINES_DIR.glob("*.toml"))
+
+
+def parse_part(table: Table, base_dir: Path):
+    """One ``[[parts]]`` entry → :class:`Part`."""
+    table.check_keys(PART_KEYS)
+    name = table.string("name")
+    kind = table.string("shape", choices={"box", "hollow_box", "cylinder", "stl"})
+    if kind == "box":
+        shape = Box(_bounds(table))
+    elif kind == "hollow_box":
+        bounds = _bounds(table)
+        wall = table.number("wall", minimum=0.0, strict_minimum=True)
+        extents = [bounds[2 * i + 1] - bounds[2 * i] for i in range(3)]
+        if 2 * wall >= min(extents):
+            raise table.error("wall", f"is too thick for bounds {bounds}", wall)
+        ribs = table.raw("ribs", [])
+        if not isinstance(ribs, list):
+            raise table.error("ribs", "must be an array of [xmin, xmax, ymin, ymax, zmin, zmax] boxes", ribs)
+        checked = []
+        for i, rib in enumerate(ribs):
+            checked.append(_bounds(Table({"rib": rib}, table.file, f"{table.path}.ribs[{i}]"), "rib"))
+        shape = HollowBox(bounds, wall, tuple(checked))
+    elif kind == "cylinder":
+        shape = Cylinder(table.vector("base", 3), table.string("axis", choices=set("xyz")),
+                         table.number("radius", minimum=0.0, strict_minimum=True),
+                         table.number("length", minimum=0.0, strict_minimum=True))
+    else:
+        path = Path(table.string("file"))
+        if not path.is_absolute():
+            path = base_dir / path
+        if not path.exists():
+            raise table.error("file", "names an STL file that does not exist", str(path))
+        shape = StlPart(str(path), table.number("scale", 1.0, minimum=0.0, strict_minimum=True),
+                        table.vector("offset", 3, (0.0, 0.0, 0.0)))
+    return Part(name, shape, table.string("material", "cast_iron"), table.string("label", ""))
+
+
+def _bounds(table, key="bounds"):
+    b = table.vector(key, 6)
+    for i, axis in enumerate("xyz"):
+        if b[2 * i + 1] <= b[2 * i]:
+            raise table.error(key, f"must have {axis}max > {axis}min", list(b))
+    return b
+
+
+def load_geometry(machine):
+    """Read the geometry of a machine definition (name or path)."""
+    path = machine_path(machine)
+    root = read_toml(path)
+    info = root.table("machine")
+    name = info.string("name", path.stem)
+    mesh = root.table("mesh")
+    mesh.check_keys({"size_m", "envelope_epsilon", "optimisation_iterations"})
+    parts = [parse_part(t, path.parent) for t in root.tables("parts", required=True)]
+    names = [p.name for p in parts]
+    dupes = sorted({n for n in names if names.count(n) > 1})
+    if dupes:
+        raise DefinitionError(f"{path}: parts: duplicate part name(s) {dupes}")
+    return MachineGeometry(
+        name=name,
+        parts=parts,
+        mesh_size_m=mesh.number("size_m", DEFAULT_MESH_SIZE_M, minimum=1e-4),
+        envelope_epsilon=mesh.number("envelope_epsilon", 1e-4, minimum=1e-6, maximum=1e-2),
+        optimisation_iterations=mesh.integer("optimisation_iterations", 10, minimum=1),
+        source=str(path),
+    )

@@ -1,0 +1,48 @@
+"""AGO-ANFIS: ANFIS trained on accumulated (AGO) series, restored by IAGO (thesis §6.2.2).
+
+The zero-referenced inputs and output are accumulated, ``X¹ = AGO(X⁰)``,
+``y¹ = AGO(y⁰)``; an ANFIS (default ANFIS-FCM, 3 rules, thesis) maps
+``X¹(k) → y¹(k)``; the prediction is ``ŷ⁰ = IAGO(ANFIS(X¹))``. AGO smooths
+noise, but the accumulated inputs keep growing, so a long test series leaves
+the training range: there the ANFIS fallback (nearest rule's linear
+consequent, see :mod:`models.anfis`) makes the de-accumulated output a
+linear model of the current input changes.
+"""
+
+from __future__ import annotations
+
+from sklearn.base import clone
+
+from .anfis import ANFISRegressor
+from .grey import GreySeriesRegressor, ago, iago
+
+
+class AGOANFISRegressor(GreySeriesRegressor):
+    """ANFIS on AGO series (grey time-series convention, see :mod:`models.grey`).
+
+    Parameters
+    ----------
+    anfis : ANFISRegressor or None
+        Unfitted template; None means ``ANFISRegressor(init="fcm", n_rules=3)``.
+        Tune it through nested parameters, e.g. ``anfis__epochs``.
+
+    Attributes
+    ----------
+    anfis_ : the fitted ANFISRegressor (on AGO series)
+    y_reference_ : first training target
+    """
+
+    def __init__(self, anfis=None):
+        self.anfis = anfis
+
+    def _template(self) -> ANFISRegressor:
+        return self.anfis if self.anfis is not None else ANFISRegressor(init="fcm", n_rules=3)
+
+    def _n_parameters(self, n_features):
+        return self._template()._n_rules_for(n_features) * (n_features + 1)
+
+    def _fit_changes(self, X0, y0):
+        self.anfis_ = clone(self._template()).fit(ago(X0), ago(y0))
+
+    def _predict_changes(self, X0):
+        return iago(self.anfis_.predict(ago(X0)))

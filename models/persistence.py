@@ -1,0 +1,148 @@
+"""Save and load fitted ``models`` estimators as versioned JSON (no pickle).
+
+File layout (schema version 1)::
+
+    {"format": "thermal-twin-model", "version": 1,
+     "class": "ANFISRegressor",
+     "params": {...hyperparameters, get_params(deep=False)...},
+     "learned": {...every public attribute ending in "_"...}}
+
+Arrays are stored as ``{"__ndarray__": {"dtype", "shape", "data"}}`` with
+floats written by ``repr`` (shortest round-trip form), so a loaded model
+reproduces predictions bit for bit. Tuples, dicts and nested estimators
+(e.g. the ANFIS inside AGO-ANFIS) have their own tagged forms. Loading checks
+the format, version and class first and raises ``ValueError`` naming the
+file, the field and the offending value.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+from sklearn.base import BaseEstimator
+
+from .ago_anfis import AGOANFISRegressor
+from .anfis import ANFISRegressor
+from .fcm import FuzzyCMeans
+from .gmc import GMCRegressor
+from .gnnmci import GNNMCIRegressor
+from .grey import GM0NRegressor, GM1NRegressor
+from .regression import ANNRegressor, MLRRegressor, PCRRegressor
+
+FORMAT = "thermal-twin-model"
+VERSION = 1
+ESTIMATORS = {
+    cls.__name__: cls
+    for cls in (
+        FuzzyCMeans,
+        ANFISRegressor,
+        GM0NRegressor,
+        GM1NRegressor,
+        GMCRegressor,
+        GNNMCIRegressor,
+        AGOANFISRegressor,
+        ANNRegressor,
+        MLRRegressor,
+        PCRRegressor,
+    )
+}
+
+
+def _encode(value):
+    if value is None or isinstance(value, (bool, str)):
+        return value
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value)
+    if isinstance(value, np.ndarray):
+        return {
+            "__ndarray__": {
+                "dtype": value.dtype.str,
+                "shape": list(value.shape),
+                "data": [_encode(v) for v in value.ravel().tolist()],
+            }
+        }
+    if isinstance(value, tuple):
+        return {"__tuple__": [_encode(v) for v in value]}
+    if isinstance(value, list):
+        return [_encode(v) for v in value]
+    if isinstance(value, dict):
+        return {"__dict__": {str(k): _encode(v) for k, v in value.items()}}
+    if isinstance(value, BaseEstimator):
+        return {"__estimator__": _model_document(value)}
+    raise TypeError(f"cannot store a value of type {type(value).__name__} in a model file.")
+
+
+def _decode(value, path):
+    if isinstance(value, list):
+        return [_decode(v, path) for v in value]
+    if not isinstance(value, dict):
+        return value
+    if "__ndarray__" in value:
+        spec = value["__ndarray__"]
+        return np.array(spec["data"], dtype=np.dtype(spec["dtype"])).reshape(spec["shape"])
+    if "__tuple__" in value:
+        return tuple(_decode(v, path) for v in value["__tuple__"])
+    if "__dict__" in value:
+        return {k: _decode(v, path) for k, v in value["__dict__"].items()}
+    if "__estimator__" in value:
+        return _build(value["__estimator__"], path)
+    raise ValueError(f"{path}: unknown tagged value {sorted(value)!r}.")
+
+
+def _model_document(estimator) -> dict:
+    cls = type(estimator).__name__
+    if cls not in ESTIMATORS:
+        raise ValueError(f"cannot save {cls}: known classes are {sorted(ESTIMATORS)}.")
+    learned = {
+        k: _encode(v) for k, v in vars(estimator).items() if k.endswith("_") and not k.startswith("_")
+    }
+    return {
+        "format": FORMAT,
+        "version": VERSION,
+        "class": cls,
+        "params": {k: _encode(v) for k, v in estimator.get_params(deep=False).items()},
+        "learned": learned,
+    }
+
+
+def _build(document, path):
+    for field, expected in (("format", FORMAT), ("version", VERSION)):
+        if document.get(field) != expected:
+            raise ValueError(
+                f"{path}: field '{field}' has value {document.get(field)!r}; "
+                f"this version of models reads {field} {expected!r}."
+            )
+    cls_name = document.get("class")
+    if cls_name not in ESTIMATORS:
+        raise ValueError(
+            f"{path}: field 'class' has value {cls_name!r}, which is not a known estimator "
+            f"({', '.join(sorted(ESTIMATORS))})."
+        )
+    params = {name: _decode(value, path) for name, value in document.get("params", {}).items()}
+    estimator = ESTIMATORS[cls_name](**params)
+    for name, value in document.get("learned", {}).items():
+        setattr(estimator, name, _decode(value, path))
+    return estimator
+
+
+def save_model(estimator, path) -> Path:
+    """Write ``estimator`` (fitted or not) to ``path`` as JSON; returns the path."""
+    path = Path(path)
+    path.write_text(json.dumps(_model_document(estimator)))
+    return path
+
+
+def load_model(path):
+    """Read an estimator written by :func:`save_model`."""
+    path = Path(path)
+    try:
+        document = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: not a JSON model file ({exc}).") from exc
+    if not isinstance(document, dict):
+        raise ValueError(f"{path}: field '<root>' has value of type {type(document).__name__}, expected an object.")
+    return _build(document, path)

@@ -1,0 +1,105 @@
+"""Bad input gives clear errors: shapes, NaN, too few samples, unfitted models."""
+
+import numpy as np
+import pytest
+from sklearn.exceptions import NotFittedError
+
+from models import (
+    AGOANFISRegressor,
+    ANFISRegressor,
+    ANNRegressor,
+    FuzzyCMeans,
+    GM0NRegressor,
+    GM1NRegressor,
+    GMCRegressor,
+    GNNMCIRegressor,
+    MLRRegressor,
+    PCRRegressor,
+    select_sensors,
+)
+
+REGRESSORS = [
+    ANFISRegressor(n_rules=2, epochs=2, random_state=0),
+    AGOANFISRegressor(ANFISRegressor(n_rules=2, epochs=2, random_state=0)),
+    ANNRegressor(max_iter=50, random_state=0),
+    GM0NRegressor(),
+    GM1NRegressor(),
+    GMCRegressor(),
+    GNNMCIRegressor(n_particles=5, epochs=2, random_state=0),
+    MLRRegressor(),
+    PCRRegressor(),
+]
+ids = [type(e).__name__ for e in REGRESSORS]
+
+# the tests train tiny ANNs on purpose
+pytestmark = pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
+
+
+def data(n=40, d=3):
+    t = np.arange(n, dtype=float)
+    X = np.column_stack([np.sin(t / (5 + j)) + j for j in range(d)])
+    return X, X.sum(axis=1) + 0.01 * t
+
+
+@pytest.mark.parametrize("estimator", REGRESSORS, ids=ids)
+def test_mismatched_lengths(estimator):
+    X, y = data()
+    with pytest.raises(ValueError, match="inconsistent numbers of samples"):
+        estimator.fit(X, y[:-1])
+
+
+@pytest.mark.parametrize("estimator", REGRESSORS, ids=ids)
+def test_nan_in_x_and_y(estimator):
+    X, y = data()
+    Xn = X.copy()
+    Xn[3, 1] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        estimator.fit(Xn, y)
+    yn = y.copy()
+    yn[5] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        estimator.fit(X, yn)
+
+
+@pytest.mark.parametrize("estimator", REGRESSORS, ids=ids)
+def test_unfitted_predict(estimator):
+    with pytest.raises(NotFittedError):
+        estimator.predict(data()[0])
+
+
+@pytest.mark.parametrize("estimator", REGRESSORS, ids=ids)
+def test_wrong_width_at_predict(estimator):
+    X, y = data()
+    estimator.fit(X, y)
+    with pytest.raises(ValueError, match="X has 2 features, but .* is expecting 3"):
+        estimator.predict(X[:, :2])
+
+
+@pytest.mark.parametrize(
+    ("estimator", "n_ok"),
+    [(GM0NRegressor(), 4), (GM1NRegressor(), 5), (GMCRegressor(), 6), (GMCRegressor(delay=2), 8),
+     (GNNMCIRegressor(n_particles=5, epochs=2, random_state=0), 7)],
+    ids=["GM0N", "GM1N", "GMC", "GMC-delay2", "GNNMCI"],
+)
+def test_grey_models_need_more_samples_than_parameters(estimator, n_ok):
+    X, y = data(d=3)
+    with pytest.raises(ValueError, match="fewer samples than parameters"):
+        estimator.fit(X[: n_ok - 1], y[: n_ok - 1])
+    estimator.fit(X[:n_ok], y[:n_ok])  # one equation per unknown is enough
+
+
+def test_clusters_larger_than_samples():
+    X, _ = data(n=4)
+    with pytest.raises(ValueError, match="n_clusters=5 is larger than the number of samples"):
+        FuzzyCMeans(n_clusters=5).fit(X)
+    # ANFIS-FCM needs (n_features + 1) samples per rule, so it refuses earlier
+    with pytest.raises(ValueError, match="fewer samples than parameters"):
+        ANFISRegressor(n_rules=5, epochs=1).fit(X[:, :1], np.arange(4.0))
+
+
+def test_selection_input_errors():
+    X, y = data()
+    with pytest.raises(ValueError, match="NaN"):
+        select_sensors(np.where(X > 2.5, np.nan, X), y)
+    with pytest.raises(ValueError, match="inconsistent numbers of samples"):
+        select_sensors(X, y[:-2])

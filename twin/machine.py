@@ -1,0 +1,255 @@
+"""A machine's thermal twin: its mesh, thermal system, inputs and virtual-sensor outputs.
+
+``build_machine("vmc_ram")`` meshes the definition (or reads the cached mesh),
+assembles the thermal system once, and precomputes every sensor as a linear
+output ``y = C T + D u + c``: surface thermometers and camera spots by
+barycentric rows, tool-centre-point drift and strain lines by adjoint
+influence rows (cached on disk, keyed by the mesh and the definition), and air
+thermometers as a feedthrough of the ambient inputs.
+
+Inputs u (one column of the thermal system each):
+- ``ambient:<zone>``   ambient temperature of a convection zone, °C
+- ``ambient_gradient`` vertical ambient gradient, K/m, about the reference height
+- ``power:<source>``   heat-source power, W
+"""
+from __future__ import annotations
+
+import hashlib
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+
+import fea
+from meshes.builder import build_mesh, user_cache_dir
+from meshes.tomlspec import DefinitionError
+
+from .machine_definition import MachineDefinition, load_machine
+
+#: Bump when the way outputs are computed changes, to invalidate cached operators.
+OUTPUT_CACHE_VERSION = 1
+GRADIENT_INPUT = "ambient_gradient"
+
+
+def ambient_input(zone):
+    return f"ambient:{zone}"
+
+
+def power_input(source):
+    return f"power:{source}"
+
+
+@dataclass(frozen=True)
+class Channel:
+    """A recorded quantity: name, kind, unit at the edges, scale from SI, position and description."""
+
+    name: str
+    kind: str            # temperature | air | camera | displacement | strain
+    unit: str            # degC | um | ue
+    scale: float         # multiply the SI value by this to get ``unit``
+    label: str = ""
+    position: tuple | None = None
+
+
+@dataclass
+class Machine:
+    """A built twin: ``outputs`` (FE outputs, SI) then air sensors, described by ``channels``."""
+
+    definition: MachineDefinition
+    mesh: fea.TetMesh
+    thermal: fea.ThermalSystem
+    outputs: fea.OutputOperator
+    feedthrough: np.ndarray          # (n_air, n_inputs): air sensors from the inputs
+    channels: list
+    mesh_seconds: float
+    operator_seconds: float
+    mesh_path: Path
+
+    @property
+    def name(self):
+        return self.definition.name
+
+    @property
+    def zones(self):
+        return self.definition.zones
+
+    def channel(self, name):
+        for c in self.channels:
+            if c.name == name:
+                return c
+        raise DefinitionError(f"{self.definition.source}: unknown channel {name!r}; "
+                              f"channels: {[c.name for c in self.channels if c.kind != 'camera']} "
+                              f"and {sum(c.kind == 'camera' for c in self.channels)} camera spots")
+
+    def input_matrix(self, spindle_rpm, feed_mm_min, ambient_C, gradient_K_per_m=0.0,
+                     source_scale=None, source_exponent=None, extra_power_W=None):
+        """Input values (n_times, n_inputs) from operating conditions on a time grid.
+
+        ``spindle_rpm`` (n,), ``feed_mm_min`` dict axis → (n,), ``ambient_C`` dict
+        zone → (n,), ``gradient_K_per_m`` scalar or (n,).  ``source_scale`` /
+        ``source_exponent`` (dicts by source name) perturb the power models;
+        ``extra_power_W`` dict input name → (n,) adds power to named inputs.
+        """
+        names = self.thermal.input_names
+        n = len(np.atleast_1d(spindle_rpm))
+        U = np.zeros((n, len(names)))
+        for zone in self.zones:
+            if zone not in ambient_C:
+                raise DefinitionError(f"no ambient given for zone {zone!r}; zones: {self.zones}")
+            U[:, names.index(ambient_input(zone))] = ambient_C[zone]
+        U[:, names.index(GRADIENT_INPUT)] = gradient_K_per_m
+        for src in self.definition.sources:
+            scale = (source_scale or {}).get(src.name, 1.0)
+            exponent = (source_exponent or {}).get(src.name)
+            U[:, names.index(power_input(src.name))] = src.power_W(spindle_rpm, feed_mm_min, scale, exponent)
+        for name, values in (extra_power_W or {}).items():
+            U[:, self.thermal.input_index(name)] += values
+        return U
+
+    def channel_values(self, fe_outputs, inputs):
+        """Channel values in edge units from FE outputs (k, p_fe) in SI and inputs (k, m) → (k, p)."""
+        air = np.atleast_2d(inputs) @ self.feedthrough.T
+        values = np.concatenate([np.atleast_2d(fe_outputs), air], axis=1)
+        return values * np.array([c.scale for c in self.channels])
+
+
+def _facet_groups(definition, mesh):
+    """Partition the boundary into the convection rules' groups (first match wins)."""
+    tet, local = mesh.boundary_facets()
+    centroids, normals, area = mesh.facet_geometry(tet, local)
+    part_of = np.array([mesh.region_names[r] for r in mesh.regions[tet]])
+    shapes = {p.name: p.shape for p in definition.geometry.parts}
+    claimed = np.zeros(len(tet), bool)
+    groups = {}
+    for rule in definition.convection:
+        match = np.isin(part_of, rule.parts) & ~claimed
+        if rule.facing is not None:
+            d = np.asarray(rule.facing, float)
+            match &= normals @ (d / np.linalg.norm(d)) >= np.cos(np.radians(30.0))
+        in_cavity = np.zeros(len(tet), bool)
+        for name in rule.parts:
+            cavity = getattr(shapes[name], "cavity", None)
+            if cavity is not None:
+                b = np.asarray(cavity).reshape(3, 2)
+                in_cavity |= (part_of == name) & np.all((centroids >= b[:, 0] - 1e-3) &
+                                                        (centroids <= b[:, 1] + 1e-3), axis=1)
+        match &= in_cavity if rule.inside else ~in_cavity
+        if match.any():
+            mesh.set_facet_group(rule.name, tet[match], local[match])
+            groups[rule.name] = rule
+            claimed |= match
+    return groups, float(area[~claimed].sum())
+
+
+def _thermal_system(definition, mesh, groups):
+    materials = {rid: definition.part_material(name) for rid, name in mesh.region_names.items()}
+    problem = fea.HeatProblem(mesh, materials)
+    for name, rule in groups.items():
+        problem.add_convection(name, rule.coefficient, ambient=ambient_input(rule.zone),
+                               ambient_gradient=GRADIENT_INPUT,
+                               reference_height=definition.ambient_reference_height_m)
+    for src in definition.sources:
+        selector = fea.Box(src.box[0::2], src.box[1::2]) if src.box is not None else None
+        try:
+            tets = mesh.select_tets(selector, region=src.part)
+        except fea.FEAInputError:
+            raise DefinitionError(f"{definition.source}: source {src.name!r}: its box {src.box} holds no "
+                                  f"tetrahedron of part {src.part!r} at this mesh size") from None
+        problem.add_volumetric_source(src.name, tets, power=power_input(src.name))
+    for a, b, h_c in definition.joints:
+        problem.add_contact(a, b, h_c)
+    return problem.assemble(), materials
+
+
+def _output_specs(definition):
+    d = definition
+    specs, channels = [], []
+    for s in d.sensors:
+        if s.kind == "temperature":
+            specs.append(fea.PointTemperature(s.name, s.position))
+            channels.append(Channel(s.name, "temperature", "degC", 1.0, s.label, s.position))
+    if d.camera is not None:
+        for i, p in enumerate(d.camera.spots()):
+            name = f"cam{i:03d}"
+            specs.append(fea.PointTemperature(name, tuple(p)))
+            channels.append(Channel(name, "camera", "degC", 1.0, f"camera spot {i}", tuple(p)))
+    tool, work = np.asarray(d.tool_point), np.asarray(d.workpiece_point)
+    for axis in "xyz":
+        name = axis.upper()
+        specs.append(fea.RelativeDisplacement(name, tuple(tool), tuple(work), axis))
+        channels.append(Channel(name, "displacement", "um", 1e6, f"TCP drift {name} (tool − table)", tuple(tool)))
+    top = tuple(tool + np.asarray(d.tilt_probe_offset))
+    specs.append(fea.RelativeDisplacement("Y_top", top, tuple(work), "y"))
+    channels.append(Channel("Y_top", "displacement", "um", 1e6,
+                            "Y drift of the upper test-bar probe (tilt = Y_top − Y)", top))
+    for s in d.sensors:
+        if s.kind == "strain":
+            specs.append(fea.AxialStrain(s.name, s.start, s.end))
+            channels.append(Channel(s.name, "strain", "ue", 1e6, s.label, s.start))
+    return specs, channels
+
+
+def _operator_cache_key(definition, mesh_digest):
+    text = Path(definition.source).read_bytes()
+    payload = b"|".join([text, mesh_digest.encode(), str(OUTPUT_CACHE_VERSION).encode()])
+    return hashlib.sha256(payload).hexdigest()[:16]
+
+
+def _build_outputs(definition, mesh, thermal, materials, mesh_digest):
+    specs, channels = _output_specs(definition)
+    cache = user_cache_dir() / f"outputs-{definition.name}-{_operator_cache_key(definition, mesh_digest)}.npz"
+    if cache.exists():
+        data = np.load(cache)
+        matrix = sp.csr_matrix((data["data"], data["indices"], data["indptr"]), shape=tuple(data["shape"]))
+        if list(data["names"]) == [s.name for s in specs] and matrix.shape[1] == thermal.n_nodes:
+            return fea.OutputOperator([s.name for s in specs], [str(u) for u in data["units"]], matrix,
+                                      data["offset"]), channels
+    if definition.elastic_degree not in (1, 2):
+        raise DefinitionError(f"{definition.source}: machine.elastic_degree must be 1 or 2, "
+                              f"got {definition.elastic_degree}")
+    elastic = fea.ElasticProblem(mesh, materials, degree=definition.elastic_degree,
+                                 reference_temperature=definition.reference_temperature_C)
+    p1, p2, p3 = definition.support_points
+    elastic.add_kinematic_mount(p1, p2, p3, tolerance=5e-3)
+    operator = fea.build_output_operator(specs, thermal, elastic, snap_distance=definition.snap_distance_m)
+    m = operator.matrix
+    tmp = cache.with_name(cache.stem + ".partial.npz")
+    np.savez(tmp, data=m.data, indices=m.indices, indptr=m.indptr, shape=np.array(m.shape),
+             names=np.array(operator.names), units=np.array(operator.units), offset=operator.offset)
+    tmp.replace(cache)
+    return operator, channels
+
+
+def build_machine(machine="vmc_ram", mesh_size_m=None, definition=None):
+    """Build (or load from caches) the twin of a machine definition.
+
+    Parameters
+    ----------
+    machine : machine name or path to its TOML file
+    mesh_size_m : target tetrahedron edge length in m (default: the definition's)
+    definition : an already-loaded :class:`MachineDefinition` (skips reading the file)
+    """
+    definition = definition or load_machine(machine)
+    mesh, info = build_mesh(definition.geometry, mesh_size_m)
+    groups, _ = _facet_groups(definition, mesh)
+    thermal, materials = _thermal_system(definition, mesh, groups)
+    start = time.perf_counter()
+    outputs, channels = _build_outputs(definition, mesh, thermal, materials, info.digest)
+    air = [s for s in definition.sensors if s.kind == "air"]
+    feedthrough = np.zeros((len(air), thermal.n_inputs))
+    for i, s in enumerate(air):
+        feedthrough[i, thermal.input_index(ambient_input(s.zone))] = 1.0
+        feedthrough[i, thermal.input_index(GRADIENT_INPUT)] = s.position[2] - definition.ambient_reference_height_m
+        channels.append(Channel(s.name, "air", "degC", 1.0, s.label, s.position))
+    return Machine(definition, mesh, thermal, outputs, feedthrough, channels, info.seconds,
+                   time.perf_counter() - start, info.path)
+
+
+def convection_summary(machine):
+    """Area (m²), coefficient and zone of each convection group, and the adiabatic remainder."""
+    groups, adiabatic = _facet_groups(machine.definition, machine.mesh)
+    rows = [(name, machine.mesh.facet_group_area(name), rule.coefficient, rule.zone)
+            for name, rule in groups.items()]
+    return rows, adiabatic

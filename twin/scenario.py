@@ -1,0 +1,345 @@
+"""Scenarios (TOML under ``scenarios/``): duty cycles, ambient, events, initial state, noise and seed.
+
+A scenario turns into operating conditions on any time grid: spindle speed
+(rpm), axis feeds (mm/min), the ambient temperature of each convection zone
+(°C) and the vertical ambient gradient (K/m).  See ``docs/scenarios.md``
+for the format; every shipped scenario is an example.
+
+Piecewise-constant duty cycles are evaluated as left limits at a step end:
+the step ending exactly when the spindle stops still carries the running
+power, so a segment that fills whole time steps injects exactly its energy.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from meshes.tomlspec import DefinitionError, Table, read_toml
+
+SCENARIOS_DIR = Path(__file__).resolve().parent.parent / "scenarios"
+HOUR = 3600.0
+TOP_KEYS = {"scenario", "initial", "ambient", "segments", "events", "noise", "outputs", "iso230_3"}
+
+
+def _duration_s(t: Table, required=True, prefix="duration"):
+    """Read one of ``<prefix>_s``, ``<prefix>_min`` or ``<prefix>_h`` (exactly one) in seconds."""
+    given = [(k, f) for k, f in ((f"{prefix}_s", 1.0), (f"{prefix}_min", 60.0), (f"{prefix}_h", HOUR)) if k in t]
+    if len(given) > 1:
+        raise t.error(given[1][0], f"conflicts with {given[0][0]}: give one of {prefix}_s/_min/_h")
+    if not given:
+        if required:
+            raise t.error(f"{prefix}_min", "is required (or _s / _h)")
+        return None
+    key, factor = given[0]
+    return t.number(key, minimum=0.0, strict_minimum=True) * factor
+
+
+@dataclass(frozen=True)
+class Segment:
+    """Constant spindle speed (rpm) and axis feeds (mm/min) over [start_s, end_s)."""
+
+    start_s: float
+    end_s: float
+    spindle_rpm: float
+    feed_mm_min: tuple = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class DoorOpening:
+    """Ambient drop in some zones: a linear fall of ``drop_K`` over the opening, then exponential recovery."""
+
+    start_s: float
+    duration_s: float
+    drop_K: float
+    recovery_s: float
+    zones: tuple | None
+
+    def offset(self, t):
+        t = np.asarray(t, float)
+        s = t - self.start_s
+        falling = np.clip(s / self.duration_s, 0.0, 1.0) * self.drop_K
+        after = np.exp(-np.clip(s - self.duration_s, 0.0, None) / self.recovery_s)
+        return -np.where(s <= self.duration_s, falling, self.drop_K * after) * (s > 0)
+
+
+@dataclass
+class Ambient:
+    """The room temperature (°C) as a function of time, plus a vertical gradient (K/m)."""
+
+    kind: str
+    params: dict
+    gradient_K_per_m: float = 0.0
+
+    def __call__(self, t):
+        t = np.asarray(t, float)
+        p = self.params
+        if self.kind == "constant":
+            base = np.full(t.shape, p["temperature_C"])
+        elif self.kind == "sinusoid":
+            clock = p["start_clock_h"] * HOUR + t
+            base = p["mean_C"] + p["amplitude_K"] * np.cos(2 * np.pi * (clock - p["peak_clock_h"] * HOUR)
+                                                          / (p["period_h"] * HOUR))
+        else:  # piecewise or csv: linear interpolation, held beyond the ends
+            base = np.interp(t, p["times_s"], p["values_C"])
+        if p.get("hvac_amplitude_K"):
+            base = base + p["hvac_amplitude_K"] * np.sin(2 * np.pi * t / (p["hvac_period_min"] * 60.0))
+        return base
+
+
+@dataclass
+class Scenario:
+    """A validated scenario; :meth:`conditions` evaluates it on a time grid."""
+
+    name: str
+    description: str
+    source: str
+    machine: str
+    duration_s: float
+    sample_interval_s: float
+    time_step_s: float
+    theta: float
+    segments: list
+    ambient: Ambient
+    events: list
+    initial: dict
+    noise: dict
+    seed: int
+    record_camera: bool = False
+    field_times_s: list = field(default_factory=list)
+    camera_image_times_s: list = field(default_factory=list)
+    iso_test: str | None = None
+
+    def times(self):
+        """Output (sampling) times, s, from 0 to the duration inclusive."""
+        n = int(round(self.duration_s / self.sample_interval_s))
+        return np.arange(n + 1) * self.sample_interval_s
+
+    def operating(self, t):
+        """Spindle speed (rpm) and feeds (dict axis → mm/min) at times ``t`` (left limits; 0 after the cycle)."""
+        t = np.atleast_1d(np.asarray(t, float))
+        if not self.segments:
+            return np.zeros(t.shape), {a: np.zeros(t.shape) for a in "xyz"}
+        ends = np.array([s.end_s for s in self.segments])
+        # Left limit at a step end; t = 0 (before the test starts) takes the first segment.
+        k = np.where(t <= 0, 0, np.searchsorted(ends, t, side="left"))
+        inside = k < len(self.segments)
+        k = np.minimum(k, len(self.segments) - 1)
+        rpm = np.where(inside, np.array([s.spindle_rpm for s in self.segments])[k], 0.0)
+        feed = np.array([s.feed_mm_min for s in self.segments])
+        feeds = {a: np.where(inside, feed[k, i], 0.0) for i, a in enumerate("xyz")}
+        return rpm, feeds
+
+    def zone_ambient(self, t, zones):
+        """Ambient (°C) of each zone at times ``t``: the room, plus event offsets in the zones they reach."""
+        base = self.ambient(t)
+        out = {}
+        for zone in zones:
+            value = base.copy()
+            for ev in self.events:
+                if ev.zones is None or zone in ev.zones:
+                    value = value + ev.offset(t)
+            out[zone] = value
+        return out
+
+    def check_machine(self, definition):
+        """Validate the scenario against a machine: speeds and feeds within limits, event zones known."""
+        for i, s in enumerate(self.segments):
+            if s.spindle_rpm > definition.max_spindle_rpm:
+                raise DefinitionError(f"{self.source}: segment {i} spindle_rpm {s.spindle_rpm:g} exceeds the "
+                                      f"maximum of machine {definition.name!r} ({definition.max_spindle_rpm:g} rpm)")
+            for axis, f in zip("xyz", s.feed_mm_min):
+                if abs(f) > definition.max_feed_mm_min:
+                    raise DefinitionError(f"{self.source}: segment {i} feed_{axis} {f:g} mm/min exceeds the "
+                                          f"maximum of machine {definition.name!r} ({definition.max_feed_mm_min:g})")
+        for i, ev in enumerate(self.events):
+            for zone in ev.zones or ():
+                if zone not in definition.zones:
+                    raise DefinitionError(f"{self.source}: events[{i}].zones names an unknown zone {zone!r}; "
+                                          f"zones of {definition.name!r}: {definition.zones}")
+
+
+def scenario_path(scenario):
+    path = Path(scenario)
+    if path.suffix == ".toml" or path.exists():
+        if not path.exists():
+            raise DefinitionError(f"{path}: scenario file not found")
+        return path
+    candidate = SCENARIOS_DIR / f"{scenario}.toml"
+    if not candidate.exists():
+        known = sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))
+        raise DefinitionError(f"unknown scenario {scenario!r}; available: {known}")
+    return candidate
+
+
+def _segments(root: Table):
+    segments, t = [], 0.0
+    for seg in root.tables("segments"):
+        seg.check_keys({"duration_s", "duration_min", "duration_h", "spindle_rpm", "feed_mm_min", "feed_x_mm_min",
+                        "feed_y_mm_min", "feed_z_mm_min", "repeat", "steps", "label"})
+        if "steps" in seg:
+            repeat = seg.integer("repeat", 1, minimum=1)
+            steps = seg.tables("steps", required=True)
+            block = [_one_segment(s) for s in steps]
+            for _ in range(repeat):
+                for length, rpm, feed in block:
+                    segments.append(Segment(t, t + length, rpm, feed))
+                    t += length
+        else:
+            length, rpm, feed = _one_segment(seg)
+            segments.append(Segment(t, t + length, rpm, feed))
+            t += length
+    return segments, t
+
+
+def _one_segment(seg: Table):
+    seg.check_keys({"duration_s", "duration_min", "duration_h", "spindle_rpm", "feed_mm_min", "feed_x_mm_min",
+                    "feed_y_mm_min", "feed_z_mm_min", "repeat", "steps", "label"})
+    length = _duration_s(seg)
+    rpm = seg.number("spindle_rpm", 0.0, minimum=0.0)
+    common = seg.number("feed_mm_min", 0.0, minimum=0.0)
+    feed = tuple(seg.number(f"feed_{a}_mm_min", common, minimum=0.0) for a in "xyz")
+    return length, rpm, feed
+
+
+def _ambient(root: Table, base_dir: Path):
+    a = root.table("ambient")
+    kind = a.string("kind", "constant", choices={"constant", "sinusoid", "piecewise", "csv"})
+    common = {"kind", "vertical_gradient_K_per_m", "hvac_amplitude_K", "hvac_period_min"}
+    params = {"hvac_amplitude_K": a.number("hvac_amplitude_K", 0.0, minimum=0.0),
+              "hvac_period_min": a.number("hvac_period_min", 30.0, minimum=0.0, strict_minimum=True)}
+    if kind == "constant":
+        a.check_keys(common | {"temperature_C"})
+        params["temperature_C"] = a.number("temperature_C", 20.0)
+    elif kind == "sinusoid":
+        a.check_keys(common | {"mean_C", "amplitude_K", "period_h", "peak_clock_h", "start_clock_h"})
+        params.update(mean_C=a.number("mean_C", 20.0), amplitude_K=a.number("amplitude_K", minimum=0.0),
+                      period_h=a.number("period_h", 24.0, minimum=0.0, strict_minimum=True),
+                      peak_clock_h=a.number("peak_clock_h", 17.0), start_clock_h=a.number("start_clock_h", 0.0))
+    elif kind == "piecewise":
+        a.check_keys(common | {"times_h", "values_C"})
+        times = np.asarray(a.vector("times_h")) * HOUR
+        values = np.asarray(a.vector("values_C"))
+        if len(times) != len(values) or len(times) == 0:
+            raise a.error("values_C", f"must have one value per time ({len(times)})", list(values))
+        if np.any(np.diff(times) <= 0):
+            raise a.error("times_h", "must increase strictly", list(times / HOUR))
+        params.update(times_s=times, values_C=values)
+    else:
+        a.check_keys(common | {"file", "time_column", "value_column"})
+        params.update(_ambient_csv(a, base_dir))
+    return Ambient(kind, params, a.number("vertical_gradient_K_per_m", 0.0))
+
+
+def _ambient_csv(a: Table, base_dir: Path):
+    import pandas as pd
+
+    path = Path(a.string("file"))
+    path = path if path.is_absolute() else base_dir / path
+    time_col = a.string("time_column", "time_s")
+    value_col = a.string("value_column", "ambient_degC")
+    if not path.exists():
+        raise a.error("file", "names a file that does not exist", str(path))
+    try:
+        frame = pd.read_csv(path)
+    except Exception as exc:
+        raise a.error("file", f"could not be read as CSV ({exc})", str(path)) from None
+    for col in (time_col, value_col):
+        if col not in frame.columns:
+            raise DefinitionError(f"{a.where('file')} {path}: no column {col!r}; columns: {list(frame.columns)}")
+    t = pd.to_numeric(frame[time_col], errors="coerce").to_numpy(float)
+    v = pd.to_numeric(frame[value_col], errors="coerce").to_numpy(float)
+    if not (np.isfinite(t).all() and np.isfinite(v).all()):
+        row = int(np.flatnonzero(~(np.isfinite(t) & np.isfinite(v)))[0])
+        raise DefinitionError(f"{path}: row {row + 2}: {time_col}/{value_col} is empty or not a number")
+    steps = np.diff(t)
+    if np.any(steps <= 0):
+        k = int(np.flatnonzero(steps <= 0)[0])
+        raise DefinitionError(f"{path}: column {time_col!r} is not monotonic: row {k + 3} has {t[k + 1]:g} "
+                              f"after {t[k]:g}")
+    return {"times_s": t, "values_C": v}
+
+
+def load_scenario(scenario):
+    """Read and validate a scenario by name (``iso230_3_spindle_short``) or path."""
+    path = scenario_path(scenario)
+    root = read_toml(path)
+    root.check_keys(TOP_KEYS)
+    head = root.table("scenario")
+    head.check_keys({"name", "description", "machine", "duration_s", "duration_min", "duration_h",
+                     "sample_interval_s", "time_step_s", "scheme", "seed"})
+    segments, cycle_end = _segments(root)
+    duration = _duration_s(head, required=False) or cycle_end
+    if not duration:
+        raise head.error("duration_h", "is required when there are no segments")
+    if cycle_end > duration * (1 + 1e-12):
+        raise head.error("duration_h", f"is shorter than the segments ({cycle_end / HOUR:g} h)", duration / HOUR)
+    sample = head.number("sample_interval_s", 60.0, minimum=0.0, strict_minimum=True)
+    if sample > duration:
+        raise head.error("sample_interval_s", f"exceeds the duration ({duration:g} s)", sample)
+    step = head.number("time_step_s", min(sample, 60.0), minimum=0.0, strict_minimum=True)
+    scheme = head.string("scheme", "backward_euler", choices={"backward_euler", "crank_nicolson"})
+
+    events = []
+    for ev in root.tables("events"):
+        ev.check_keys({"kind", "start_s", "start_min", "start_h", "duration_s", "duration_min", "duration_h",
+                       "drop_K", "recovery_h", "zones"})
+        ev.string("kind", choices={"door_opening"})
+        events.append(DoorOpening(_duration_s(ev, required=False, prefix="start") or 0.0, _duration_s(ev),
+                                  ev.number("drop_K"), ev.number("recovery_h", 1.0, minimum=0.0,
+                                                                 strict_minimum=True) * HOUR,
+                                  tuple(ev.strings("zones")) if "zones" in ev else None))
+
+    init = root.table("initial")
+    init.check_keys({"kind", "temperature_C", "spindle_rpm", "ambient_C"})
+    initial = {"kind": init.string("kind", "uniform", choices={"uniform", "steady"})}
+    if initial["kind"] == "uniform":
+        initial["temperature_C"] = init.number("temperature_C", None)
+    else:
+        initial["spindle_rpm"] = init.number("spindle_rpm", None, minimum=0.0)
+        initial["ambient_C"] = init.number("ambient_C", None)
+
+    noise = root.table("noise")
+    noise.check_keys({"temperature", "displacement", "strain", "camera"})
+    noise_spec = {"temperature": noise.string("temperature", "none", choices={"none", "DS18S20"}),
+                  "displacement": noise.string("displacement", "none", choices={"none", "NCDT"}),
+                  "strain": noise.string("strain", "none", choices={"none", "FBG"}),
+                  "camera": noise.string("camera", "none", choices={"none", "S65"})}
+
+    out = root.table("outputs")
+    out.check_keys({"camera", "fields_at_h", "camera_images_at_h"})
+    iso = root.table("iso230_3")
+    iso.check_keys({"test"})
+
+    def times_h(key):
+        values = out.vector(key, default=())
+        bad = [v for v in values if not 0 <= v * HOUR <= duration]
+        if bad:
+            raise out.error(key, f"must lie within the scenario (0–{duration / HOUR:g} h)", list(values))
+        return [v * HOUR for v in values]
+
+    return Scenario(
+        name=head.string("name", path.stem),
+        description=head.string("description", ""),
+        source=str(path),
+        machine=head.string("machine", "vmc_ram"),
+        duration_s=duration,
+        sample_interval_s=sample,
+        time_step_s=min(step, sample),
+        theta=1.0 if scheme == "backward_euler" else 0.5,
+        segments=segments,
+        ambient=_ambient(root, path.parent),
+        events=events,
+        initial=initial,
+        noise=noise_spec,
+        seed=head.integer("seed", 0, minimum=0),
+        record_camera=out.boolean("camera", False),
+        field_times_s=times_h("fields_at_h"),
+        camera_image_times_s=times_h("camera_images_at_h"),
+        iso_test=iso.string("test", None, choices={"spindle", "etve"}) if "test" in iso else None,
+    )
+
+
+def available_scenarios():
+    return sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))

@@ -1,0 +1,72 @@
+"""A short readable summary of a run, and the quantities an ISO 230-3 test reports."""
+from __future__ import annotations
+
+import numpy as np
+
+
+def tilt_urad(dataset, probe_spacing_m):
+    """Tilt in the YZ plane from the two Y probes, µrad (= µm per m)."""
+    return (dataset["Y_top"] - dataset["Y"]) / probe_spacing_m
+
+
+def run_summary(dataset, wall_seconds, probe_spacing_m=0.1, iso_test=None):
+    """Key figures as a dict: peak drift per axis (µm), hottest sensor, run time, ISO 230-3 quantities."""
+    out = {"scenario": dataset.metadata.get("scenario"), "machine": dataset.metadata.get("machine"),
+           "duration_h": float(dataset.time_s[-1] / 3600.0), "samples": len(dataset),
+           "run_seconds": float(wall_seconds)}
+    drift = {}
+    for axis in ("X", "Y", "Z"):
+        if axis in dataset:
+            v = dataset[axis]
+            k = int(np.argmax(np.abs(v)))
+            drift[axis] = {"peak_um": float(v[k]), "at_h": float(dataset.time_s[k] / 3600.0),
+                           "range_um": float(np.ptp(v))}
+    out["drift"] = drift
+    surface = dataset.names_of_kind("temperature")
+    if surface:
+        rise = {n: float(dataset[n].max() - dataset[n][0]) for n in surface}
+        hottest = max(surface, key=lambda n: dataset[n].max())
+        out["hottest_sensor"] = {"name": hottest, "max_C": float(dataset[hottest].max()),
+                                 "rise_K": rise[hottest]}
+    if dataset.metadata.get("energy_balance_relative_error") is not None:
+        out["energy_balance_relative_error"] = dataset.metadata["energy_balance_relative_error"]
+    if iso_test == "etve":
+        ambient = [n for n in dataset.names if n.startswith("ambient_") and dataset.info(n).unit == "degC"]
+        out["iso230_3_etve"] = {
+            "drift_range_um": {a: drift[a]["range_um"] for a in drift},
+            "ambient_range_K": float(max(np.ptp(dataset[n]) for n in ambient)) if ambient else None,
+        }
+    if iso_test == "spindle" and "Y_top" in dataset:
+        tilt = tilt_urad(dataset, probe_spacing_m)
+        out["iso230_3_spindle"] = {
+            "max_abs_drift_um": {a: float(np.abs(dataset[a]).max()) for a in drift},
+            "max_abs_tilt_yz_urad": float(np.abs(tilt).max()),
+        }
+    return out
+
+
+def format_summary(summary):
+    """The summary as Markdown."""
+    lines = [f"# Run summary: {summary['scenario']} on {summary['machine']}", "",
+             f"- duration: {summary['duration_h']:.2f} h, {summary['samples']} samples",
+             f"- run time: {summary['run_seconds']:.1f} s (wall clock, simulation only)"]
+    if "hottest_sensor" in summary:
+        h = summary["hottest_sensor"]
+        lines.append(f"- hottest sensor: {h['name']} at {h['max_C']:.2f} °C (rise {h['rise_K']:.2f} K)")
+    if "energy_balance_relative_error" in summary:
+        lines.append(f"- energy balance (stored vs in − out), max relative error: "
+                     f"{summary['energy_balance_relative_error']:.1e}")
+    lines += ["", "| axis | peak drift (µm) | at (h) | range (µm) |", "|---|---|---|---|"]
+    for axis, d in summary["drift"].items():
+        lines.append(f"| {axis} | {d['peak_um']:.2f} | {d['at_h']:.2f} | {d['range_um']:.2f} |")
+    if "iso230_3_etve" in summary:
+        e = summary["iso230_3_etve"]
+        lines += ["", "## ISO 230-3 ETVE", "",
+                  f"- ambient range: {e['ambient_range_K']:.2f} K",
+                  *[f"- maximum drift range {a}: {v:.2f} µm" for a, v in e["drift_range_um"].items()]]
+    if "iso230_3_spindle" in summary:
+        s = summary["iso230_3_spindle"]
+        lines += ["", "## ISO 230-3 spindle thermal distortion", "",
+                  *[f"- maximum |drift| {a}: {v:.2f} µm" for a, v in s["max_abs_drift_um"].items()],
+                  f"- maximum |tilt| in YZ: {s['max_abs_tilt_yz_urad']:.1f} µrad (µm/m)"]
+    return "\n".join(lines) + "\n"

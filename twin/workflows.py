@@ -1,0 +1,91 @@
+"""The functions behind the CLI's ``run`` and ``mesh`` commands (callable from Python too)."""
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+import fea
+from meshes.builder import build_mesh, mesh_statistics
+from meshes.definition import load_geometry
+
+from . import plots
+from .machine import build_machine, convection_summary
+from .outdir import atomic_directory
+from .render import render_machine, render_thermal_image
+from .scenario import load_scenario
+from .simulate import simulate
+from .summary import format_summary, run_summary
+
+
+@dataclass
+class RunOutput:
+    out_dir: Path
+    summary: dict
+    dataset_path: Path
+
+
+def run_scenario(scenario, machine=None, mesh_size_m=None, out_dir=None, fields=False, progress=None,
+                 camera=None):
+    """Simulate a scenario and write the dataset, plots, summary (and fields/images) to ``out_dir``.
+
+    Parameters
+    ----------
+    scenario : scenario name or path
+    machine : machine name or path overriding the scenario's
+    mesh_size_m : mesh size override, m
+    out_dir : result folder (default ``runs/<scenario>``); written atomically
+    fields : also write VTK temperature fields at the scenario's ``fields_at_h`` times
+    progress : callable ``progress(done, total)``
+    camera : record the camera spots in the dataset (default: as the scenario says)
+    """
+    sc = load_scenario(scenario)
+    if machine is not None:
+        sc.machine = str(machine)
+    if camera is not None:
+        sc.record_camera = bool(camera)
+    model = build_machine(sc.machine, mesh_size_m)
+    result = simulate(sc, model, fields=bool(fields), progress=progress)
+    out_dir = Path(out_dir or Path("runs") / sc.name)
+    summary = run_summary(result.dataset, result.wall_seconds,
+                          float(np.linalg.norm(model.definition.tilt_probe_offset)), sc.iso_test)
+    with atomic_directory(out_dir) as tmp:
+        data_path = tmp / f"{sc.name}.csv"
+        result.dataset.write(data_path)
+        plots.plot_temperatures(result.dataset, tmp / "temperatures.png")
+        plots.plot_drift(result.dataset, tmp / "drift.png")
+        plots.plot_strains(result.dataset, tmp / "strains.png")
+        for t in sc.camera_image_times_s:
+            if t in result.fields and model.definition.camera is not None:
+                render_thermal_image(model, result.fields[t], tmp / f"thermal_{t / 3600:.2f}h.png",
+                                     title=f"{sc.name}  t = {t / 3600:.2f} h")
+        if fields and result.fields:
+            frames = {t: {"temperature_degC": model.thermal.nodal_field(T)} for t, T in result.fields.items()}
+            fea.write_time_series(tmp / "fields.pvd", model.mesh, frames)
+        (tmp / "summary.json").write_text(json.dumps(summary, indent=1))
+        (tmp / "summary.md").write_text(format_summary(summary))
+    return RunOutput(out_dir, summary, out_dir / f"{sc.name}.csv")
+
+
+def mesh_machine(machine="vmc_ram", mesh_size_m=None, out_dir=None, rebuild=False):
+    """Build (or load) and describe a machine's mesh; write statistics and an off-screen render."""
+    geometry = load_geometry(machine)
+    start = time.perf_counter()
+    mesh, info = build_mesh(geometry, mesh_size_m, rebuild=rebuild)
+    stats = mesh_statistics(mesh)
+    stats.update(cache_file=str(info.path), from_cache=info.from_cache,
+                 seconds=round(time.perf_counter() - start, 2))
+    model = build_machine(machine, mesh_size_m)
+    rows, adiabatic = convection_summary(model)
+    stats["convection_groups"] = [{"name": n, "area_m2": a, "coefficient_W_m2K": h, "zone": z}
+                                  for n, a, h, z in rows]
+    stats["adiabatic_area_m2"] = adiabatic
+    stats["thermal_nodes"] = model.thermal.n_nodes
+    out_dir = Path(out_dir or Path("runs") / f"mesh_{geometry.name}")
+    with atomic_directory(out_dir) as tmp:
+        (tmp / "mesh_statistics.json").write_text(json.dumps(stats, indent=1))
+        render_machine(model, tmp / f"{geometry.name}.png", title=f"{geometry.name}: {mesh.n_tets} tetrahedra")
+    return stats, out_dir
