@@ -124,6 +124,12 @@ class Background:
             return self._state[2]
         return None
 
+    def __del__(self):
+        try:
+            self.cancel()
+        except Exception:  # noqa: BLE001 - interpreter shutdown
+            pass
+
     def cancel(self):
         """Stop the worker if it is still running."""
         if self._state is None and self._process is not None:

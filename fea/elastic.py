@@ -82,9 +82,9 @@ class _StiffnessSolver:
         residuals = []
         with blas_threads(1):
             x = self.hierarchy.solve(b, tol=AMG_TOLERANCE, accel="cg", maxiter=1000, residuals=residuals)
+            # pyamg stops silently at maxiter: check the true residual.
+            relative = np.linalg.norm(b - self.K @ x) / max(np.linalg.norm(b), 1e-300)
         self.iterations.append(len(residuals) - 1)
-        # pyamg stops silently at maxiter: check the true residual.
-        relative = np.linalg.norm(b - self.K @ x) / max(np.linalg.norm(b), 1e-300)
         if relative > 100 * AMG_TOLERANCE:
             raise RuntimeError(f"AMG-CG stopped at relative residual {relative:.1e} "
                                f"(required {AMG_TOLERANCE:.0e}); the elastic solve did not converge")
@@ -118,7 +118,19 @@ class ElasticProblem:
         self._load_operators = {}
         #: Timings (s) and solver facts of the assembly and solves done so far, for benchmarks.
         self.stats = {}
-        self._grad_lambda, self._volumes = barycentric_gradients(mesh.points, mesh.tets)
+        self._geometry = None
+
+    @property
+    def _grad_lambda(self):
+        """∇λ of each tetrahedron (m, 4, 3), computed when first needed (often in a background worker)."""
+        if self._geometry is None:
+            self._geometry = barycentric_gradients(self.mesh.points, self.mesh.tets)
+        return self._geometry[0]
+
+    @property
+    def _volumes(self):
+        self._grad_lambda
+        return self._geometry[1]
 
     # ---------------------------------------------------------------- supports
     def _constrain(self, nodes, components, label):

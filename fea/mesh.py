@@ -191,7 +191,11 @@ class TetMesh:
         if getattr(self, "_face_cache", None) is None:
             nodes, tet, local = self._faces()
             key = np.sort(nodes, axis=1)
-            order = np.lexsort(key.T[::-1])
+            n = np.int64(len(self.points))
+            if n < 2**21:   # one int64 key per face; a stable sort gives the lexicographic order faster
+                order = np.argsort((key[:, 0] * n + key[:, 1]) * n + key[:, 2], kind="stable")
+            else:
+                order = np.lexsort(key.T[::-1])
             ks = key[order]
             same = np.all(ks[1:] == ks[:-1], axis=1)
             first = np.flatnonzero(same)
@@ -308,8 +312,6 @@ class TetMesh:
             raise FEAInputError(f"points must have shape (k, 3), got {pts.shape}")
         if getattr(self, "_centroid_tree", None) is None:
             self._centroid_tree = cKDTree(self.points[self.tets].mean(axis=1))
-            X = self.points[self.tets]
-            self._inv_jac = np.linalg.inv(np.transpose(X[:, 1:] - X[:, :1], (0, 2, 1)))
         found_tet = np.empty(len(pts), dtype=np.int64)
         found_w = np.empty((len(pts), 4))
         for i, x in enumerate(pts):
@@ -317,7 +319,9 @@ class TetMesh:
                 k = min(k, len(self.tets))
                 _, cand = self._centroid_tree.query(x, k=k)
                 cand = np.atleast_1d(cand)
-                lam = np.einsum("kij,kj->ki", self._inv_jac[cand], x - self.points[self.tets[cand, 0]])
+                X = self.points[self.tets[cand]]               # only the candidates' Jacobians are inverted
+                jac = np.transpose(X[:, 1:] - X[:, :1], (0, 2, 1))
+                lam = np.linalg.solve(jac, (x - X[:, 0])[..., None])[..., 0]
                 w = np.column_stack([1.0 - lam.sum(1), lam])
                 best = int(np.argmax(w.min(1)))
                 if w[best].min() >= -tolerance or k == len(self.tets):

@@ -233,6 +233,7 @@ def build_output_operator(specs, thermal_system, elastic=None, snap_distance=0.0
     matrix = sp.vstack(rows).tocsr() if rows else sp.csr_matrix((0, n))
     operator = OutputOperator(names, [UNITS[type(s)] for s in specs], matrix, offset, deferred)
     operator.stats = stats
+    operator.poll()                         # complete at once when the rows were computed serially
     return operator
 
 

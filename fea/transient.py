@@ -64,6 +64,7 @@ class ThermalSolver:
         self.fixed = system.fixed_nodes
         self.free = np.setdiff1d(np.arange(n), self.fixed)
         self._cache = {}
+        self._trail = None     # (dt, last states) for the initial guesses of the ``mixed`` backend
         self.factorisations = 0
 
     # ---------------------------------------------------------------- factors
@@ -123,9 +124,12 @@ class ThermalSolver:
             r += term.excess(T, u)
         return r
 
-    def _solve(self, factors, rhs, g_new, weight, u_new, T_guess):
-        """Solve ``lhs T + weight·r(T) = rhs`` with fixed values ``g_new``."""
+    def _solve(self, factors, rhs, g_new, weight, u_new, T_guess, guess=None):
+        """Solve ``lhs T + weight·r(T) = rhs`` with fixed values ``g_new`` (``guess``: optional start)."""
         lhs, lhs_ff, lhs_fd, _, solve = factors
+        if not len(self.fixed) and not self.system.radiation:                 # the common linear case
+            x = solve(rhs) if guess is None else solve(rhs, guess)
+            return np.asarray(x, dtype=float).reshape(T_guess.shape)
         T = T_guess.copy()
         if len(self.fixed):
             T[self.fixed] = g_new
@@ -133,7 +137,7 @@ class ThermalSolver:
         else:
             rhs_f = rhs
         if not self.system.radiation:
-            T[self.free] = solve(rhs_f)
+            T[self.free] = solve(rhs_f) if guess is None else solve(rhs_f, guess[self.free])
             return T
         previous = np.inf
         tangent_solve = None
@@ -171,7 +175,35 @@ class ThermalSolver:
         rhs = factors[3] @ T + self.system.input_matrix @ (th * u_new + (1.0 - th) * u_old)
         if self.system.radiation and th < 1.0:
             rhs -= (1.0 - th) * self._radiation(T, u_old)
-        return self._solve(factors, rhs, self.system.fixed_values(u_new), th, u_new, T)
+        guess = self._extrapolate(T, dt) if getattr(factors[4], "accepts_guess", False) else None
+        T_new = self._solve(factors, rhs, self.system.fixed_values(u_new), th, u_new, T, guess)
+        if guess is not None:
+            self._remember(T, T_new, dt)
+        return T_new
+
+    # ---------------------------------------------------------------- initial guesses
+    def _extrapolate(self, T, dt):
+        """A guess for the next state: polynomial extrapolation of the last steps when ``T`` is the last result.
+
+        Only solvers that refine from a guess (the ``mixed`` backend) use it;
+        a poor guess costs iterations, never accuracy.
+        """
+        trail = self._trail
+        if trail is None or trail[0] != dt or trail[1][-1] is not T:
+            return T
+        states = trail[1]
+        if len(states) >= 3:
+            return 3.0 * states[-1] - 3.0 * states[-2] + states[-3]
+        if len(states) == 2:
+            return 2.0 * states[-1] - states[-2]
+        return T
+
+    def _remember(self, T, T_new, dt):
+        trail = self._trail
+        if trail is not None and trail[0] == dt and trail[1][-1] is T:
+            self._trail = (dt, (trail[1] + [T_new])[-3:])
+        else:
+            self._trail = (dt, [T, T_new])
 
     def run(self, T0, times_s, schedule, outputs=None, field_times_s=(), max_step_s=None, progress=None):
         """Integrate from ``times_s[0]`` through ``times_s``; record outputs at each time.

@@ -39,6 +39,14 @@ def user_cache_dir():
     return path
 
 
+def find_cached(name):
+    """A cached file by name: shipped with the package first, then the user cache; ``None`` if absent."""
+    for folder in (SHIPPED_CACHE, user_cache_dir()):
+        if (folder / name).exists():
+            return folder / name
+    return None
+
+
 @dataclass
 class MeshInfo:
     """How a mesh was obtained and what it looks like."""
@@ -69,13 +77,11 @@ def build_mesh(geometry, size_m=None, rebuild=False, quiet=True):
         raise DefinitionError(f"{geometry.source}: mesh size must be positive, got {size_m!r}")
     name = cache_file_name(geometry, size_m)
     digest = geometry.digest(size_m)
-    if not rebuild:
-        for folder in (SHIPPED_CACHE, user_cache_dir()):
-            path = folder / name
-            if path.exists():
-                start = time.perf_counter()
-                mesh = read_labelled_mesh(path)
-                return mesh, MeshInfo(path, True, time.perf_counter() - start, digest)
+    path = None if rebuild else find_cached(name)
+    if path is not None:
+        start = time.perf_counter()
+        mesh = read_labelled_mesh(path)
+        return mesh, MeshInfo(path, True, time.perf_counter() - start, digest)
     start = time.perf_counter()
     grid = tetrahedralize(geometry, size_m, quiet)
     mesh = label_parts(geometry, grid)
@@ -106,12 +112,17 @@ def tetrahedralize(geometry, size_m, quiet=True):
         csg.write_text(json.dumps(tree))
         diagonal = float(np.linalg.norm(np.ptp(np.vstack([p.shape.surface(size_m).points
                                                            for p in geometry.parts]), axis=0)))
+        cwd = os.getcwd()
+        os.chdir(folder)        # fTetWild drops a scratch surface file in the working directory
         try:
             grid = pytetwild.tetrahedralize_csg(str(csg), epsilon=geometry.envelope_epsilon,
                                                 edge_length_r=size_m / diagonal, coarsen=False,
+                                                stop_energy=geometry.stop_energy,
                                                 loglevel=6 if quiet else 3)
         except Exception as exc:  # fTetWild reports failures as generic exceptions
             raise DefinitionError(f"{geometry.source}: meshing failed in pytetwild: {exc}") from exc
+        finally:
+            os.chdir(cwd)
     if grid is None or grid.n_cells == 0:
         raise DefinitionError(f"{geometry.source}: meshing produced no tetrahedra (size {size_m} m)")
     return grid

@@ -41,7 +41,7 @@ class MachineGeometry:
     parts: list
     mesh_size_m: float = DEFAULT_MESH_SIZE_M
     envelope_epsilon: float = 1e-4
-    optimisation_iterations: int = 10
+    stop_energy: float = 10.0
     source: str = ""
     extras: dict = field(default_factory=dict)
 
@@ -58,7 +58,7 @@ class MachineGeometry:
             "parts": [[p.name, type(p.shape).__name__, _shape_state(p.shape)] for p in self.parts],
             "size": round(float(mesh_size_m), 9),
             "epsilon": self.envelope_epsilon,
-            "iterations": self.optimisation_iterations,
+            "stop_energy": self.stop_energy,
             "pytetwild": getattr(pytetwild, "__version__", "?"),
             "builder": BUILDER_VERSION,
         }
@@ -140,7 +140,7 @@ def load_geometry(machine):
     info = root.table("machine")
     name = info.string("name", path.stem)
     mesh = root.table("mesh")
-    mesh.check_keys({"size_m", "envelope_epsilon", "optimisation_iterations"})
+    mesh.check_keys({"size_m", "envelope_epsilon", "stop_energy"})
     parts = [parse_part(t, path.parent) for t in root.tables("parts", required=True)]
     names = [p.name for p in parts]
     dupes = sorted({n for n in names if names.count(n) > 1})
@@ -151,6 +151,6 @@ def load_geometry(machine):
         parts=parts,
         mesh_size_m=mesh.number("size_m", DEFAULT_MESH_SIZE_M, minimum=1e-4),
         envelope_epsilon=mesh.number("envelope_epsilon", 1e-4, minimum=1e-6, maximum=1e-2),
-        optimisation_iterations=mesh.integer("optimisation_iterations", 10, minimum=1),
+        stop_energy=mesh.number("stop_energy", 10.0, minimum=3.0),
         source=str(path),
     )

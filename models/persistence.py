@@ -129,6 +129,18 @@ def _build(document, path):
     return estimator
 
 
+def model_to_document(estimator) -> dict:
+    """The JSON-ready document :func:`save_model` writes (for embedding in a larger file)."""
+    return _model_document(estimator)
+
+
+def model_from_document(document, source="<document>"):
+    """Rebuild an estimator from a :func:`model_to_document` document; ``source`` names it in errors."""
+    if not isinstance(document, dict):
+        raise ValueError(f"{source}: field '<root>' has value of type {type(document).__name__}, expected an object.")
+    return _build(document, source)
+
+
 def save_model(estimator, path) -> Path:
     """Write ``estimator`` (fitted or not) to ``path`` as JSON; returns the path."""
     path = Path(path)

@@ -12,7 +12,7 @@ import sys
 
 from .errors import USER_ERRORS
 
-COMMAND_MODULES = ("twin.cli_run",)
+COMMAND_MODULES = ("twin.cli_run", "twin.cli_fmu", "twin.cli_models")
 
 
 def build_parser():

@@ -19,7 +19,7 @@ def cmd_run(args):
 def cmd_mesh(args):
     from .workflows import mesh_machine
 
-    stats, out_dir = mesh_machine(args.machine, args.mesh_size, args.out, rebuild=args.rebuild)
+    stats, out_dir = mesh_machine(args.machine, args.mesh_size, args.out, rebuild=args.rebuild, ship=args.ship)
     print(f"machine {args.machine}: {stats['nodes']} nodes, {stats['tetrahedra']} tetrahedra, "
           f"{stats['thermal_nodes']} thermal nodes (joints split)")
     print(f"volume {stats['volume_m3']:.4f} m³; edge length mean {stats['edge_length_m']['mean'] * 1e3:.1f} mm; "
@@ -33,6 +33,8 @@ def cmd_mesh(args):
     print(f"  adiabatic remainder {stats['adiabatic_area_m2']:.3f} m²")
     print(f"mesh {'read from cache' if stats['from_cache'] else 'built'} in {stats['seconds']} s: "
           f"{stats['cache_file']}")
+    if stats.get("shipped"):
+        print(f"copied into meshes/cache: {', '.join(stats['shipped'])}")
     print(f"statistics and render in {out_dir}/")
 
 
@@ -52,6 +54,8 @@ def register(sub):
     mesh.add_argument("--mesh-size", type=float, help="target tetrahedron edge length, m")
     mesh.add_argument("--out", help="folder for statistics and render (default runs/mesh_<machine>)")
     mesh.add_argument("--rebuild", action="store_true", help="mesh again even if cached")
+    mesh.add_argument("--ship", action="store_true",
+                      help="copy the mesh and output operator into meshes/cache (for committing)")
     mesh.set_defaults(func=cmd_mesh)
 
 

@@ -297,8 +297,10 @@ def _parse_csv(path, text):
     """Header and float matrix of a CSV; empty cells and NaN/NA become NaN."""
     import pandas as pd
 
+    # pandas ≥ 3 parses floats exactly by default; older versions need round_trip.
+    exact = {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"}
     try:
-        frame = pd.read_csv(io.StringIO(text), skipinitialspace=True, float_precision="round_trip")
+        frame = pd.read_csv(io.StringIO(text), skipinitialspace=True, **exact)
     except pd.errors.EmptyDataError:
         raise TwinInputError(f"{path}: the file is empty") from None
     except pd.errors.ParserError as exc:

@@ -15,6 +15,7 @@ Inputs u (one column of the thermal system each):
 from __future__ import annotations
 
 import hashlib
+import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,7 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 
 import fea
-from meshes.builder import build_mesh, user_cache_dir
+from meshes.builder import build_mesh, find_cached, user_cache_dir
 from meshes.tomlspec import DefinitionError
 
 from .machine_definition import MachineDefinition, load_machine
@@ -66,6 +67,7 @@ class Machine:
     mesh_seconds: float
     operator_seconds: float
     mesh_path: Path
+    operator_path: Path
 
     @property
     def name(self):
@@ -192,20 +194,33 @@ def _output_specs(definition):
 
 
 def _operator_cache_key(definition, mesh_digest):
-    text = Path(definition.source).read_bytes()
-    payload = b"|".join([text, mesh_digest.encode(), str(OUTPUT_CACHE_VERSION).encode()])
-    return hashlib.sha256(payload).hexdigest()[:16]
+    """Hash of what the output operator depends on: mesh, materials, joints, supports, sensors, degree.
+
+    Source powers and convection do not enter the operator, so calibrating
+    them reuses the cached adjoint rows.
+    """
+    d = definition
+    payload = {
+        "mesh": mesh_digest, "version": OUTPUT_CACHE_VERSION, "degree": d.elastic_degree,
+        "materials": {k: repr(v) for k, v in sorted(d.materials.items())},
+        "part_materials": [(p.name, p.material) for p in d.geometry.parts],
+        "joints": d.joints, "supports": d.support_points, "sensors": [repr(s) for s in d.sensors],
+        "camera": repr(d.camera), "tcp": [d.tool_point, d.workpiece_point, d.tilt_probe_offset],
+        "reference_temperature": d.reference_temperature_C, "snap": d.snap_distance_m,
+    }
+    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
 def _build_outputs(definition, mesh, thermal, materials, mesh_digest):
     specs, channels = _output_specs(definition)
-    cache = user_cache_dir() / f"outputs-{definition.name}-{_operator_cache_key(definition, mesh_digest)}.npz"
+    name = f"outputs-{definition.name}-{_operator_cache_key(definition, mesh_digest)}.npz"
+    cache = find_cached(name) or user_cache_dir() / name
     if cache.exists():
         data = np.load(cache)
         matrix = sp.csr_matrix((data["data"], data["indices"], data["indptr"]), shape=tuple(data["shape"]))
         if list(data["names"]) == [s.name for s in specs] and matrix.shape[1] == thermal.n_nodes:
             return fea.OutputOperator([s.name for s in specs], [str(u) for u in data["units"]], matrix,
-                                      data["offset"]), channels
+                                      data["offset"]), channels, cache
     if definition.elastic_degree not in (1, 2):
         raise DefinitionError(f"{definition.source}: machine.elastic_degree must be 1 or 2, "
                               f"got {definition.elastic_degree}")
@@ -214,12 +229,13 @@ def _build_outputs(definition, mesh, thermal, materials, mesh_digest):
     p1, p2, p3 = definition.support_points
     elastic.add_kinematic_mount(p1, p2, p3, tolerance=5e-3)
     operator = fea.build_output_operator(specs, thermal, elastic, snap_distance=definition.snap_distance_m)
+    cache = user_cache_dir() / name
     m = operator.matrix
     tmp = cache.with_name(cache.stem + ".partial.npz")
     np.savez(tmp, data=m.data, indices=m.indices, indptr=m.indptr, shape=np.array(m.shape),
              names=np.array(operator.names), units=np.array(operator.units), offset=operator.offset)
     tmp.replace(cache)
-    return operator, channels
+    return operator, channels, cache
 
 
 def build_machine(machine="vmc_ram", mesh_size_m=None, definition=None):
@@ -236,7 +252,7 @@ def build_machine(machine="vmc_ram", mesh_size_m=None, definition=None):
     groups, _ = _facet_groups(definition, mesh)
     thermal, materials = _thermal_system(definition, mesh, groups)
     start = time.perf_counter()
-    outputs, channels = _build_outputs(definition, mesh, thermal, materials, info.digest)
+    outputs, channels, operator_path = _build_outputs(definition, mesh, thermal, materials, info.digest)
     air = [s for s in definition.sensors if s.kind == "air"]
     feedthrough = np.zeros((len(air), thermal.n_inputs))
     for i, s in enumerate(air):
@@ -244,7 +260,7 @@ def build_machine(machine="vmc_ram", mesh_size_m=None, definition=None):
         feedthrough[i, thermal.input_index(GRADIENT_INPUT)] = s.position[2] - definition.ambient_reference_height_m
         channels.append(Channel(s.name, "air", "degC", 1.0, s.label, s.position))
     return Machine(definition, mesh, thermal, outputs, feedthrough, channels, info.seconds,
-                   time.perf_counter() - start, info.path)
+                   time.perf_counter() - start, info.path, operator_path)
 
 
 def convection_summary(machine):

@@ -131,6 +131,7 @@ class MachineDefinition:
     snap_distance_m: float
     ambient_reference_height_m: float
     zones: list = field(default_factory=list)
+    zone_lags_s: dict = field(default_factory=dict)
 
     def sensor(self, name):
         for s in self.sensors:
@@ -151,7 +152,7 @@ def load_machine(machine):
     geometry = load_geometry(path)
     root = read_toml(path)
     root.check_keys({"machine", "mesh", "materials", "parts", "joints", "convection", "sources",
-                     "supports", "tcp", "sensors", "camera"})
+                     "supports", "tcp", "sensors", "camera", "zones"})
     info = root.table("machine")
     info.check_keys({"name", "description", "max_spindle_rpm", "max_feed_mm_min", "reference_temperature_C",
                      "elastic_degree", "snap_distance_m", "ambient_reference_height_m"})
@@ -198,6 +199,13 @@ def load_machine(machine):
                                          t.string("zone", "room"), t.vector("facing", 3, None),
                                          t.boolean("inside", False)))
     zones = sorted({r.zone for r in convection})
+    zone_lags_s = {}
+    for t in root.tables("zones"):
+        t.check_keys({"name", "lag_h", "label"})
+        name = t.string("name")
+        if name not in zones:
+            raise t.error("name", f"is not a convection zone; zones: {zones}", name)
+        zone_lags_s[name] = t.number("lag_h", minimum=0.0, strict_minimum=True) * 3600.0
 
     sources = []
     for t in root.tables("sources"):
@@ -272,4 +280,5 @@ def load_machine(machine):
         snap_distance_m=info.number("snap_distance_m", 0.003, minimum=0.0),
         ambient_reference_height_m=info.number("ambient_reference_height_m", 1.0),
         zones=zones,
+        zone_lags_s=zone_lags_s,
     )

@@ -23,8 +23,8 @@ HOUR = 3600.0
 TOP_KEYS = {"scenario", "initial", "ambient", "segments", "events", "noise", "outputs", "iso230_3"}
 
 
-def _duration_s(t: Table, required=True, prefix="duration"):
-    """Read one of ``<prefix>_s``, ``<prefix>_min`` or ``<prefix>_h`` (exactly one) in seconds."""
+def _duration_s(t: Table, required=True, prefix="duration", strict=True):
+    """Read one of ``<prefix>_s``, ``<prefix>_min`` or ``<prefix>_h`` (exactly one) in seconds (> 0, or ≥ 0)."""
     given = [(k, f) for k, f in ((f"{prefix}_s", 1.0), (f"{prefix}_min", 60.0), (f"{prefix}_h", HOUR)) if k in t]
     if len(given) > 1:
         raise t.error(given[1][0], f"conflicts with {given[0][0]}: give one of {prefix}_s/_min/_h")
@@ -33,7 +33,7 @@ def _duration_s(t: Table, required=True, prefix="duration"):
             raise t.error(f"{prefix}_min", "is required (or _s / _h)")
         return None
     key, factor = given[0]
-    return t.number(key, minimum=0.0, strict_minimum=True) * factor
+    return t.number(key, minimum=0.0, strict_minimum=strict) * factor
 
 
 @dataclass(frozen=True)
@@ -44,6 +44,7 @@ class Segment:
     end_s: float
     spindle_rpm: float
     feed_mm_min: tuple = (0.0, 0.0, 0.0)
+    origin: str = field(default="", compare=False)   # where it was written, e.g. "segments[2].steps[1]"
 
 
 @dataclass(frozen=True)
@@ -131,33 +132,66 @@ class Scenario:
         feeds = {a: np.where(inside, feed[k, i], 0.0) for i, a in enumerate("xyz")}
         return rpm, feeds
 
-    def zone_ambient(self, t, zones):
-        """Ambient (°C) of each zone at times ``t``: the room, plus event offsets in the zones they reach."""
-        base = self.ambient(t)
+    def zone_ambient(self, t, zones, lags_s=None):
+        """Ambient (°C) of each zone at times ``t``.
+
+        A zone sees the room plus the events that reach it.  A zone with a
+        lag (``lags_s[zone]`` in s, e.g. the air inside a machine enclosure)
+        sees the room and the room's events through a first-order lag,
+        starting in equilibrium at t = 0.
+        """
+        t = np.atleast_1d(np.asarray(t, float))
+        lags_s = lags_s or {}
         out = {}
         for zone in zones:
-            value = base.copy()
-            for ev in self.events:
-                if ev.zones is None or zone in ev.zones:
-                    value = value + ev.offset(t)
-            out[zone] = value
+            tau = lags_s.get(zone, 0.0)
+
+            def raw(x, zone=zone, lagged=tau > 0):
+                value = self.ambient(x)
+                for ev in self.events:
+                    if ev.zones is None or zone in ev.zones or (lagged and "room" in ev.zones):
+                        value = value + ev.offset(x)
+                return value
+
+            out[zone] = first_order_lag(raw, t, tau) if tau > 0 else raw(t)
         return out
 
     def check_machine(self, definition):
         """Validate the scenario against a machine: speeds and feeds within limits, event zones known."""
         for i, s in enumerate(self.segments):
+            where = s.origin or f"segment {i}"
             if s.spindle_rpm > definition.max_spindle_rpm:
-                raise DefinitionError(f"{self.source}: segment {i} spindle_rpm {s.spindle_rpm:g} exceeds the "
+                raise DefinitionError(f"{self.source}: {where}.spindle_rpm {s.spindle_rpm:g} exceeds the "
                                       f"maximum of machine {definition.name!r} ({definition.max_spindle_rpm:g} rpm)")
             for axis, f in zip("xyz", s.feed_mm_min):
                 if abs(f) > definition.max_feed_mm_min:
-                    raise DefinitionError(f"{self.source}: segment {i} feed_{axis} {f:g} mm/min exceeds the "
-                                          f"maximum of machine {definition.name!r} ({definition.max_feed_mm_min:g})")
+                    raise DefinitionError(f"{self.source}: {where}.feed_{axis}_mm_min {f:g} exceeds the maximum "
+                                          f"of machine {definition.name!r} ({definition.max_feed_mm_min:g} mm/min)")
         for i, ev in enumerate(self.events):
             for zone in ev.zones or ():
                 if zone not in definition.zones:
                     raise DefinitionError(f"{self.source}: events[{i}].zones names an unknown zone {zone!r}; "
                                           f"zones of {definition.name!r}: {definition.zones}")
+
+
+def first_order_lag(signal, t, tau_s):
+    """Response at times ``t`` of ``dy/dt = (signal − y)/τ`` with y(0) = signal(0).
+
+    Integrated exactly for a signal that is linear between the points of a
+    fine grid (step ≤ τ/20 and ≤ 60 s).
+    """
+    t = np.asarray(t, float)
+    end = max(float(t.max()), 0.0)
+    dt = min(tau_s / 20.0, 60.0)
+    grid = np.arange(0.0, end + dt, dt)
+    x = signal(grid)
+    a = np.exp(-dt / tau_s)
+    slope = np.diff(x) / dt
+    y = np.empty_like(x)
+    y[0] = x[0]
+    for k in range(len(slope)):
+        y[k + 1] = x[k + 1] - slope[k] * tau_s + (y[k] - x[k] + slope[k] * tau_s) * a
+    return np.interp(t, grid, y)
 
 
 def scenario_path(scenario):
@@ -179,23 +213,30 @@ def _segments(root: Table):
         seg.check_keys({"duration_s", "duration_min", "duration_h", "spindle_rpm", "feed_mm_min", "feed_x_mm_min",
                         "feed_y_mm_min", "feed_z_mm_min", "repeat", "steps", "label"})
         if "steps" in seg:
+            extra = sorted(set(seg.keys()) - {"repeat", "steps", "label"})
+            if extra:
+                raise seg.error(extra[0], "cannot be combined with steps (give it inside each step)")
             repeat = seg.integer("repeat", 1, minimum=1)
             steps = seg.tables("steps", required=True)
-            block = [_one_segment(s) for s in steps]
+            if not steps:
+                raise seg.error("steps", "must list at least one step", [])
+            block = [(_one_segment(s), s.path) for s in steps]
             for _ in range(repeat):
-                for length, rpm, feed in block:
-                    segments.append(Segment(t, t + length, rpm, feed))
+                for (length, rpm, feed), origin in block:
+                    segments.append(Segment(t, t + length, rpm, feed, origin))
                     t += length
         else:
+            if "repeat" in seg:
+                raise seg.error("repeat", "needs steps = [...] to repeat")
             length, rpm, feed = _one_segment(seg)
-            segments.append(Segment(t, t + length, rpm, feed))
+            segments.append(Segment(t, t + length, rpm, feed, seg.path))
             t += length
     return segments, t
 
 
 def _one_segment(seg: Table):
     seg.check_keys({"duration_s", "duration_min", "duration_h", "spindle_rpm", "feed_mm_min", "feed_x_mm_min",
-                    "feed_y_mm_min", "feed_z_mm_min", "repeat", "steps", "label"})
+                    "feed_y_mm_min", "feed_z_mm_min", "label"})
     length = _duration_s(seg)
     rpm = seg.number("spindle_rpm", 0.0, minimum=0.0)
     common = seg.number("feed_mm_min", 0.0, minimum=0.0)
@@ -250,14 +291,17 @@ def _ambient_csv(a: Table, base_dir: Path):
             raise DefinitionError(f"{a.where('file')} {path}: no column {col!r}; columns: {list(frame.columns)}")
     t = pd.to_numeric(frame[time_col], errors="coerce").to_numpy(float)
     v = pd.to_numeric(frame[value_col], errors="coerce").to_numpy(float)
+    if len(t) == 0:
+        raise DefinitionError(f"{a.where('file')} {path}: no data rows")
     if not (np.isfinite(t).all() and np.isfinite(v).all()):
         row = int(np.flatnonzero(~(np.isfinite(t) & np.isfinite(v)))[0])
-        raise DefinitionError(f"{path}: row {row + 2}: {time_col}/{value_col} is empty or not a number")
+        raise DefinitionError(f"{a.where('file')} {path}: row {row + 2}: {time_col}/{value_col} is empty or not "
+                              f"a number, got {frame[time_col].iloc[row]!r}, {frame[value_col].iloc[row]!r}")
     steps = np.diff(t)
     if np.any(steps <= 0):
         k = int(np.flatnonzero(steps <= 0)[0])
-        raise DefinitionError(f"{path}: column {time_col!r} is not monotonic: row {k + 3} has {t[k + 1]:g} "
-                              f"after {t[k]:g}")
+        raise DefinitionError(f"{a.where('file')} {path}: column {time_col!r} must increase strictly: "
+                              f"row {k + 3} has {t[k + 1]:g} after {t[k]:g}")
     return {"times_s": t, "values_C": v}
 
 
@@ -278,6 +322,10 @@ def load_scenario(scenario):
     sample = head.number("sample_interval_s", 60.0, minimum=0.0, strict_minimum=True)
     if sample > duration:
         raise head.error("sample_interval_s", f"exceeds the duration ({duration:g} s)", sample)
+    n_samples = duration / sample
+    if abs(n_samples - round(n_samples)) > 1e-6 * max(1.0, n_samples):
+        raise head.error("sample_interval_s", f"must divide the duration ({duration:g} s) into whole samples",
+                         sample)
     step = head.number("time_step_s", min(sample, 60.0), minimum=0.0, strict_minimum=True)
     scheme = head.string("scheme", "backward_euler", choices={"backward_euler", "crank_nicolson"})
 
@@ -286,17 +334,22 @@ def load_scenario(scenario):
         ev.check_keys({"kind", "start_s", "start_min", "start_h", "duration_s", "duration_min", "duration_h",
                        "drop_K", "recovery_h", "zones"})
         ev.string("kind", choices={"door_opening"})
-        events.append(DoorOpening(_duration_s(ev, required=False, prefix="start") or 0.0, _duration_s(ev),
+        start = _duration_s(ev, required=False, prefix="start", strict=False) or 0.0
+        if start >= duration:
+            key = next(k for k in ("start_s", "start_min", "start_h") if k in ev)
+            raise ev.error(key, f"is not within the scenario (0–{duration / HOUR:g} h)", ev.raw(key))
+        events.append(DoorOpening(start, _duration_s(ev),
                                   ev.number("drop_K"), ev.number("recovery_h", 1.0, minimum=0.0,
                                                                  strict_minimum=True) * HOUR,
                                   tuple(ev.strings("zones")) if "zones" in ev else None))
 
     init = root.table("initial")
-    init.check_keys({"kind", "temperature_C", "spindle_rpm", "ambient_C"})
     initial = {"kind": init.string("kind", "uniform", choices={"uniform", "steady"})}
     if initial["kind"] == "uniform":
+        init.check_keys({"kind", "temperature_C"})
         initial["temperature_C"] = init.number("temperature_C", None)
     else:
+        init.check_keys({"kind", "spindle_rpm", "ambient_C"})
         initial["spindle_rpm"] = init.number("spindle_rpm", None, minimum=0.0)
         initial["ambient_C"] = init.number("ambient_C", None)
 
@@ -313,7 +366,7 @@ def load_scenario(scenario):
     iso.check_keys({"test"})
 
     def times_h(key):
-        values = out.vector(key, default=())
+        values = out.vector(key, default=[])
         bad = [v for v in values if not 0 <= v * HOUR <= duration]
         if bad:
             raise out.error(key, f"must lie within the scenario (0–{duration / HOUR:g} h)", list(values))

@@ -47,7 +47,7 @@ class ScenarioInputs:
     def conditions(self, times_s):
         t = np.atleast_1d(np.asarray(times_s, float))
         rpm, feeds = self.scenario.operating(t)
-        ambient = self.scenario.zone_ambient(t, self.machine.zones)
+        ambient = self.scenario.zone_ambient(t, self.machine.zones, self.machine.definition.zone_lags_s)
         gradient = np.full(t.shape, self.scenario.ambient.gradient_K_per_m)
         U = self.machine.input_matrix(rpm, feeds, ambient, gradient)
         cond = Conditions(t, rpm, feeds, ambient, gradient, U)
@@ -85,10 +85,12 @@ def initial_temperature(machine, scenario, schedule):
         value = init.get("temperature_C")
         return float(schedule.conditions([0.0]).ambient_C[machine.zones[0]][0] if value is None else value)
     cond = schedule.conditions([0.0])
-    rpm = cond.spindle_rpm if init.get("spindle_rpm") is None else np.array([init["spindle_rpm"]])
+    # The machine stands idle before the test unless the scenario names a speed.
+    rpm = np.array([init.get("spindle_rpm") or 0.0])
+    idle = {a: np.zeros(1) for a in "xyz"}
     ambient = cond.ambient_C if init.get("ambient_C") is None else \
         {z: np.array([init["ambient_C"]]) for z in machine.zones}
-    u = machine.input_matrix(rpm, cond.feed_mm_min, ambient, cond.gradient_K_per_m)[0]
+    u = machine.input_matrix(rpm, idle, ambient, cond.gradient_K_per_m)[0]
     return fea.ThermalSolver(machine.thermal).steady_state(u)
 
 

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -9,11 +10,12 @@ from pathlib import Path
 import numpy as np
 
 import fea
-from meshes.builder import build_mesh, mesh_statistics
+from meshes.builder import SHIPPED_CACHE, build_mesh, mesh_statistics
 from meshes.definition import load_geometry
 
 from . import plots
 from .machine import build_machine, convection_summary
+from .machine_definition import load_machine
 from .outdir import atomic_directory
 from .render import render_machine, render_thermal_image
 from .scenario import load_scenario
@@ -47,6 +49,7 @@ def run_scenario(scenario, machine=None, mesh_size_m=None, out_dir=None, fields=
         sc.machine = str(machine)
     if camera is not None:
         sc.record_camera = bool(camera)
+    sc.check_machine(load_machine(sc.machine))      # fail on bad speeds before any meshing
     model = build_machine(sc.machine, mesh_size_m)
     result = simulate(sc, model, fields=bool(fields), progress=progress)
     out_dir = Path(out_dir or Path("runs") / sc.name)
@@ -70,8 +73,13 @@ def run_scenario(scenario, machine=None, mesh_size_m=None, out_dir=None, fields=
     return RunOutput(out_dir, summary, out_dir / f"{sc.name}.csv")
 
 
-def mesh_machine(machine="vmc_ram", mesh_size_m=None, out_dir=None, rebuild=False):
-    """Build (or load) and describe a machine's mesh; write statistics and an off-screen render."""
+def mesh_machine(machine="vmc_ram", mesh_size_m=None, out_dir=None, rebuild=False, ship=False):
+    """Build (or load) and describe a machine's mesh; write statistics and an off-screen render.
+
+    ``ship`` copies the mesh and the machine's output operator into the
+    package's shipped cache (``meshes/cache``), for committing with the
+    definition so a fresh clone needs neither meshing nor elastic solves.
+    """
     geometry = load_geometry(machine)
     start = time.perf_counter()
     mesh, info = build_mesh(geometry, mesh_size_m, rebuild=rebuild)
@@ -84,6 +92,12 @@ def mesh_machine(machine="vmc_ram", mesh_size_m=None, out_dir=None, rebuild=Fals
                                   for n, a, h, z in rows]
     stats["adiabatic_area_m2"] = adiabatic
     stats["thermal_nodes"] = model.thermal.n_nodes
+    if ship:
+        SHIPPED_CACHE.mkdir(exist_ok=True)
+        for path in (model.mesh_path, model.operator_path):
+            if path.parent != SHIPPED_CACHE:
+                shutil.copy2(path, SHIPPED_CACHE / path.name)
+        stats["shipped"] = [model.mesh_path.name, model.operator_path.name]
     out_dir = Path(out_dir or Path("runs") / f"mesh_{geometry.name}")
     with atomic_directory(out_dir) as tmp:
         (tmp / "mesh_statistics.json").write_text(json.dumps(stats, indent=1))

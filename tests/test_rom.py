@@ -1,0 +1,175 @@
+"""Reduced-order model: exactness properties, accuracy against the full FE, persistence and errors."""
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import scipy.linalg
+import scipy.sparse as sp
+
+import fea
+from twin.machine import build_machine
+from twin.rom import (DEFAULT_ORDER, FORMAT_VERSION, ROMError, ReducedModel, build_rom, cached_rom, krylov_basis,
+                      simulate_rom)
+from twin.rom_report import GOAL_TCP_UM, GOAL_TEMPERATURE_K, max_errors
+from twin.scenario import load_scenario
+from twin.simulate import simulate
+
+
+@pytest.fixture(scope="module")
+def machine():
+    return build_machine("vmc_ram")
+
+
+@pytest.fixture(scope="module")
+def rom(machine):
+    return cached_rom(machine, DEFAULT_ORDER)
+
+
+def _fe_outputs(machine, rom, T, u):
+    """The machine's channels (edge units) for a temperature field, in the ROM's output order."""
+    values = machine.channel_values(machine.outputs.apply(T)[None, :], u[None, :])[0]
+    names = [c.name for c in machine.channels]
+    return values[[names.index(n) for n in rom.output_names]]
+
+
+def test_uniform_start_is_exact_and_an_equilibrium(machine, rom):
+    assert rom.info["uniform_residual"] < 1e-10
+    T0 = 23.5
+    u = rom.inputs_from_conditions([0.0], {}, T0)[0]
+    z = rom.uniform(T0)
+    expected = _fe_outputs(machine, rom, np.full(machine.thermal.n_nodes, T0), u)
+    np.testing.assert_allclose(rom.outputs(z, u), expected, rtol=1e-9, atol=1e-9)
+    # Uniform T0 with ambient T0 and no power stays put for a day (exact ZOH).
+    t = np.arange(0.0, 86400.0 + 1, 600.0)
+    Y = rom.simulate(t, np.tile(u, (len(t), 1)), z, "zoh")
+    assert np.abs(Y - Y[0]).max() < 1e-9
+
+
+def test_steady_state_has_the_exact_dc_gain(machine, rom):
+    u = rom.inputs_from_conditions([9000.0], {"x": [3000.0], "y": [0.0], "z": [5000.0]},
+                                   {z: [21.0 - 1.5 * i] for i, z in enumerate(rom.zones)}, 0.3)[0]
+    T = fea.ThermalSolver(machine.thermal).steady_state(u)
+    np.testing.assert_allclose(rom.outputs(rom.steady_state(u), u), _fe_outputs(machine, rom, T, u),
+                               rtol=1e-7, atol=1e-7)
+
+
+def test_inputs_from_conditions_match_the_machine(machine, rom):
+    rpm = np.array([0.0, 4500.0, 12000.0])
+    feeds = {"x": np.array([0.0, 1000.0, 200.0]), "y": np.array([500.0, 0.0, 300.0]), "z": np.array([0.0, 7000.0, 0.0])}
+    amb = {z: np.array([20.0, 21.0, 19.0]) - i for i, z in enumerate(rom.zones)}
+    np.testing.assert_allclose(rom.inputs_from_conditions(rpm, feeds, amb, 0.2),
+                               machine.input_matrix(rpm, feeds, amb, 0.2), rtol=1e-14)
+
+
+def test_krylov_rom_meets_the_goal_on_the_heat_cool_cycle(machine, rom):
+    """Same θ-scheme and grid as the FE: the difference is the reduction error alone."""
+    fe = simulate("heat_cool_9000", machine, noise=False).dataset
+    errors = max_errors(simulate_rom(rom, "heat_cool_9000", scheme="theta"), fe)
+    assert errors["temperature"] <= GOAL_TEMPERATURE_K
+    assert errors["displacement"] <= GOAL_TCP_UM
+    assert np.abs(fe["Z"]).max() > 5.0      # the cycle does drift
+
+
+def test_zoh_is_exact_for_held_inputs(rom):
+    """One ZOH step of h equals ten of h/10, and the matrix exponential of the continuous system."""
+    u = rom.inputs_from_conditions([9000.0], {}, 20.0)[0]
+    z0 = rom.uniform(20.0)
+    one = rom.states([0.0, 600.0], np.tile(u, (2, 1)), z0, "zoh")[0]
+    t = np.linspace(0.0, 600.0, 11)
+    ten = rom.states(t, np.tile(u, (len(t), 1)), z0, "zoh")[0]
+    np.testing.assert_allclose(one, ten, rtol=1e-10, atol=1e-12)
+    ss = rom.state_space()
+    n = rom.order
+    aug = np.zeros((n + 1, n + 1))
+    aug[:n, :n] = ss.A
+    aug[:n, n] = ss.B @ u
+    e = scipy.linalg.expm(aug * 600.0)
+    np.testing.assert_allclose(one, e[:n, :n] @ z0 + e[:n, n], rtol=1e-9, atol=1e-9)
+
+
+def test_state_space_is_stable_and_consistent(rom):
+    ss = rom.state_space()
+    assert ss.A.shape == (rom.order, rom.order) and ss.B.shape == (rom.order, rom.n_inputs)
+    assert ss.C.shape == (rom.n_outputs, rom.order) and ss.D.shape == (rom.n_outputs, rom.n_inputs)
+    assert np.all(np.linalg.eigvals(ss.A).real < 0)
+    assert {"T01", "X", "Y", "Z", "FBG1"} <= set(ss.output_names)
+    np.testing.assert_allclose(ss.initial_state(20.0), rom.uniform(20.0))
+
+
+def test_modal_truncation_runs_and_is_less_accurate(machine, rom):
+    modal = build_rom(machine, 12, "modal")
+    krylov = build_rom(machine, 12, "krylov")
+    assert modal.method == "modal" and modal.order == 12
+    assert np.all(np.diff(modal.eigenvalues) >= 0)
+    u = rom.inputs_from_conditions([9000.0], {}, 20.0)[0]
+    T = fea.ThermalSolver(machine.thermal).steady_state(u)
+    z = rom.output_index("Z")
+    exact = _fe_outputs(machine, rom, T, u)[z]
+    assert abs(krylov.outputs(krylov.steady_state(u), u)[z] - exact) < 1e-6 * abs(exact)
+    assert abs(modal.outputs(modal.steady_state(u), u)[z] - exact) > 1e-3 * abs(exact)
+
+
+def test_save_load_round_trip_without_pickle(rom, tmp_path):
+    path = rom.save(tmp_path / "rom.npz")
+    data = np.load(path, allow_pickle=False)            # would raise on object arrays
+    assert "meta" in data.files
+    back = ReducedModel.load(path)
+    for name in ("eigenvalues", "input_matrix", "output_matrix", "feedthrough", "offset", "uniform_state"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(rom, name))
+    assert back.output_names == rom.output_names and back.digest == rom.digest and back.sources == rom.sources
+
+
+def test_load_rejects_another_version(rom, tmp_path):
+    import json
+
+    path = rom.save(tmp_path / "rom.npz")
+    data = dict(np.load(path, allow_pickle=False))
+    meta = json.loads(str(data["meta"]))
+    meta["version"] = FORMAT_VERSION + 1
+    data["meta"] = np.array(json.dumps(meta))
+    np.savez(tmp_path / "future.npz", **data)
+    with pytest.raises(ROMError, match="version"):
+        ReducedModel.load(tmp_path / "future.npz")
+    (tmp_path / "junk.npz").write_bytes(b"not a zip")
+    with pytest.raises(ROMError, match="not a readable ROM"):
+        ReducedModel.load(tmp_path / "junk.npz")
+
+
+def test_cache_is_keyed_by_the_machine(machine, rom):
+    again = cached_rom(machine, DEFAULT_ORDER)
+    assert again.info.get("from_cache")
+    assert again.digest == rom.digest
+    np.testing.assert_array_equal(again.eigenvalues, rom.eigenvalues)
+
+
+def test_order_too_high_for_the_mesh_is_a_clear_error(machine):
+    n = machine.thermal.n_nodes
+    with pytest.raises(ROMError, match=f"exceeds the {n} thermal unknowns"):
+        build_rom(machine, n + 1)
+    with pytest.raises(ROMError, match="too high"):
+        build_rom(machine, n, "modal")
+    with pytest.raises(ROMError, match="positive"):
+        build_rom(machine, 0)
+
+
+def test_krylov_breakdown_is_a_clear_error():
+    """Three distinct eigenvalues: the Krylov space of the input has dimension 3."""
+    n = 30
+    d = np.repeat([1.0, 2.0, 5.0], n // 3)
+    system = SimpleNamespace(n_nodes=n, stiffness=sp.diags(d).tocsr(), mass=sp.identity(n, format="csr"),
+                             input_matrix=sp.csr_matrix(np.ones((n, 1))))
+    V = krylov_basis(system, 3, [0.0, 0.5])
+    np.testing.assert_allclose(V.T @ V, np.eye(3), atol=1e-12)
+    with pytest.raises(ROMError, match="broke down at dimension 3"):
+        krylov_basis(system, 5, [0.0, 0.5])
+
+
+def test_rom_runs_the_160h_etve_quickly(rom):
+    import time
+
+    scenario = load_scenario("etve_160h")
+    start = time.perf_counter()
+    ds = simulate_rom(rom, scenario)
+    seconds = time.perf_counter() - start
+    assert len(ds) == 9601 and np.all(np.isfinite(ds.values))
+    assert seconds < 2.0          # ~20 ms alone; generous for a loaded CI machine

@@ -1,0 +1,100 @@
+"""Dataset contract: exact round trip, atomic sidecar, measured-data import and its validation."""
+import json
+
+import numpy as np
+import pytest
+
+from twin.dataset import ChannelInfo, Dataset, sidecar_path
+from twin.errors import TwinInputError
+
+
+def _dataset(n=50, seed=0):
+    rng = np.random.default_rng(seed)
+    t = np.cumsum(rng.uniform(0.5, 2.0, n))
+    values = rng.normal(size=(n, 3)) * np.array([1.0, 1e-7, 1e5])  # awkward magnitudes
+    channels = [ChannelInfo("T01", "degC", "temperature", "strip", (0.1, 0.2, 0.3)),
+                ChannelInfo("Z", "um", "displacement", "drift"),
+                ChannelInfo("spindle", "rpm", "spindle_speed")]
+    return Dataset(t, values, channels, {"machine": "m", "seed": 3})
+
+
+def test_round_trip_is_exact(tmp_path):
+    ds = _dataset()
+    path = ds.write(tmp_path / "run.csv")
+    back = Dataset.read(path)
+    assert np.array_equal(back.time_s, ds.time_s)
+    assert np.array_equal(back.values, ds.values)          # bit for bit, not approximately
+    assert back.channels == ds.channels
+    assert back.metadata == ds.metadata
+    header = path.read_text().splitlines()[0]
+    assert header == "time_s,T01_degC,Z_um,spindle_rpm"
+
+
+def test_edited_csv_is_detected(tmp_path):
+    path = _dataset().write(tmp_path / "run.csv")
+    text = path.read_text().replace("\n", "\n", 1)
+    path.write_text(text + "0,0,0,0\n")
+    with pytest.raises(TwinInputError, match="does not match its sidecar"):
+        Dataset.read(path)
+
+
+def test_no_partial_files_left(tmp_path):
+    _dataset().write(tmp_path / "run.csv")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.csv", "run.csv.json"]
+    meta = json.loads(sidecar_path(tmp_path / "run.csv").read_text())
+    assert meta["format"] == "thermal-twin-dataset" and meta["version"] == 1
+
+
+def test_unknown_channel_lists_available():
+    with pytest.raises(TwinInputError, match=r"unknown channel 'T99'.*T01"):
+        _dataset()["T99"]
+
+
+def _write(tmp_path, text, name="m.csv"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_measured_import_and_gap_report(tmp_path):
+    path = _write(tmp_path, "time_s,T01_degC,X_um\n0,20,0\n10,20.5,1\n20,21,2\n60,22,3\n70,22.5,4\n")
+    ds = Dataset.from_measured_csv(path)
+    assert ds.info("T01").kind == "temperature" and ds.info("X").unit == "um"
+    report = ds.metadata["import"]
+    assert report["sampling_interval_s"] == 10.0
+    assert report["n_gaps"] == 1 and report["gaps"][0] == {"after_s": 20.0, "length_s": 40.0}
+
+
+def test_measured_column_map(tmp_path):
+    path = _write(tmp_path, "t,temp1,disp\n0,20,0\n1,21,1\n")
+    ds = Dataset.from_measured_csv(path, column_map={"temp1": "T01_degC", "disp": "Z_um"}, time_column="t")
+    assert ds.names == ["T01", "Z"]
+
+
+def test_measured_nan_policies(tmp_path):
+    path = _write(tmp_path, "time_s,T01_degC,Z_um\n0,20,0\n1,,1\n2,22,nan\n3,23,3\n")
+    with pytest.raises(TwinInputError, match=r"T01_degC.*t = 1\.0 s"):
+        Dataset.from_measured_csv(path)
+    filled = Dataset.from_measured_csv(path, nan_policy="interpolate")
+    assert filled["T01"][1] == pytest.approx(21.0) and filled["Z"][2] == pytest.approx(2.0)
+    dropped = Dataset.from_measured_csv(path, nan_policy="drop")
+    assert list(dropped.time_s) == [0.0, 3.0]
+    assert dropped.metadata["import"]["dropped_rows"] == 2
+
+
+@pytest.mark.parametrize("text, message", [
+    ("time_s,T01_degC\n0,20\n5,21\n3,22\n", r"must increase strictly.*3\.0 s after 5\.0 s"),
+    ("time_s,T01_degC\n0,20\n1,abc\n", r"'abc' is not a number"),
+    ("time_s,temperature\n0,20\n", r"'temperature' is not named <name>_<unit>"),
+    ("t,T01_degC\n0,20\n", r"no time column 'time_s'"),
+    ("time_s,T01_degC\n", r"no data rows"),
+])
+def test_measured_bad_input(tmp_path, text, message):
+    with pytest.raises(TwinInputError, match=message):
+        Dataset.from_measured_csv(_write(tmp_path, text))
+
+
+def test_real_recording_imports(fl_thermal_csv):
+    ds = Dataset.from_measured_csv(fl_thermal_csv)
+    assert len(ds) == 7711 and ds.info("t1").kind == "temperature" and ds.info("ch3").unit == "um"
+    assert ds.metadata["import"]["n_gaps"] == 0

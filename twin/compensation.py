@@ -1,0 +1,308 @@
+"""Training and evaluating thermal-error compensation models on datasets, and the twin as a predictor.
+
+The functions behind ``twin train`` and ``twin evaluate`` (callable from Python):
+
+- :func:`load_dataset`: a dataset by path (a twin dataset with its sidecar, or
+  a measured CSV through :meth:`~twin.dataset.Dataset.from_measured_csv`) or by
+  scenario name (simulated on the spot);
+- :func:`train` fits a :class:`~twin.model_store.CompensationModel` and saves it;
+- :func:`evaluate` scores a model on datasets — a table (RMSE, NSE, R, max
+  residual, improvement %) and a measured-vs-predicted PNG per dataset;
+- :func:`physics_prediction`: the twin's own prediction of drift channels
+  from a record's operating conditions (spindle speed, feeds, ambient),
+  through the full FE model or the ROM — the physics half of the hybrid model.
+
+Every metric is on the zero-referenced target (the change since the start of
+the record, see :mod:`twin.model_store`); "uncompensated" is that change
+itself, so improvement % = (1 − max|residual| / max|change|) × 100.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .dataset import Dataset
+from .errors import TwinInputError
+from .model_store import CompensationModel, dataset_label, fit_compensation_model
+
+METRIC_COLUMNS = ("rmse", "nse", "r", "max_residual", "improvement_percent", "uncompensated_max", "rows")
+
+
+# ----------------------------------------------------------------------------- datasets
+def load_dataset(spec, column_map=None, nan_policy="error", machine=None, noise=True, label=None):
+    """A :class:`Dataset` from a path or a scenario name.
+
+    ``spec`` may be a :class:`Dataset` (returned as is), a CSV path (read with
+    its JSON sidecar if there is one, else imported as measured data with
+    ``column_map`` and ``nan_policy``; a column mapped to ``"time_s"`` is the
+    time in s), or the name of a scenario, which is
+    simulated on ``machine`` (default: the scenario's) with its sensor noise.
+    """
+    if isinstance(spec, Dataset):
+        return spec
+    path = Path(str(spec))
+    if path.exists():
+        from .dataset import sidecar_path
+
+        if sidecar_path(path).exists() and column_map is None:
+            ds = Dataset.read(path)
+        else:
+            column_map = dict(column_map or {})
+            time_cols = [k for k, v in column_map.items() if v == "time_s"]
+            for k in time_cols:
+                del column_map[k]
+            ds = Dataset.from_measured_csv(path, column_map=column_map, nan_policy=nan_policy,
+                                           time_column=time_cols[0] if time_cols else "time_s")
+    else:
+        from .scenario import available_scenarios
+
+        names = available_scenarios()
+        if str(spec) not in names:
+            raise TwinInputError(f"{spec!r} is neither a dataset file nor a scenario; scenarios: {names}")
+        from .simulate import simulate
+
+        ds = simulate(str(spec), machine, noise=noise).dataset
+    if label:
+        ds.metadata["label"] = label
+    return ds
+
+
+def read_column_map(value):
+    """A column map from a JSON file path or inline JSON (``{"t1": "T01_degC"}``), or None."""
+    if value is None:
+        return None
+    path = Path(value)
+    text = path.read_text(encoding="utf-8") if path.exists() else value
+    try:
+        out = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise TwinInputError(f"column map {value!r} is neither a JSON file nor inline JSON ({exc})") from None
+    if not isinstance(out, dict):
+        raise TwinInputError(f"column map must be a JSON object csv column → '<name>_<unit>', got {out!r}")
+    return out
+
+
+def split_names(value):
+    """``"T01,T05"`` or ``["T01", "T05"]`` → ``["T01", "T05"]``."""
+    if value is None:
+        return []
+    if isinstance(value, str):
+        value = [value]
+    return [n.strip() for item in value for n in str(item).split(",") if n.strip()]
+
+
+# ----------------------------------------------------------------------------- metrics
+def score(y_true, y_pred):
+    """Metrics of a prediction of the (zero-referenced) target: dict of :data:`METRIC_COLUMNS`."""
+    from models import metrics as m
+
+    y_true, y_pred = np.asarray(y_true, float), np.asarray(y_pred, float)
+    peak = float(np.max(np.abs(y_true)))
+    out = {"rmse": m.rmse(y_true, y_pred), "max_residual": m.max_abs_residual(y_true, y_pred),
+           "uncompensated_max": peak, "uncompensated_rmse": float(np.sqrt(np.mean(y_true ** 2))),
+           "rows": int(len(y_true))}
+    spread_ok = np.ptp(y_true) > 0
+    out["nse"] = m.nse(y_true, y_pred) if spread_ok else float("nan")
+    out["r"] = m.pearson_r(y_true, y_pred) if spread_ok and np.ptp(y_pred) > 0 else float("nan")
+    out["improvement_percent"] = m.improvement_percent(y_true, y_pred) if peak > 0 else float("nan")
+    return out
+
+
+def format_table(rows, columns=None, floatfmt="{:.3g}"):
+    """Markdown table of a list of dicts."""
+    columns = columns or list(rows[0])
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    for r in rows:
+        cells = []
+        for c in columns:
+            v = r.get(c, "")
+            cells.append(floatfmt.format(v) if isinstance(v, (float, np.floating)) and np.isfinite(v) else
+                         ("–" if isinstance(v, float) else str(v)))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+# ----------------------------------------------------------------------------- train / evaluate
+@dataclass
+class Evaluation:
+    rows: list            # one dict per dataset
+    out_dir: Path | None
+    predictions: dict     # label → (time_s, measured change, predicted change)
+
+    def table(self):
+        cols = ["dataset", "rows", "rmse", "nse", "r", "max_residual", "improvement_percent", "uncompensated_max"]
+        return format_table(self.rows, cols)
+
+
+def train(datasets, inputs, target, model="anfis", params=None, out=None, zero_reference=True,
+          reference_samples=1, column_map=None, nan_policy="error", machine=None):
+    """Fit a compensation model on datasets (paths, scenario names or :class:`Dataset`) and save it to ``out``.
+
+    Returns the :class:`CompensationModel`; its training metrics are in
+    ``model.metadata["training_metrics"]``.
+    """
+    loaded = [load_dataset(d, column_map, nan_policy, machine) for d in datasets]
+    cm = fit_compensation_model(loaded, split_names(inputs), target, model, params, zero_reference,
+                                reference_samples)
+    cm.metadata["training_metrics"] = {dataset_label(ds): score(cm.target_values(ds), cm.predict(ds))
+                                       for ds in loaded}
+    if out is not None:
+        cm.save(out)
+    return cm
+
+
+def evaluate(model, datasets, out_dir=None, column_map=None, nan_policy="error", machine=None, plots=True):
+    """Score a model (a :class:`CompensationModel` or a saved model path) on datasets.
+
+    Writes (when ``out_dir`` is given) ``evaluation.md``, ``evaluation.csv``,
+    ``evaluation.json`` and ``<dataset>_<target>.png`` (measured vs predicted
+    change and the residual).  A dataset whose channels do not match the
+    model's raises a :class:`TwinInputError` naming them.
+    """
+    cm = model if isinstance(model, CompensationModel) else CompensationModel.load(model)
+    loaded = [load_dataset(d, column_map, nan_policy, machine) for d in datasets]
+    for ds in loaded:
+        cm.check(ds)
+    rows, predictions = [], {}
+    seen = {}
+    for ds in loaded:
+        label = dataset_label(ds)
+        seen[label] = seen.get(label, 0) + 1
+        if seen[label] > 1:
+            label = f"{label}_{seen[label]}"
+        y = cm.target_values(ds)
+        p = cm.predict(ds)
+        rows.append({"dataset": label, **score(y, p)})
+        predictions[label] = (ds.time_s, y, p)
+    out_dir = Path(out_dir) if out_dir is not None else None
+    result = Evaluation(rows, out_dir, predictions)
+    if out_dir is not None:
+        from .outdir import atomic_directory
+
+        with atomic_directory(out_dir) as tmp:
+            _write_evaluation(cm, result, tmp, plots)
+        result.out_dir = out_dir
+    return result
+
+
+def _write_evaluation(cm, result, folder, plots):
+    import pandas as pd
+
+    from .plots import plot_measured_vs_predicted
+
+    head = (f"# Evaluation of {cm.describe()}\n\nTrained on: "
+            f"{', '.join(t['label'] for t in cm.training) or '?'}. Metrics on the target's change since the "
+            f"start of each dataset ({cm.target_unit}); improvement % = (1 − max|residual| / max|change|) × 100.\n\n")
+    (folder / "evaluation.md").write_text(head + result.table(), encoding="utf-8")
+    pd.DataFrame(result.rows).to_csv(folder / "evaluation.csv", index=False)
+    (folder / "evaluation.json").write_text(json.dumps({"model": cm.to_document()["model_name"],
+                                                        "inputs": cm.inputs, "target": cm.target,
+                                                        "rows": result.rows}, indent=1))
+    if plots:
+        for label, (t, y, p) in result.predictions.items():
+            row = next(r for r in result.rows if r["dataset"] == label)
+            title = (f"{cm.target} on {label}: {cm.model_name}, RMSE {row['rmse']:.2f}, "
+                     f"max residual {row['max_residual']:.2f} {cm.target_unit}")
+            plot_measured_vs_predicted(t, y, p, cm.target_unit, title, folder / f"{_safe(label)}_{cm.target}.png")
+
+
+def _safe(text):
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in str(text))
+
+
+# ----------------------------------------------------------------------------- the twin as a predictor
+class RecordSchedule:
+    """Thermal inputs of a machine from a record's operating channels, interpolated in time.
+
+    Channels used: ``spindle`` (rpm, required), ``feed_x/y/z`` (mm/min, 0
+    when absent), ``ambient_<zone>`` per zone, else one ambient for all zones
+    from the mean of the ``ambient``/``air`` channels, and ``ambient_gradient``
+    (K/m, 0 when absent).
+    """
+
+    def __init__(self, machine, dataset):
+        self.machine = machine
+        self.t = dataset.time_s
+        if "spindle" not in dataset:
+            raise TwinInputError(f"{dataset_label(dataset)}: the twin needs a 'spindle' channel (rpm); "
+                                 f"channels: {dataset.names}")
+        self.spindle = dataset["spindle"]
+        self.feeds = {a: dataset[f"feed_{a}"] if f"feed_{a}" in dataset else np.zeros(len(dataset)) for a in "xyz"}
+        zones = machine.zones
+        if all(f"ambient_{z}" in dataset for z in zones):
+            self.ambient = {z: dataset[f"ambient_{z}"] for z in zones}
+        else:
+            air = dataset.names_of_kind("ambient", "air")
+            air = [n for n in air if dataset.info(n).unit == "degC"]
+            if not air:
+                raise TwinInputError(f"{dataset_label(dataset)}: the twin needs the ambient: channels "
+                                     f"{[f'ambient_{z}' for z in zones]} or an air/ambient thermometer; "
+                                     f"channels: {dataset.names}")
+            mean = dataset.matrix(air).mean(axis=1)
+            self.ambient = {z: mean for z in zones}
+        self.gradient = dataset["ambient_gradient"] if "ambient_gradient" in dataset else np.zeros(len(dataset))
+
+    def conditions(self, times_s):
+        t = np.atleast_1d(np.asarray(times_s, float))
+        rpm = np.interp(t, self.t, self.spindle)
+        feeds = {a: np.interp(t, self.t, v) for a, v in self.feeds.items()}
+        ambient = {z: np.interp(t, self.t, v) for z, v in self.ambient.items()}
+        return rpm, feeds, ambient, np.interp(t, self.t, self.gradient)
+
+    def sample(self, times_s):
+        rpm, feeds, ambient, gradient = self.conditions(times_s)
+        return self.machine.input_matrix(rpm, feeds, ambient, gradient)
+
+    def at_rest(self):
+        """Inputs at t₀ with spindle and feeds stopped: the machine in equilibrium with the room."""
+        rpm, feeds, ambient, gradient = self.conditions([self.t[0]])
+        return self.machine.input_matrix(rpm * 0, {a: f * 0 for a, f in feeds.items()}, ambient, gradient)[0]
+
+
+PHYSICS_BACKENDS = ("fe", "rom")
+
+
+def physics_prediction(machine, dataset, outputs=("Z", "Y"), backend="fe", max_step_s=None, initial="rest"):
+    """The twin's prediction of ``outputs`` (edge units, e.g. µm) from a record's operating conditions.
+
+    Parameters
+    ----------
+    machine : the (nominal) :class:`~twin.machine.Machine`
+    dataset : record with spindle speed, feeds and ambient channels (see :class:`RecordSchedule`)
+    outputs : channel names of the machine to predict (drift X/Y/Z/Y_top, sensors …)
+    backend : ``"fe"`` (full finite-element run, one factorisation reused for every step)
+        or ``"rom"`` (the cached reduced model of :mod:`twin.rom`, when available)
+    max_step_s : sub-step length (default: the record's sampling interval)
+    initial : ``"rest"`` — steady state with spindle and feeds stopped at the first ambient
+        (a record rarely knows more); or a uniform temperature in °C
+
+    Returns a dict name → (n,) array, absolute (not zero-referenced).
+    """
+    import fea
+
+    if backend not in PHYSICS_BACKENDS:
+        raise TwinInputError(f"unknown physics backend {backend!r}; available: {PHYSICS_BACKENDS}")
+    outputs = list(outputs)
+    channels = [machine.channel(n) for n in outputs]
+    fe_names = machine.outputs.names
+    schedule = RecordSchedule(machine, dataset)
+    times = dataset.time_s
+    if backend == "rom":
+        from .rom import cached_rom
+
+        rom = cached_rom(machine)
+        z0 = rom.steady_state(schedule.at_rest()) if initial == "rest" else rom.uniform(float(initial))
+        U = schedule.sample(times)
+        Y = rom.simulate(times, U, z0, scheme="theta")
+        return {n: Y[:, rom.output_index(n)] for n in outputs}
+    missing = [n for n in outputs if n not in fe_names]
+    if missing:
+        raise TwinInputError(f"physics outputs {missing} are not FE outputs of {machine.name!r}")
+    operator = machine.outputs.subset(outputs)
+    solver = fea.ThermalSolver(machine.thermal)
+    T0 = solver.steady_state(schedule.at_rest()) if initial == "rest" else float(initial)
+    run = solver.run(T0, times, schedule, operator, max_step_s=max_step_s)
+    return {n: run.outputs[:, j] * c.scale for j, (n, c) in enumerate(zip(outputs, channels))}

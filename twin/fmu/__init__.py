@@ -1,0 +1,328 @@
+"""FMI 2.0 Co-Simulation export of the thermal twin.
+
+Two kinds, one interface (:mod:`twin.fmu.spec`):
+
+``python``
+    Built with PythonFMU: the slave (``thermal_twin_slave.py``) and the ROM
+    matrices (``resources/rom.npz``, no pickle) travel inside the FMU; the
+    importing process needs Python with numpy (and the ``twin`` package for
+    ``engine="fe"``, the full finite-element model).
+``native``
+    Generated C (``sources/``: ``thermal_twin_rom.c``, ``model_data.h``, the
+    official FMI 2 headers) compiled with the machine's C compiler into
+    ``binaries/linux64/thermal_twin_rom.so``; needs nothing at run time.
+    ``modelDescription.xml`` lists the sources so other platforms can rebuild.
+
+Both integrate the ROM exactly for inputs held over each communication step
+(zero-order hold, any step size) and are checked by :func:`validate` (fmpy).
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import tempfile
+import zipfile
+from pathlib import Path
+from xml.dom.minidom import parseString
+from xml.etree.ElementTree import Element, SubElement, fromstring, tostring
+
+import numpy as np
+
+from ..errors import TwinInputError
+from . import spec
+
+KINDS = ("python", "native")
+ENGINES = ("rom", "fe")
+NATIVE_IDENTIFIER = "thermal_twin_rom"
+PYTHON_IDENTIFIER = "ThermalTwin"
+C_FILE = "thermal_twin_rom.c"
+
+
+class FMUError(TwinInputError):
+    """An FMU cannot be exported or used as asked."""
+
+
+def _output_rows(rom, outputs):
+    if outputs is None:
+        return list(range(rom.n_outputs))
+    return [rom.output_index(n) for n in outputs]
+
+
+def _subset(rom, rows):
+    """A shallow view of the ROM restricted to some outputs (for the interface only)."""
+    import copy
+
+    view = copy.copy(rom)
+    view.output_names = [rom.output_names[i] for i in rows]
+    view.output_units = [rom.output_units[i] for i in rows]
+    view.output_kinds = [rom.output_kinds[i] for i in rows]
+    return view
+
+
+def _description(rom, engine):
+    what = "full finite-element model" if engine == "fe" else f"{rom.method} ROM of order {rom.order}"
+    return (f"Thermal twin of machine {rom.machine!r} ({what}): spindle speed, feeds and ambient in; "
+            f"temperatures (degC), TCP drift (um) and strains (ue) out")
+
+
+def export_fmu(rom, out, kind="python", engine="rom", outputs=None, default_temperature_C=20.0,
+               step_s=spec.DEFAULT_STEP_S, fe_options=None, compiler="cc"):
+    """Write an FMI 2.0 Co-Simulation FMU of ``rom`` to ``out``; return its path.
+
+    Parameters
+    ----------
+    kind : ``"python"`` (PythonFMU) or ``"native"`` (compiled C)
+    engine : ``"rom"`` or, for the Python kind only, ``"fe"`` (the full model; slow)
+    outputs : ROM output names to expose (default: all of the ROM's)
+    default_temperature_C : start value of ``T_initial`` and the ambient inputs
+    step_s : the DefaultExperiment step size (any step works)
+    fe_options : for ``engine="fe"``: dict(machine=name or TOML path, mesh_size_m=..., max_step_s=...)
+    compiler : C compiler command for the native kind
+    """
+    if kind not in KINDS:
+        raise FMUError(f"unknown FMU kind {kind!r}; kinds: {list(KINDS)}")
+    if engine not in ENGINES:
+        raise FMUError(f"unknown FMU engine {engine!r}; engines: {list(ENGINES)}")
+    if kind == "native" and engine != "rom":
+        raise FMUError("the native FMU runs the ROM only; use --kind python for --engine fe")
+    out = Path(out)
+    if out.suffix != ".fmu":
+        raise FMUError(f"{out}: the FMU file name must end in .fmu")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    rows = _output_rows(rom, outputs)
+    view = _subset(rom, rows)
+    variables = spec.interface(view, default_temperature_C)
+    if kind == "python":
+        return _export_python(rom, view, variables, out, engine, step_s, fe_options or {})
+    return _export_native(rom, view, variables, rows, out, step_s, compiler)
+
+
+# ----------------------------------------------------------------------------- model description
+def _default_experiment(step_s):
+    return Element("DefaultExperiment", startTime="0.0", stepSize=repr(float(step_s)))
+
+
+def _pretty(root):
+    return parseString(tostring(root, "UTF-8")).toprettyxml(encoding="UTF-8")
+
+
+def _native_model_description(view, variables, guid, step_s):
+    root = Element("fmiModelDescription", {
+        "fmiVersion": "2.0", "modelName": f"thermal_twin_{view.machine}", "guid": guid,
+        "description": _description(view, "rom"), "generationTool": "thermal-twin",
+        "variableNamingConvention": "structured", "numberOfEventIndicators": "0"})
+    cs = SubElement(root, "CoSimulation", {
+        "modelIdentifier": NATIVE_IDENTIFIER, "canHandleVariableCommunicationStepSize": "true",
+        "canGetAndSetFMUstate": "true", "canSerializeFMUstate": "true",
+        "canNotUseMemoryManagementFunctions": "false", "canInterpolateInputs": "false"})
+    files = SubElement(cs, "SourceFiles")
+    SubElement(files, "File", name=C_FILE)
+    root.append(spec.unit_definitions({v.unit for v in variables if v.unit}))
+    cats = SubElement(root, "LogCategories")
+    for name, text in (("logStatusError", "errors: rejected inputs or calls"), ("logAll", "all messages")):
+        SubElement(cats, "Category", name=name, description=text)
+    root.append(_default_experiment(step_s))
+    mv = SubElement(root, "ModelVariables")
+    for v in variables:
+        mv.append(spec.scalar_variable(v))
+    root.append(spec.model_structure(variables))
+    return _pretty(root)
+
+
+def _patch_python_description(xml_bytes, view, variables, step_s):
+    """Declare units, ranges, InitialUnknowns and the default experiment in PythonFMU's description."""
+    root = fromstring(xml_bytes)
+    root.set("description", _description(view, "rom"))
+    by_name = {v.name: v for v in variables}
+    mv = root.find("ModelVariables")
+    for sv in mv.findall("ScalarVariable"):
+        v = by_name[sv.get("name")]
+        if int(sv.get("valueReference")) != v.vr:
+            raise FMUError(f"PythonFMU numbered {v.name!r} {sv.get('valueReference')}, expected {v.vr}")
+        sv.set("description", v.description)
+        child = sv.find(v.type)
+        if v.type == "Real":
+            for key in ("unit", "min", "max"):
+                value = getattr(v, key)
+                if value is not None:
+                    child.set(key, value if key == "unit" else spec._fmt(value))
+    children = list(root)
+    position = [c.tag for c in children].index("CoSimulation") + 1
+    root.insert(position, spec.unit_definitions({v.unit for v in variables if v.unit}))
+    old = root.find("DefaultExperiment")
+    if old is not None:
+        root.remove(old)
+    root.insert([c.tag for c in list(root)].index("ModelVariables"), _default_experiment(step_s))
+    root.remove(root.find("ModelStructure"))
+    root.append(spec.model_structure(variables))
+    return _pretty(root)
+
+
+# ----------------------------------------------------------------------------- python kind
+def _export_python(rom, view, variables, out, engine, step_s, fe_options):
+    from pythonfmu.builder import FmuBuilder
+
+    config = {"engine": engine, "description": _description(view, engine), "outputs": view.output_names,
+              "variables": [dict(name=v.name, vr=v.vr, type=v.type, causality=v.causality,
+                                 variability=v.variability, description=v.description, start=v.start,
+                                 initial=v.initial, min=v.min, max=v.max, role=v.role) for v in variables]}
+    if engine == "fe":
+        if "machine" not in fe_options:
+            raise FMUError("engine 'fe' needs fe_options['machine'] (machine name or TOML path)")
+        config["fe"] = dict(machine=str(fe_options["machine"]), mesh_size_m=fe_options.get("mesh_size_m"),
+                            max_step_s=float(fe_options.get("max_step_s", 60.0)), sources=rom.sources)
+    with tempfile.TemporaryDirectory(prefix="twin_fmu_") as tmp:
+        tmp = Path(tmp)
+        script = tmp / "thermal_twin_slave.py"
+        shutil.copy2(Path(__file__).with_name("thermal_twin_slave.py"), script)
+        (tmp / "interface.json").write_text(json.dumps(config, indent=1), encoding="utf-8")
+        files = [tmp / "interface.json"]
+        if engine == "rom":
+            rom.save(tmp / "rom.npz")
+            files.append(tmp / "rom.npz")
+        built = Path(FmuBuilder.build_FMU(script, dest=tmp / "build", project_files=files))
+        with zipfile.ZipFile(built) as zin, zipfile.ZipFile(out.with_suffix(".fmu.partial"), "w",
+                                                           zipfile.ZIP_DEFLATED) as zout:
+            for item in zin.infolist():
+                data = zin.read(item.filename)
+                if item.filename == "modelDescription.xml":
+                    data = _patch_python_description(data, view, variables, step_s)
+                zout.writestr(item.filename, data)
+    out.with_suffix(".fmu.partial").replace(out)
+    return out
+
+
+# ----------------------------------------------------------------------------- native kind
+def fmi_headers_dir():
+    """The official FMI 2 headers shipped with fmpy."""
+    import fmpy
+
+    path = Path(fmpy.__file__).parent / "c-code"
+    if not (path / "fmi2Functions.h").exists():
+        raise FMUError(f"the FMI 2 headers are not in {path}; reinstall fmpy")
+    return path
+
+
+def write_native_sources(rom, view, variables, rows, folder, guid):
+    """Write the C sources of the native FMU into ``folder``; return the C file."""
+    from .native_source import FMI2_SOURCE, model_data_header
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"):
+        shutil.copy2(fmi_headers_dir() / name, folder / name)
+    (folder / "model_data.h").write_text(model_data_header(rom, variables, guid, rows), encoding="utf-8")
+    (folder / C_FILE).write_text(FMI2_SOURCE, encoding="utf-8")
+    return folder / C_FILE
+
+
+def compile_native(source, library, compiler="cc"):
+    """Compile the C source into a shared library; raise :class:`FMUError` with the compiler's message."""
+    cmd = [compiler, "-shared", "-fPIC", "-O2", "-std=c99", "-Wall", "-I", str(Path(source).parent), str(source),
+           "-o", str(library), "-lm"]
+    try:
+        run = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    except FileNotFoundError:
+        raise FMUError(f"C compiler {compiler!r} not found; install gcc or pass --compiler") from None
+    if run.returncode != 0:
+        raise FMUError(f"compiling the native FMU failed ({' '.join(cmd)}):\n{run.stderr.strip()}")
+    return library
+
+
+def _export_native(rom, view, variables, rows, out, step_s, compiler):
+    guid = spec.guid(view, "native")
+    with tempfile.TemporaryDirectory(prefix="twin_fmu_native_") as tmp:
+        tmp = Path(tmp)
+        source = write_native_sources(rom, view, variables, rows, tmp / "sources", guid)
+        (tmp / "binaries" / "linux64").mkdir(parents=True)
+        compile_native(source, tmp / "binaries" / "linux64" / f"{NATIVE_IDENTIFIER}.so", compiler)
+        (tmp / "modelDescription.xml").write_bytes(_native_model_description(view, variables, guid, step_s))
+        (tmp / "documentation").mkdir()
+        (tmp / "documentation" / "index.html").write_text(
+            "<html><body><h1>Thermal twin ROM FMU</h1><p>" + _description(view, "rom") +
+            ". Rebuild on another platform: <code>cc -shared -fPIC -O2 -I sources sources/" + C_FILE +
+            " -o binaries/&lt;platform&gt;/" + NATIVE_IDENTIFIER + ".&lt;so|dll|dylib&gt; -lm</code>.</p>"
+            "</body></html>\n", encoding="utf-8")
+        partial = out.with_suffix(".fmu.partial")
+        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as z:
+            for f in sorted(tmp.rglob("*")):
+                if f.is_file():
+                    z.write(f, f.relative_to(tmp).as_posix())
+        partial.replace(out)
+    return out
+
+
+# ----------------------------------------------------------------------------- checks and runs
+def validate(path):
+    """Problems fmpy finds in the FMU (an empty list when it is valid)."""
+    from fmpy.validation import validate_fmu
+
+    return list(validate_fmu(str(path)))
+
+
+def input_table(rom, scenario, times=None):
+    """A structured array (``time`` + FMU input names) driving the FMU through a scenario.
+
+    Row i is what the master sets at tᵢ for the step to tᵢ₊₁: the scenario's
+    conditions at tᵢ₊₁ (left limits, :func:`twin.rom.held_conditions`), so the
+    FMU reproduces :func:`twin.rom.simulate_rom` (zero-order hold).
+    """
+    from ..rom import held_conditions
+    from ..scenario import Scenario, load_scenario
+
+    scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    t = scenario.times() if times is None else np.asarray(times, float)
+    held = held_conditions(scenario, rom.zones, t, rom.zone_lags_s)
+    cols = [("time", t), ("spindle_speed", held.spindle_rpm)]
+    cols += [(f"feed_{a}", held.feed_mm_min[a]) for a in "xyz"]
+    cols += [(f"ambient_{z}", held.ambient_C[z]) for z in rom.zones]
+    cols += [("ambient_gradient", held.gradient_K_per_m)]
+    table = np.zeros(len(t), dtype=[(name, np.float64) for name, _ in cols])
+    for name, values in cols:
+        table[name] = values
+    return table
+
+
+def scenario_start(rom, scenario):
+    """FMU start parameters ``(T_initial, steady_start)`` for a scenario's initial state.
+
+    A steady start uses the inputs set at initialisation (the table's first
+    row, i.e. the conditions just after t = 0), which differs from the twin's
+    steady state at t = 0 only when the conditions change within the first step.
+    """
+    init = scenario.initial
+    if init["kind"] == "steady":
+        return 20.0, True
+    value = init.get("temperature_C")
+    if value is None:
+        from ..rom import scenario_conditions
+
+        value = scenario_conditions(scenario, rom.zones, [0.0], rom.zone_lags_s).ambient_C[rom.zones[0]][0]
+    return float(value), False
+
+
+def table_inputs(rom, table):
+    """Thermal inputs (k, m) of the ROM for an FMU input table."""
+    feeds = {a: table[f"feed_{a}"] for a in "xyz"}
+    ambient = {z: table[f"ambient_{z}"] for z in rom.zones}
+    return rom.inputs_from_conditions(table["spindle_speed"], feeds, ambient, table["ambient_gradient"])
+
+
+def simulate_table(rom, table, T_initial=20.0, steady_start=False, outputs=None):
+    """The in-process twin (ROM, ZOH) on an FMU input table: outputs (k, p) as the FMU reports them."""
+    U = table_inputs(rom, table)
+    z0 = rom.steady_state(U[0]) if steady_start else rom.uniform(T_initial)
+    Y = rom.simulate(table["time"], U, z0, "zoh")
+    return Y[:, _output_rows(rom, outputs)]
+
+
+def simulate(path, table, T_initial=20.0, steady_start=False, outputs=None, **kwargs):
+    """Run an FMU in fmpy on an input table (output interval = the table's step); return fmpy's result."""
+    from fmpy import simulate_fmu
+
+    t = table["time"]
+    step = float(t[1] - t[0])
+    return simulate_fmu(str(path), start_time=float(t[0]), stop_time=float(t[-1]), output_interval=step,
+                        input=table, output=outputs, validate=True,
+                        start_values={"T_initial": T_initial, "steady_start": bool(steady_start)}, **kwargs)

@@ -1,0 +1,307 @@
+"""Compensation models with their channel contract: which inputs, which target, units, preprocessing.
+
+A :class:`CompensationModel` wraps a fitted ``models`` estimator with what is
+needed to use it on a :class:`~twin.dataset.Dataset`: the input channels (in
+order) and the target channel, their units, the preprocessing, the training
+datasets and, for grey time-series models, the sampling interval the
+coefficients belong to.
+
+Preprocessing (the default, ``zero_reference=True``): every dataset is
+referenced to its own start, inputs and target alike::
+
+    X⁰ = X − X(ref),   y⁰ = y − y(ref),   ref = mean of the first ``reference_samples`` rows
+
+and the model maps X⁰ → y⁰.  A prediction is therefore the *change* of the
+target since the start of the record (the drift since the probe was zeroed),
+and a constant offset of any sensor (a thermometer reading 0.4 °C high, a
+probe zeroed elsewhere) cancels exactly.  Metrics compare it with the
+measured change y⁰.
+
+On disk (``.json``, no pickle)::
+
+    {"format": "thermal-twin-compensation-model", "version": 1,
+     "model_name": "anfis", "inputs": [...], "input_units": [...], "target": "Z", "target_unit": "um",
+     "preprocessing": {...}, "sampling_interval_s": ..., "training": [...], "project_version": ...,
+     "estimator": <models.persistence document>}
+"""
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .dataset import project_version
+from .errors import TwinInputError
+
+FORMAT = "thermal-twin-compensation-model"
+FORMAT_VERSION = 1
+
+#: Model names → (class name in ``models``, default hyperparameters).
+MODEL_NAMES = {
+    "mlr": ("MLRRegressor", {}),
+    "pcr": ("PCRRegressor", {}),
+    "ann": ("ANNRegressor", {"random_state": 0}),
+    "anfis": ("ANFISRegressor", {"init": "fcm", "n_rules": 3, "epochs": 50, "random_state": 0}),
+    "anfis-fcm": ("ANFISRegressor", {"init": "fcm", "n_rules": 3, "epochs": 50, "random_state": 0}),
+    "anfis-grid": ("ANFISRegressor", {"init": "grid", "n_mfs": 2, "epochs": 50, "random_state": 0}),
+    "gm0n": ("GM0NRegressor", {}),
+    "gm1n": ("GM1NRegressor", {}),
+    "gmc": ("GMCRegressor", {"random_state": 0}),
+    "gnnmci": ("GNNMCIRegressor", {"random_state": 0}),
+    "ago-anfis": ("AGOANFISRegressor", {}),
+}
+#: Grey time-series models: coefficients per sample, trained on one contiguous, evenly sampled record.
+TIME_SERIES_MODELS = {"GM0NRegressor", "GM1NRegressor", "GMCRegressor", "GNNMCIRegressor", "AGOANFISRegressor"}
+
+
+def make_estimator(name, params=None):
+    """An unfitted estimator by model name (see :data:`MODEL_NAMES`) with hyperparameters overridden."""
+    import models
+
+    key = str(name).lower()
+    if key not in MODEL_NAMES:
+        raise TwinInputError(f"unknown model {name!r}; available: {sorted(MODEL_NAMES)}")
+    cls_name, defaults = MODEL_NAMES[key]
+    cls = getattr(models, cls_name)
+    merged = {**defaults, **(params or {})}
+    valid = cls().get_params(deep=False)
+    unknown = sorted(set(merged) - set(valid))
+    if unknown:
+        raise TwinInputError(f"model {name!r} ({cls_name}) has no parameter(s) {unknown}; "
+                             f"parameters: {sorted(valid)}")
+    return cls(**merged)
+
+
+def parse_params(items):
+    """``["n_rules=4", "epochs=20"]`` → ``{"n_rules": 4, "epochs": 20}`` (values read as JSON when they can be)."""
+    out = {}
+    for item in items or []:
+        if "=" not in item:
+            raise TwinInputError(f"model parameter {item!r} is not of the form name=value")
+        key, value = item.split("=", 1)
+        try:
+            out[key.strip()] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key.strip()] = value
+    return out
+
+
+def dataset_label(dataset):
+    meta = dataset.metadata
+    if meta.get("label"):
+        return str(meta["label"])
+    if meta.get("scenario"):
+        return str(meta["scenario"])
+    if meta.get("source"):
+        return Path(str(meta["source"])).stem
+    return "dataset"
+
+
+def sampling_interval(dataset, strict=True):
+    """The constant sampling interval of a dataset (s); with ``strict`` an uneven one is an error."""
+    steps = np.diff(dataset.time_s)
+    if len(steps) == 0:
+        raise TwinInputError(f"{dataset_label(dataset)}: a dataset with one row has no sampling interval")
+    dt = float(np.median(steps))
+    if strict and np.abs(steps - dt).max() > 1e-6 * dt:
+        raise TwinInputError(f"{dataset_label(dataset)}: grey time-series models need evenly sampled data; "
+                             f"steps range from {steps.min():g} to {steps.max():g} s")
+    return dt
+
+
+def check_channels(dataset, names, units=None, role="input"):
+    """Raise a :class:`TwinInputError` naming missing channels or unit mismatches, listing what is there."""
+    missing = [n for n in names if n not in dataset]
+    if missing:
+        raise TwinInputError(f"{dataset_label(dataset)}: lacks {role} channel(s) {missing}; it has "
+                             f"{dataset.names}")
+    if units is not None:
+        bad = [(n, u, dataset.info(n).unit) for n, u in zip(names, units) if dataset.info(n).unit != u]
+        if bad:
+            text = ", ".join(f"{n} is {have!r}, the model needs {want!r}" for n, want, have in bad)
+            raise TwinInputError(f"{dataset_label(dataset)}: channel units do not match: {text}")
+
+
+def reference_rows(values, preprocessing):
+    """Subtract each column's reference (mean of the first ``reference_samples`` rows) when zero-referencing."""
+    values = np.asarray(values, float)
+    if not preprocessing.get("zero_reference", True):
+        return values
+    k = max(1, int(preprocessing.get("reference_samples", 1)))
+    return values - values[:k].mean(axis=0)
+
+
+@dataclass
+class CompensationModel:
+    """A fitted estimator plus its channel contract; ``predict(dataset)`` gives the target change."""
+
+    estimator: object
+    model_name: str
+    inputs: list
+    target: str
+    input_units: list
+    target_unit: str
+    preprocessing: dict = field(default_factory=lambda: {"zero_reference": True, "reference_samples": 1})
+    training: list = field(default_factory=list)
+    sampling_interval_s: float | None = None
+    metadata: dict = field(default_factory=dict)
+
+    @property
+    def is_time_series(self):
+        return type(self.estimator).__name__ in TIME_SERIES_MODELS
+
+    def describe(self):
+        kind = "grey time-series" if self.is_time_series else "static"
+        return (f"{self.model_name} ({type(self.estimator).__name__}, {kind}): {', '.join(self.inputs)} → "
+                f"{self.target} [{self.target_unit}]")
+
+    # ------------------------------------------------------------------ data
+    def check(self, dataset):
+        check_channels(dataset, self.inputs, self.input_units, "input")
+        check_channels(dataset, [self.target], [self.target_unit], "target")
+
+    def features(self, dataset):
+        check_channels(dataset, self.inputs, self.input_units, "input")
+        return reference_rows(dataset.matrix(self.inputs), self.preprocessing)
+
+    def target_values(self, dataset):
+        """The measured target as the model sees it (zero-referenced unless that is switched off)."""
+        check_channels(dataset, [self.target], [self.target_unit], "target")
+        return reference_rows(dataset[self.target][:, None], self.preprocessing)[:, 0]
+
+    def predict(self, dataset):
+        """Predicted target (its change since the record's start when zero-referenced), one per row."""
+        X = self.features(dataset)
+        if not self.is_time_series:
+            return np.asarray(self.estimator.predict(X), float)
+        dt = sampling_interval(dataset, strict=False)
+        t = dataset.time_s
+        if self.sampling_interval_s is None or abs(dt - self.sampling_interval_s) <= 1e-6 * dt:
+            sampling_interval(dataset, strict=True)
+            return self._predict_series(X)
+        # Grey coefficients are per sample: resample onto the training interval, predict, interpolate back.
+        grid = np.arange(t[0], t[-1] + 1e-9 * self.sampling_interval_s, self.sampling_interval_s)
+        Xg = np.column_stack([np.interp(grid, t, X[:, j]) for j in range(X.shape[1])])
+        return np.interp(t, grid, self._predict_series(Xg))
+
+    def _predict_series(self, X):
+        # the estimator returns y_reference_ + Δŷ; we want Δŷ in the referenced frame of the data
+        y = np.asarray(self.estimator.predict(X), float)
+        return y - float(self.estimator.y_reference_) if self.preprocessing.get("zero_reference", True) else y
+
+    # ------------------------------------------------------------------ files
+    def to_document(self):
+        from models.persistence import model_to_document
+
+        return {
+            "format": FORMAT, "version": FORMAT_VERSION, "model_name": self.model_name,
+            "inputs": list(self.inputs), "input_units": list(self.input_units),
+            "target": self.target, "target_unit": self.target_unit,
+            "preprocessing": dict(self.preprocessing), "sampling_interval_s": self.sampling_interval_s,
+            "training": list(self.training), "project_version": project_version(),
+            "metadata": dict(self.metadata), "estimator": model_to_document(self.estimator),
+        }
+
+    def save(self, path):
+        """Write the model as JSON (atomically); returns the path."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.partial")
+        tmp.write_text(json.dumps(self.to_document(), indent=1, default=_json_default), encoding="utf-8")
+        os.replace(tmp, path)
+        return path
+
+    @classmethod
+    def load(cls, path):
+        """Read a model written by :meth:`save`; a wrong format or version is a clear error."""
+        from models.persistence import model_from_document
+
+        path = Path(path)
+        if not path.exists():
+            raise TwinInputError(f"{path}: model file not found")
+        try:
+            doc = json.loads(path.read_text(encoding="utf-8"))
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise TwinInputError(f"{path}: not a JSON model file ({exc})") from None
+        if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+            got = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
+            hint = " (a bare models.save_model file? train it with `twin train`)" \
+                if isinstance(doc, dict) and doc.get("format") == "thermal-twin-model" else ""
+            raise TwinInputError(f"{path}: format {got!r} is not {FORMAT!r}{hint}")
+        if doc.get("version") != FORMAT_VERSION:
+            raise TwinInputError(f"{path}: compensation-model version {doc.get('version')!r} was written by "
+                                 f"project version {doc.get('project_version', '?')}; this version "
+                                 f"({project_version()}) reads version {FORMAT_VERSION} only — retrain it")
+        missing = [k for k in ("model_name", "inputs", "input_units", "target", "target_unit", "estimator")
+                   if k not in doc]
+        if missing:
+            raise TwinInputError(f"{path}: model file lacks field(s) {missing}")
+        try:
+            estimator = model_from_document(doc["estimator"], f"{path} [estimator]")
+        except ValueError as exc:
+            raise TwinInputError(str(exc)) from None
+        return cls(estimator, doc["model_name"], list(doc["inputs"]), doc["target"], list(doc["input_units"]),
+                   doc["target_unit"], dict(doc.get("preprocessing") or {}), list(doc.get("training") or []),
+                   doc.get("sampling_interval_s"), dict(doc.get("metadata") or {}))
+
+
+def _json_default(value):
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"not JSON serialisable: {value!r}")
+
+
+def fit_compensation_model(datasets, inputs, target, model="anfis", params=None, zero_reference=True,
+                           reference_samples=1):
+    """Fit a :class:`CompensationModel` on one or more datasets.
+
+    Static models (MLR, PCR, ANN, ANFIS) are fitted on the rows of all
+    datasets, each referenced to its own start; grey time-series models take
+    one evenly sampled dataset.
+    """
+    datasets = list(datasets)
+    if not datasets:
+        raise TwinInputError("no training dataset given")
+    inputs = list(inputs)
+    if not inputs:
+        raise TwinInputError("no input channel given")
+    if target in inputs:
+        raise TwinInputError(f"the target {target!r} is also an input")
+    estimator = make_estimator(model, params)
+    first = datasets[0]
+    check_channels(first, inputs, role="input")
+    check_channels(first, [target], role="target")
+    units = [first.info(n).unit for n in inputs]
+    target_unit = first.info(target).unit
+    for ds in datasets[1:]:
+        check_channels(ds, inputs, units, "input")
+        check_channels(ds, [target], [target_unit], "target")
+    prep = {"zero_reference": bool(zero_reference), "reference_samples": int(reference_samples),
+            "convention": "inputs and target minus their value at the start of each dataset"
+            if zero_reference else "raw values"}
+    cm = CompensationModel(estimator, str(model).lower(), inputs, target, units, target_unit, prep)
+    dt = None
+    if cm.is_time_series:
+        if len(datasets) > 1:
+            raise TwinInputError(f"model {model!r} is a grey time-series model and trains on one contiguous "
+                                 f"record; got {len(datasets)} datasets (use a static model: mlr, pcr, ann, "
+                                 "anfis)")
+        dt = sampling_interval(first, strict=True)
+    X = np.vstack([cm.features(ds) for ds in datasets])
+    y = np.concatenate([cm.target_values(ds) for ds in datasets])
+    try:
+        estimator.fit(X, y)
+    except ValueError as exc:
+        raise TwinInputError(f"cannot fit {model!r}: {exc}") from None
+    cm.sampling_interval_s = dt
+    cm.training = [{"label": dataset_label(ds), "rows": len(ds), "source": ds.metadata.get("source"),
+                    "scenario": ds.metadata.get("scenario"), "kind": ds.metadata.get("kind"),
+                    "duration_h": float((ds.time_s[-1] - ds.time_s[0]) / 3600.0)} for ds in datasets]
+    return cm

@@ -1,0 +1,706 @@
+"""Reduced-order real-time model (ROM) of a machine's thermal twin.
+
+The full model is the LTI system of the finite-element twin
+
+    M Ṫ + A T = B u,        y = C T + D u + c
+
+(M, A symmetric positive definite; u = zone ambients °C, vertical ambient
+gradient K/m, heat-source powers W; y = the machine's channels in edge units:
+°C, µm, µε).  A ROM is a Galerkin projection T ≈ V x with an M-orthonormal
+basis V (Vᵀ M V = I):
+
+    ẋ = −Aᵣ x + Bᵣ u,       Aᵣ = Vᵀ A V (symmetric positive definite),  Bᵣ = Vᵀ B,  Cᵣ = C V
+
+which is stable and passive by construction.  Two bases are offered:
+
+``krylov`` (default)
+    Block Krylov moment matching: block Arnoldi on the pencil at expansion
+    points s₀ = 0 (steady state, exact DC gain) and a few positive points
+    (moments of (A + sⱼM)⁻¹ B).  The uniform field 1 (= A⁻¹ Σ_zones B_ambient)
+    is put first into the basis so that a uniform start temperature and every
+    steady state for any constant input are represented exactly.
+``modal``
+    Modal truncation: the r slowest modes of A φ = λ M φ (shift-invert
+    ``eigsh``), for comparison; no exact DC gain, no exact uniform state.
+
+Whatever the basis, the reduced pencil is diagonalised once (Aᵣ = Q Λ Qᵀ), so
+the ROM lives in *reduced modal coordinates* z: ż = −Λ z + B_z u, y = C_z z + D u + c.
+Each coordinate is a first-order filter, so the zero-order-hold step is
+exact for any step size h: z ← e^{−λh} z + (1 − e^{−λh})/λ · B_z u — no
+matrix exponential is needed and a change of step size costs r exponentials.
+The same θ-scheme as the FE solver is offered for like-for-like comparisons
+(the error report uses it).
+
+Inputs at the edges (operating conditions) map to u through the machine's
+power models P = c·(n/n_ref)^b; the ROM stores those models, so it needs no
+mesh at run time (:meth:`ReducedModel.inputs_from_conditions`).
+
+A ROM saves to a versioned ``.npz`` (no pickle) and is cached under the
+user cache folder keyed by a digest of the machine's matrices
+(:func:`machine_digest`), so a change of mesh, materials, sources or output
+operator (e.g. P1 → P2 elasticity) builds a new one.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as sla
+
+from .errors import TwinInputError
+
+FORMAT = "thermal-twin-rom"
+FORMAT_VERSION = 1
+METHODS = ("krylov", "modal")
+DEFAULT_ORDER = 80
+#: Expansion points (1/s) of the Krylov basis besides s = 0, chosen per machine from its slowest
+#: time constant τ₁ unless given: s = 0, 1/τ₁·{10, 100, 1000} spread the order over the hours to
+#: seconds range of machine-tool thermal dynamics.
+DEFAULT_POINT_FACTORS = (0.0, 10.0, 100.0, 1000.0)
+#: Relative M-norm below which a new Krylov direction counts as linearly dependent (deflated).
+DEFLATION_TOLERANCE = 1e-9
+DEFAULT_KINDS = ("temperature", "air", "displacement", "strain")
+
+
+class ROMError(TwinInputError):
+    """A reduced model cannot be built or used as asked (order too high, Krylov breakdown, bad input)."""
+
+
+# ----------------------------------------------------------------------------- helpers
+def machine_digest(machine):
+    """SHA-256 (16 hex) of everything the ROM depends on: M, A, B, C, c, D, names and power models."""
+    h = hashlib.sha256()
+    system = machine.thermal
+    for m in (system.mass, system.stiffness, system.input_matrix, machine.outputs.matrix):
+        m = sp.csr_matrix(m)
+        for a in (m.indptr, m.indices, m.data, np.array(m.shape)):
+            h.update(np.ascontiguousarray(a).tobytes())
+    h.update(np.ascontiguousarray(machine.outputs.offset, float).tobytes())
+    h.update(np.ascontiguousarray(machine.feedthrough, float).tobytes())
+    h.update(json.dumps([system.input_names, [c.name for c in machine.channels],
+                         [c.scale for c in machine.channels], _source_models(machine)]).encode())
+    h.update(f"rom-format-{FORMAT_VERSION}".encode())
+    return h.hexdigest()[:16]
+
+
+def _source_models(machine):
+    return [dict(name=s.name, driver=s.driver, coefficient_W=float(s.coefficient_W),
+                 reference=float(s.reference), exponent=float(s.exponent))
+            for s in machine.definition.sources]
+
+
+def _check_lti(system):
+    if system.radiation:
+        raise ROMError("the thermal system has T⁴ radiation, which is nonlinear: no LTI reduced model")
+    if len(system.fixed_nodes):
+        raise ROMError("the thermal system has fixed-temperature nodes; the ROM supports convection-"
+                       "anchored systems only (no Dirichlet lifting)")
+
+
+def _spd_factor(matrix):
+    from fea.linsolve import factorize
+
+    return factorize(sp.csc_matrix(matrix), symmetric_positive_definite=True)
+
+
+class _MOrthonormalBasis:
+    """An M-orthonormal basis grown block by block (classical Gram–Schmidt, twice, plus deflation)."""
+
+    def __init__(self, mass, capacity):
+        self.M = mass
+        self.n = mass.shape[0]
+        self.V = np.empty((self.n, capacity))
+        self.MV = np.empty((self.n, capacity))
+        self.k = 0
+
+    def add(self, W, limit):
+        """M-orthonormalise the columns of W against the basis; append at most ``limit`` new ones.
+
+        Returns the appended block (n, j), j ≤ limit (0 when W lies in the span).
+        """
+        W = np.array(W, dtype=float, copy=True).reshape(self.n, -1)
+        MW = self.M @ W
+        norms0 = np.sqrt(np.maximum(np.einsum("ij,ij->j", W, MW), 0.0))
+        added = []
+        for j in range(W.shape[1]):
+            if len(added) >= limit:
+                break
+            w = W[:, j]
+            ref = norms0[j]
+            if ref == 0.0:
+                continue
+            for _ in range(2):
+                if self.k:
+                    w = w - self.V[:, :self.k] @ (self.MV[:, :self.k].T @ w)
+            mw = self.M @ w
+            norm = float(np.sqrt(max(w @ mw, 0.0)))
+            if norm <= DEFLATION_TOLERANCE * ref:
+                continue
+            self.V[:, self.k] = w / norm
+            self.MV[:, self.k] = mw / norm
+            self.k += 1
+            added.append(self.k - 1)
+        return self.V[:, added]
+
+    @property
+    def basis(self):
+        return self.V[:, :self.k]
+
+
+def krylov_basis(system, order, points, uniform=True):
+    """M-orthonormal block-Krylov basis (n, order) of the pencil (A + sM)⁻¹ at the expansion ``points``.
+
+    The blocks are taken round-robin over the points: the first block of each
+    point, then the second of each, … so that every point contributes about
+    order/len(points) directions.  Raises :class:`ROMError` when the order
+    exceeds the number of unknowns or the Krylov spaces of all points are
+    exhausted (breakdown: an invariant subspace smaller than the order).
+    """
+    n = system.n_nodes
+    A, M = sp.csr_matrix(system.stiffness), sp.csr_matrix(system.mass)
+    B = np.asarray(system.input_matrix.todense()) if sp.issparse(system.input_matrix) else np.asarray(
+        system.input_matrix, float)
+    if order > n:
+        raise ROMError(f"ROM order {order} exceeds the {n} thermal unknowns of this mesh; "
+                       f"choose an order ≤ {n}")
+    basis = _MOrthonormalBasis(M, order)
+    if uniform:
+        basis.add(np.ones(n), 1)
+    solvers = [_spd_factor(A + s * M) if s else _spd_factor(A) for s in points]
+    blocks = [np.asarray(solve(B)).reshape(n, -1) for solve in solvers]
+    alive = [True] * len(points)
+    while basis.k < order:
+        if not any(alive):
+            raise ROMError(f"the Krylov space broke down at dimension {basis.k} < order {order} "
+                           f"(expansion points {list(points)}): the inputs reach no more directions; "
+                           f"choose an order ≤ {basis.k}")
+        for i, solve in enumerate(solvers):
+            if not alive[i] or basis.k >= order:
+                continue
+            new = basis.add(blocks[i], order - basis.k)
+            if new.shape[1] == 0:
+                alive[i] = False
+                continue
+            blocks[i] = np.asarray(solve(M @ new)).reshape(n, -1)
+    return basis.basis
+
+
+def modal_basis(system, order):
+    """The ``order`` slowest M-orthonormal modes of A φ = λ M φ (shift-invert about 0)."""
+    n = system.n_nodes
+    if order >= n - 1:
+        raise ROMError(f"modal ROM order {order} is too high for the {n} thermal unknowns of this mesh "
+                       f"(eigsh needs order < n − 1 = {n - 1})")
+    A, M = sp.csc_matrix(system.stiffness), sp.csc_matrix(system.mass)
+    solve = _spd_factor(A)
+    OPinv = sla.LinearOperator(A.shape, matvec=lambda x: solve(np.asarray(x, float)), dtype=float)
+    lam, phi = sla.eigsh(A, k=order, M=M, sigma=0.0, which="LM", OPinv=OPinv, tol=1e-10)
+    idx = np.argsort(lam)
+    phi = phi[:, idx]
+    # eigsh returns M-orthonormal vectors to its tolerance; re-orthonormalise to machine precision.
+    G = phi.T @ (M @ phi)
+    L = np.linalg.cholesky((G + G.T) / 2)
+    return np.linalg.solve(L, phi.T).T
+
+
+def slowest_rate(system):
+    """Smallest eigenvalue λ₁ (1/s) of A φ = λ M φ: 1/λ₁ is the slowest thermal time constant."""
+    A, M = sp.csc_matrix(system.stiffness), sp.csc_matrix(system.mass)
+    solve = _spd_factor(A)
+    OPinv = sla.LinearOperator(A.shape, matvec=lambda x: solve(np.asarray(x, float)), dtype=float)
+    lam = sla.eigsh(A, k=1, M=M, sigma=0.0, which="LM", OPinv=OPinv, tol=1e-8, return_eigenvectors=False)
+    return float(lam[0])
+
+
+# ----------------------------------------------------------------------------- the model
+@dataclass
+class StateSpace:
+    """ẋ = A x + B u, y = C x + D u + offset (continuous time); x0 for a uniform 1 °C start."""
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    offset: np.ndarray
+    uniform_state: np.ndarray
+    input_names: list
+    output_names: list
+    output_units: list
+
+    def initial_state(self, temperature_C):
+        """State of a uniform start at ``temperature_C`` (exact for a Krylov ROM)."""
+        return float(temperature_C) * self.uniform_state
+
+
+@dataclass
+class ReducedModel:
+    """A reduced model in reduced modal coordinates: ż = −λ ⊙ z + B u, y = C z + D u + offset.
+
+    ``outputs`` are channels in edge units (°C, µm, µε) named ``output_names``;
+    inputs are the thermal system's inputs ``input_names`` (ambients °C,
+    gradient K/m, powers W).  ``basis`` (n, r), when kept, maps z back to the
+    temperature field: T ≈ basis @ z.
+    """
+
+    method: str
+    eigenvalues: np.ndarray          # λ (r,), 1/s
+    input_matrix: np.ndarray         # (r, m)
+    output_matrix: np.ndarray        # (p, r)
+    feedthrough: np.ndarray          # (p, m)
+    offset: np.ndarray               # (p,)
+    uniform_state: np.ndarray        # (r,): coordinates of T ≡ 1 °C (its M-projection for modal)
+    input_names: list
+    output_names: list
+    output_units: list
+    output_kinds: list
+    zones: list
+    sources: list                    # power models, see machine_definition.HeatSource
+    limits: dict                     # max_spindle_rpm, max_feed_mm_min
+    machine: str
+    digest: str
+    info: dict = field(default_factory=dict)
+    basis: np.ndarray | None = None
+    zone_lags_s: dict = field(default_factory=dict)   # zones whose air lags the room (s), as the machine says
+
+    # ------------------------------------------------------------------ shape
+    @property
+    def order(self):
+        return len(self.eigenvalues)
+
+    @property
+    def n_inputs(self):
+        return len(self.input_names)
+
+    @property
+    def n_outputs(self):
+        return len(self.output_names)
+
+    def output_index(self, name):
+        try:
+            return self.output_names.index(name)
+        except ValueError:
+            raise ROMError(f"unknown ROM output {name!r}; outputs: {self.output_names}") from None
+
+    def __repr__(self):
+        return (f"ReducedModel({self.method}, order {self.order}, {self.n_inputs} inputs, "
+                f"{self.n_outputs} outputs, machine {self.machine!r})")
+
+    # ------------------------------------------------------------------ state space
+    def state_space(self):
+        """Continuous-time ``StateSpace`` (A, B, C, D, offset) on the thermal inputs u, in modal coordinates."""
+        return StateSpace(-np.diag(self.eigenvalues), self.input_matrix.copy(), self.output_matrix.copy(),
+                          self.feedthrough.copy(), self.offset.copy(), self.uniform_state.copy(),
+                          list(self.input_names), list(self.output_names), list(self.output_units))
+
+    def uniform(self, temperature_C):
+        """State of a uniform temperature field (°C); exact for a Krylov ROM (1 is in its basis)."""
+        return float(temperature_C) * self.uniform_state
+
+    def steady_state(self, u):
+        """Steady state for a constant input vector ``u`` (exact DC gain for a Krylov ROM)."""
+        return (self.input_matrix @ np.asarray(u, float)) / self.eigenvalues
+
+    def project(self, T, mass):
+        """State of a temperature field T (n,) by M-orthogonal projection (needs the kept ``basis``)."""
+        if self.basis is None:
+            raise ROMError("this ROM was saved without its basis; it cannot project temperature fields")
+        return self.basis.T @ (mass @ np.asarray(T, float))
+
+    def outputs(self, z, u):
+        """Outputs (p,) or (k, p) for states z (r,)/(k, r) and inputs u (m,)/(k, m)."""
+        z, u = np.asarray(z, float), np.asarray(u, float)
+        return z @ self.output_matrix.T + u @ self.feedthrough.T + self.offset
+
+    # ------------------------------------------------------------------ operating conditions → u
+    def inputs_from_conditions(self, spindle_rpm, feed_mm_min, ambient_C, gradient_K_per_m=0.0):
+        """Thermal inputs (k, m) from operating conditions, as :meth:`twin.machine.Machine.input_matrix`.
+
+        ``spindle_rpm`` (k,), ``feed_mm_min`` dict axis → (k,), ``ambient_C``
+        dict zone → (k,) (or a number/array for every zone), ``gradient_K_per_m``.
+        """
+        rpm = np.atleast_1d(np.asarray(spindle_rpm, float))
+        k = len(rpm)
+        feeds = {a: np.broadcast_to(np.asarray((feed_mm_min or {}).get(a, 0.0), float), (k,)) for a in "xyz"}
+        if not isinstance(ambient_C, dict):
+            ambient_C = {z: ambient_C for z in self.zones}
+        U = np.zeros((k, self.n_inputs))
+        for zone in self.zones:
+            if zone not in ambient_C:
+                raise ROMError(f"no ambient given for zone {zone!r}; zones: {self.zones}")
+            U[:, self.input_names.index(f"ambient:{zone}")] = ambient_C[zone]
+        U[:, self.input_names.index("ambient_gradient")] = gradient_K_per_m
+        for src in self.sources:
+            U[:, self.input_names.index(f"power:{src['name']}")] = source_power(src, rpm, feeds)
+        return U
+
+    # ------------------------------------------------------------------ time integration
+    def simulate(self, times_s, inputs, z0, scheme="zoh", theta=1.0):
+        """Outputs (k, p) at ``times_s`` from inputs (k, m) and the initial state ``z0``.
+
+        ``scheme="zoh"``: exact for inputs held piecewise constant — ``inputs[i]``
+        acts over [tᵢ, tᵢ₊₁) (the last row only enters the feedthrough at t₀ … see
+        below).  The output at tᵢ (i ≥ 1) uses the input last applied,
+        ``inputs[i−1]``, as an FMU reports it after ``doStep``; at t₀ it uses ``inputs[0]``.
+
+        ``scheme="theta"``: the FE solver's θ-method on the same grid with
+        inputs sampled at the step ends (θ = 1 backward Euler); outputs at tᵢ use ``inputs[i]``.
+        """
+        z, Z = self.states(times_s, inputs, z0, scheme, theta)
+        U = np.asarray(inputs, float)
+        if scheme == "zoh":
+            U = np.vstack([U[:1], U[:-1]])
+        return self.outputs(Z, U)
+
+    def states(self, times_s, inputs, z0, scheme="zoh", theta=1.0):
+        """Final state and the states (k, r) at ``times_s`` (see :meth:`simulate`)."""
+        t = np.asarray(times_s, float)
+        U = np.asarray(inputs, float).reshape(len(t), self.n_inputs)
+        if scheme not in ("zoh", "theta"):
+            raise ROMError(f"unknown scheme {scheme!r}; use 'zoh' or 'theta'")
+        if not np.all(np.isfinite(U)):
+            raise ROMError("ROM inputs contain NaN or infinite values")
+        if np.any(np.diff(t) <= 0):
+            raise ROMError("ROM times must increase strictly")
+        lam = self.eigenvalues
+        W = U @ self.input_matrix.T                       # (k, r) forcing per coordinate
+        Z = np.empty((len(t), self.order))
+        Z[0] = z0
+        if len(t) == 1:
+            return Z[0], Z
+        dt = np.diff(t)
+        uniform = np.allclose(dt, dt[0], rtol=1e-12, atol=0.0)
+        if scheme == "zoh":
+            forcing = W[:-1]
+        else:
+            forcing = theta * W[1:] + (1.0 - theta) * W[:-1]
+        if uniform:
+            a, g = self._step_coefficients(dt[0], scheme, theta)
+            from scipy.signal import lfilter
+
+            for i in range(self.order):
+                Z[1:, i] = lfilter([g[i]], [1.0, -a[i]], forcing[:, i], zi=[a[i] * Z[0, i]])[0]
+        else:
+            z = np.array(z0, float)
+            for k, h in enumerate(dt):
+                a, g = self._step_coefficients(h, scheme, theta)
+                z = a * z + g * forcing[k]
+                Z[k + 1] = z
+        return Z[-1], Z
+
+    def _step_coefficients(self, h, scheme="zoh", theta=1.0):
+        lam = self.eigenvalues
+        if scheme == "zoh":
+            return np.exp(-lam * h), -np.expm1(-lam * h) / lam
+        denom = 1.0 / h + theta * lam
+        return (1.0 / h - (1.0 - theta) * lam) / denom, 1.0 / denom
+
+    def discretize(self, step_s):
+        """Exact ZOH discretisation for step h: (Φ, Γ) diagonal/dense with z⁺ = Φ z + Γ u."""
+        a, g = self._step_coefficients(float(step_s))
+        return np.diag(a), g[:, None] * self.input_matrix
+
+    # ------------------------------------------------------------------ persistence
+    def save(self, path, keep_basis=False):
+        """Write a versioned ``.npz`` (no pickle); the basis only with ``keep_basis``."""
+        path = Path(path)
+        meta = dict(format=FORMAT, version=FORMAT_VERSION, method=self.method, input_names=self.input_names,
+                    output_names=self.output_names, output_units=self.output_units,
+                    output_kinds=self.output_kinds, zones=self.zones, zone_lags_s=self.zone_lags_s,
+                    sources=self.sources, limits=self.limits,
+                    machine=self.machine, digest=self.digest, info=self.info)
+        arrays = dict(eigenvalues=self.eigenvalues, input_matrix=self.input_matrix,
+                      output_matrix=self.output_matrix, feedthrough=self.feedthrough, offset=self.offset,
+                      uniform_state=self.uniform_state, meta=np.array(json.dumps(meta, default=_json_default)))
+        if keep_basis and self.basis is not None:
+            arrays["basis"] = self.basis
+        tmp = path.with_name(path.name + ".partial.npz")
+        np.savez(tmp, **arrays)
+        tmp.replace(path)
+        return path
+
+    @classmethod
+    def load(cls, path):
+        """Read a ROM written by :meth:`save`; raise :class:`ROMError` on another format or version."""
+        path = Path(path)
+        try:
+            data = np.load(path, allow_pickle=False)
+            meta = json.loads(str(data["meta"]))
+        except Exception as exc:
+            raise ROMError(f"{path}: not a readable ROM file ({exc})") from None
+        if meta.get("format") != FORMAT or meta.get("version") != FORMAT_VERSION:
+            raise ROMError(f"{path}: ROM format {meta.get('format')!r} version {meta.get('version')!r}; "
+                           f"this program reads {FORMAT!r} version {FORMAT_VERSION}")
+        return cls(meta["method"], data["eigenvalues"], data["input_matrix"], data["output_matrix"],
+                   data["feedthrough"], data["offset"], data["uniform_state"], meta["input_names"],
+                   meta["output_names"], meta["output_units"], meta["output_kinds"], meta["zones"],
+                   meta["sources"], meta["limits"], meta["machine"], meta["digest"], meta["info"],
+                   data["basis"] if "basis" in data.files else None, meta.get("zone_lags_s", {}))
+
+
+def _json_default(value):
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"not JSON serialisable: {type(value)}")
+
+
+def source_power(src, spindle_rpm, feed_mm_min):
+    """Power (W) of a source model dict (see :class:`twin.machine_definition.HeatSource`)."""
+    rpm = np.asarray(spindle_rpm, float)
+    driver = src["driver"]
+    if driver == "constant":
+        return src["coefficient_W"] * np.ones_like(rpm)
+    if driver == "spindle":
+        n = np.abs(rpm)
+    elif driver == "feed_xy":
+        n = np.maximum(np.abs(feed_mm_min["x"]), np.abs(feed_mm_min["y"]))
+    elif driver == "feed_xyz":
+        n = np.maximum.reduce([np.abs(feed_mm_min[a]) for a in "xyz"])
+    else:
+        n = np.abs(np.asarray(feed_mm_min[driver[-1]], float))
+    return src["coefficient_W"] * (n / src["reference"]) ** src["exponent"]
+
+
+# ----------------------------------------------------------------------------- building
+def default_points(system, n_points=len(DEFAULT_POINT_FACTORS)):
+    """Expansion points 0 and λ₁·{10, 100, 1000, …} (1/s) with λ₁ the slowest thermal rate."""
+    lam1 = slowest_rate(system)
+    return [f * lam1 for f in DEFAULT_POINT_FACTORS[:n_points]]
+
+
+def compute_basis(machine, order, method="krylov", points=None):
+    """The projection basis V (n, order) and the expansion points used (Krylov) or [] (modal).
+
+    Bases are nested: the first r columns of an order-R basis are the order-r basis
+    (the construction is sequential), which :func:`twin.rom_report.error_report` uses.
+    """
+    if method not in METHODS:
+        raise ROMError(f"unknown ROM method {method!r}; methods: {list(METHODS)}")
+    order = int(order)
+    if order < 1:
+        raise ROMError(f"ROM order must be a positive integer, got {order}")
+    system = machine.thermal
+    _check_lti(system)
+    if method == "modal":
+        return modal_basis(system, order), []
+    points = [float(p) for p in (default_points(system) if points is None else points)]
+    if any(p < 0 for p in points) or not points:
+        raise ROMError(f"Krylov expansion points must be ≥ 0 (1/s), got {points}")
+    return krylov_basis(system, order, points), points
+
+
+def build_rom(machine, order=DEFAULT_ORDER, method="krylov", points=None, kinds=DEFAULT_KINDS,
+              keep_basis=False):
+    """Reduce a built :class:`~twin.machine.Machine` to a :class:`ReducedModel` of ``order`` states.
+
+    Parameters
+    ----------
+    order : number of states r (Krylov: includes the uniform field)
+    method : ``"krylov"`` (block moment matching) or ``"modal"`` (modal truncation)
+    points : Krylov expansion points in 1/s (default :func:`default_points`)
+    kinds : channel kinds kept as outputs (``"camera"`` adds the 525 camera spots)
+    keep_basis : keep V (n, r) in the model to project or reconstruct temperature fields
+    """
+    start = time.perf_counter()
+    V, points = compute_basis(machine, order, method, points)
+    basis_seconds = time.perf_counter() - start
+    rom = reduce_with_basis(machine, V, method, kinds, keep_basis)
+    rom.info.update(points_per_s=points, basis_seconds=basis_seconds, build_seconds=time.perf_counter() - start)
+    return rom
+
+
+def reduce_with_basis(machine, V, method="krylov", kinds=DEFAULT_KINDS, keep_basis=False):
+    """The :class:`ReducedModel` of a machine for an M-orthonormal basis V (n, r)."""
+    start = time.perf_counter()
+    system = machine.thermal
+    M, A = sp.csr_matrix(system.mass), sp.csr_matrix(system.stiffness)
+    Ar = V.T @ (A @ V)
+    Ar = (Ar + Ar.T) / 2
+    lam, Q = np.linalg.eigh(Ar)
+    if lam[0] <= 0:
+        raise ROMError(f"reduced stiffness is not positive definite (λ_min = {lam[0]:.3e}); "
+                       "the thermal system has no heat path to an ambient")
+    Vq = V @ Q
+    B = sp.csr_matrix(system.input_matrix)
+    Bz = np.asarray((B.T @ Vq).T)
+    keep = [j for j, c in enumerate(machine.channels) if c.kind in kinds]
+    n_fe = machine.outputs.n_outputs
+    scale = np.array([machine.channels[j].scale for j in keep])
+    C_fe = sp.csr_matrix(machine.outputs.matrix)
+    rows_fe = [j for j in keep if j < n_fe]
+    rows_air = [j - n_fe for j in keep if j >= n_fe]
+    C = np.zeros((len(keep), len(lam)))
+    D = np.zeros((len(keep), system.n_inputs))
+    c = np.zeros(len(keep))
+    n_kept_fe = len(rows_fe)
+    if rows_fe:
+        C[:n_kept_fe] = np.asarray(C_fe[rows_fe] @ Vq)
+        c[:n_kept_fe] = machine.outputs.offset[rows_fe]
+    if rows_air:
+        D[n_kept_fe:] = machine.feedthrough[rows_air]
+    C *= scale[:, None]
+    D *= scale[:, None]
+    c *= scale
+    ones = np.ones(system.n_nodes)
+    uniform = Vq.T @ (M @ ones)
+    gap = ones - Vq @ uniform
+    residual = float(np.sqrt((gap @ (M @ gap)) / (ones @ (M @ ones))))
+    orth = float(np.abs(V.T @ (M @ V) - np.eye(V.shape[1])).max())
+    seconds = time.perf_counter() - start
+    info = dict(n_nodes=int(system.n_nodes), build_seconds=seconds, points_per_s=[],
+                slowest_time_constant_s=float(1.0 / lam[0]), fastest_time_constant_s=float(1.0 / lam[-1]),
+                uniform_residual=residual, orthonormality_error=orth)
+    definition = machine.definition
+    limits = dict(max_spindle_rpm=float(definition.max_spindle_rpm),
+                  max_feed_mm_min=float(definition.max_feed_mm_min))
+    channels = [machine.channels[j] for j in keep]
+    return ReducedModel(method, lam, Bz, C, D, c, uniform, list(system.input_names),
+                        [ch.name for ch in channels], [ch.unit for ch in channels], [ch.kind for ch in channels],
+                        list(machine.zones), _source_models(machine), limits, machine.name,
+                        machine_digest(machine), info, Vq if keep_basis else None,
+                        dict(getattr(definition, "zone_lags_s", {}) or {}))
+
+
+def rom_cache_path(machine, order, method="krylov", points=None, kinds=DEFAULT_KINDS):
+    from meshes.builder import user_cache_dir
+
+    key = hashlib.sha256(json.dumps([machine_digest(machine), int(order), method,
+                                     None if points is None else [float(p) for p in points],
+                                     sorted(kinds)]).encode()).hexdigest()[:16]
+    return user_cache_dir() / f"rom-{machine.name}-{method}-r{int(order)}-{key}.npz"
+
+
+def cached_rom(machine, order=DEFAULT_ORDER, method="krylov", points=None, kinds=DEFAULT_KINDS, rebuild=False):
+    """:func:`build_rom`, or the ROM saved earlier for the same machine matrices and settings."""
+    path = rom_cache_path(machine, order, method, points, kinds)
+    if path.exists() and not rebuild:
+        try:
+            rom = ReducedModel.load(path)
+            if rom.digest == machine_digest(machine):
+                rom.info["from_cache"] = str(path)
+                return rom
+        except ROMError:
+            pass
+    rom = build_rom(machine, order, method, points, kinds)
+    rom.save(path)
+    rom.info["from_cache"] = None
+    return rom
+
+
+# ----------------------------------------------------------------------------- scenarios
+def step_grid(times, max_step_s=None):
+    """The FE solver's step times: each output interval split into equal sub-steps ≤ max_step_s."""
+    times = np.asarray(times, float)
+    intervals = np.diff(times)
+    sub = np.ones(len(intervals), int) if max_step_s is None else \
+        np.maximum(1, np.ceil(intervals / float(max_step_s) - 1e-9).astype(int))
+    at_output = np.concatenate([[0], np.cumsum(sub)])
+    if np.all(sub == 1):
+        return times.copy(), at_output
+    k = np.repeat(np.arange(len(sub)), sub)                 # interval of each step
+    j = np.arange(len(k)) - at_output[k] + 1                # 1..sub within the interval
+    steps = np.concatenate([[times[0]], times[k] + intervals[k] * j / sub[k]])
+    return steps, at_output
+
+
+@dataclass
+class ScenarioConditions:
+    times_s: np.ndarray
+    spindle_rpm: np.ndarray
+    feed_mm_min: dict
+    ambient_C: dict
+    gradient_K_per_m: np.ndarray
+
+
+def scenario_conditions(scenario, zones, times, lags_s=None):
+    """Operating conditions of a scenario at ``times`` (as :class:`twin.simulate.ScenarioInputs` gives them)."""
+    t = np.atleast_1d(np.asarray(times, float))
+    rpm, feeds = scenario.operating(t)
+    ambient = scenario.zone_ambient(t, zones, lags_s) if lags_s else scenario.zone_ambient(t, zones)
+    return ScenarioConditions(t, rpm, feeds, ambient, np.full(t.shape, scenario.ambient.gradient_K_per_m))
+
+
+def initial_state(rom, scenario):
+    """The scenario's initial state: uniform (its temperature, or the t = 0 ambient) or steady."""
+    init = scenario.initial
+    cond = scenario_conditions(scenario, rom.zones, [0.0], rom.zone_lags_s)
+    if init["kind"] == "uniform":
+        value = init.get("temperature_C")
+        return rom.uniform(cond.ambient_C[rom.zones[0]][0] if value is None else value)
+    # The machine stands idle before the test unless the scenario names a speed (as twin.simulate does).
+    rpm = np.array([init.get("spindle_rpm") or 0.0])
+    idle = {a: np.zeros(1) for a in "xyz"}
+    ambient = cond.ambient_C if init.get("ambient_C") is None else \
+        {z: np.array([init["ambient_C"]]) for z in rom.zones}
+    u = rom.inputs_from_conditions(rpm, idle, ambient, cond.gradient_K_per_m)[0]
+    return rom.steady_state(u)
+
+
+def held_conditions(scenario, zones, times, lags_s=None):
+    """Conditions held over each step [tᵢ, tᵢ₊₁): the scenario's value at tᵢ₊₁ (left limit).
+
+    This is the scenario module's convention (a step ending when the spindle
+    stops still carries the running power) and the table an FMU master feeds:
+    row i is applied at tᵢ for the step to tᵢ₊₁.  The last row repeats the
+    value at the last time.
+    """
+    t = np.asarray(times, float)
+    return scenario_conditions(scenario, zones, np.r_[t[1:], t[-1]], lags_s)
+
+
+def simulate_rom(rom, scenario, scheme="zoh", theta=None, sample_times=None):
+    """Run a scenario (name, path or Scenario) on a ROM; return a :class:`~twin.dataset.Dataset`.
+
+    Channels as in :func:`twin.simulate.simulate` (conditions, then the ROM's
+    outputs, no noise).  ``scheme="zoh"``: exact for conditions held over each
+    step at their left-limit value (:func:`held_conditions`); ``"theta"``:
+    the FE's θ-method on its step grid (like-for-like with the full model).
+    """
+    from .dataset import ChannelInfo, Dataset, project_version
+    from .scenario import Scenario, load_scenario
+
+    scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    start = time.perf_counter()
+    times = scenario.times() if sample_times is None else np.asarray(sample_times, float)
+    steps, at_output = step_grid(times, scenario.time_step_s)
+    z0 = initial_state(rom, scenario)
+    if scheme == "zoh":
+        held = held_conditions(scenario, rom.zones, steps, rom.zone_lags_s)
+        U = rom.inputs_from_conditions(held.spindle_rpm, held.feed_mm_min, held.ambient_C, held.gradient_K_per_m)
+        _, Z = rom.states(steps, U, z0, "zoh")
+    else:
+        cond = scenario_conditions(scenario, rom.zones, steps, rom.zone_lags_s)
+        U = rom.inputs_from_conditions(cond.spindle_rpm, cond.feed_mm_min, cond.ambient_C,
+                                       cond.gradient_K_per_m)
+        _, Z = rom.states(steps, U, z0, "theta", scenario.theta if theta is None else theta)
+    out = scenario_conditions(scenario, rom.zones, times, rom.zone_lags_s)
+    U_out = rom.inputs_from_conditions(out.spindle_rpm, out.feed_mm_min, out.ambient_C, out.gradient_K_per_m)
+    Y = rom.outputs(Z[at_output], U_out)
+    channels = [ChannelInfo("spindle", "rpm", "spindle_speed", "spindle speed")]
+    columns = [out.spindle_rpm]
+    for axis in "xyz":
+        channels.append(ChannelInfo(f"feed_{axis}", "mm_min", "feed", f"{axis.upper()} axis feed"))
+        columns.append(out.feed_mm_min[axis])
+    for zone in rom.zones:
+        channels.append(ChannelInfo(f"ambient_{zone}", "degC", "ambient", f"ambient of zone {zone} (true)"))
+        columns.append(out.ambient_C[zone])
+    channels.append(ChannelInfo("ambient_gradient", "K_m", "ambient_gradient", "vertical ambient gradient"))
+    columns.append(out.gradient_K_per_m)
+    for src in rom.sources:
+        channels.append(ChannelInfo(f"P_{src['name']}", "W", "power", src["name"]))
+        columns.append(U_out[:, rom.input_names.index(f"power:{src['name']}")])
+    for j, name in enumerate(rom.output_names):
+        channels.append(ChannelInfo(name, rom.output_units[j], rom.output_kinds[j]))
+        columns.append(Y[:, j])
+    metadata = {"kind": "synthetic", "machine": rom.machine, "scenario": scenario.name,
+                "scenario_file": scenario.source, "noise": "none", "effects": [],
+                "model": f"ROM {rom.method} r={rom.order} ({scheme})", "rom_digest": rom.digest,
+                "time_step_s": scenario.time_step_s, "wall_seconds": time.perf_counter() - start,
+                "project_version": project_version()}
+    return Dataset(times, np.column_stack(columns), channels, metadata)
