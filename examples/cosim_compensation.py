@@ -92,8 +92,8 @@ def run(scenario_name="heat_cool_9000", kind="native", out_dir="runs/cosim", ste
             if (k + 1) % max(1, int(round(update_s / step_s))) == 0:
                 latest = np.array(model.get(*axes))           # a new prediction leaves the controller
             if delay_steps:
+                applied = pipeline[0]                         # sent `delay` ago, reaching the drives now
                 pipeline.append(latest)
-                applied = pipeline[0]                         # ... and reaches the drives `delay` later
             else:
                 applied = latest
             true_drift[k + 1] = plant.get(*axes)

@@ -34,7 +34,7 @@ def cluster():
     from distributed import LocalCluster
 
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=None) as c:
+                      dashboard_address="127.0.0.1:0") as c:
         yield c
 
 
@@ -66,3 +66,38 @@ def test_scheduler_argument_is_checked():
     done = []
     run_tasks([SolveTask(3, 0), SolveTask(3, 1)], scheduler="serial", progress=lambda d, t: done.append((d, t)))
     assert done == [(1, 2), (2, 2)]
+
+
+def test_workers_rebuild_the_machine_from_caches_and_match_serial(cluster, tmp_path):
+    """Twin runs as sweep tasks: the workers get names, rebuild the machine from the caches, equal serial."""
+    from twin.machine import build_machine
+    from twin.placement import CandidateSpec, MachineSpec, RecordTask
+
+    build_machine("vmc_ram")                       # the caches exist (the workers only read them)
+    body = """
+[scenario]
+name = "{name}"
+sample_interval_s = 600.0
+time_step_s = 600.0
+[ambient]
+kind = "constant"
+temperature_C = {amb}
+[[segments]]
+duration_h = 1
+spindle_rpm = {rpm}
+[[segments]]
+duration_h = 1
+spindle_rpm = 0
+"""
+    paths = []
+    for name, rpm, amb in (("sw_a", 9000, 20.0), ("sw_b", 3000, 21.0), ("sw_c", 6000, 20.0)):
+        path = tmp_path / f"{name}.toml"
+        path.write_text(body.format(name=name, rpm=rpm, amb=amb))
+        paths.append(str(path))
+    tasks = [RecordTask(MachineSpec(), CandidateSpec(("ram",), 30, camera=False), p, ("Z",), None) for p in paths]
+    serial = run_tasks(tasks, scheduler="serial")
+    remote = run_tasks(tasks, scheduler=cluster.scheduler_address)
+    for a, b in zip(serial, remote):
+        assert a.scenario == b.scenario
+        assert np.array_equal(a.temperatures, b.temperatures) and np.array_equal(a.drift["Z"], b.drift["Z"])
+    assert np.ptp(serial[0].drift["Z"]) > np.ptp(serial[1].drift["Z"])      # 9000 rpm moves more than 3000

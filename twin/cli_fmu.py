@@ -95,12 +95,12 @@ def cmd_rom_build(args):
 
 def cmd_rom_report(args):
     from .machine import build_machine
-    from .rom_report import error_report, format_markdown
+    from .rom_report import error_report, format_markdown, format_summary
 
     machine = build_machine(args.machine, args.mesh_size)
     scenarios = args.scenarios.split(",") if args.scenarios else None
     report = error_report(machine, _orders(args.orders), args.methods.split(","), scenarios, progress=print)
-    text = format_markdown(report)
+    text = format_summary(report) + "\n\n" + format_markdown(report)
     print()
     print(text)
     best = report.passes("krylov") if "krylov" in args.methods else None

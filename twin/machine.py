@@ -211,6 +211,14 @@ def _operator_cache_key(definition, mesh_digest):
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
+def mesh_content_digest(mesh):
+    """Hash of the mesh itself (fTetWild is not reproducible, so the definition's hash is not enough)."""
+    h = hashlib.sha256()
+    for array in (mesh.points, mesh.tets, mesh.regions):
+        h.update(np.ascontiguousarray(array).tobytes())
+    return h.hexdigest()
+
+
 def _build_outputs(definition, mesh, thermal, materials, mesh_digest):
     specs, channels = _output_specs(definition)
     name = f"outputs-{definition.name}-{_operator_cache_key(definition, mesh_digest)}.npz"
@@ -252,7 +260,8 @@ def build_machine(machine="vmc_ram", mesh_size_m=None, definition=None):
     groups, _ = _facet_groups(definition, mesh)
     thermal, materials = _thermal_system(definition, mesh, groups)
     start = time.perf_counter()
-    outputs, channels, operator_path = _build_outputs(definition, mesh, thermal, materials, info.digest)
+    outputs, channels, operator_path = _build_outputs(definition, mesh, thermal, materials,
+                                                      mesh_content_digest(mesh))
     air = [s for s in definition.sensors if s.kind == "air"]
     feedthrough = np.zeros((len(air), thermal.n_inputs))
     for i, s in enumerate(air):

@@ -617,9 +617,9 @@ def placement_study(machine="vmc_ram", mesh_size_m=None, parts=DEFAULT_PARTS, n_
         else tuple(axes)
     tasks = [RecordTask(spec, cspec, s, record_axes, record_interval_s) for s in list(train) + list(test)]
     t0 = time.perf_counter()
+    m = spec.build()              # here first: mesh and operator caches are then ready for the workers
     records = run_records(tasks, scheduler=scheduler, use_cache=use_cache, progress=progress)
     t_sim = time.perf_counter() - t0
-    m = spec.build()
     cands = cspec.build(m)
     if noise:
         records = [add_noise(r, cands.kinds, 1000 + i) for i, r in enumerate(records)]

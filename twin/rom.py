@@ -42,6 +42,7 @@ operator (e.g. P1 → P2 elasticity) builds a new one.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import time
@@ -654,6 +655,13 @@ def held_conditions(scenario, zones, times, lags_s=None):
     return scenario_conditions(scenario, zones, np.r_[t[1:], t[-1]], lags_s)
 
 
+@functools.lru_cache(maxsize=1)
+def _project_version():
+    from .dataset import project_version
+
+    return project_version()
+
+
 def simulate_rom(rom, scenario, scheme="zoh", theta=None, sample_times=None):
     """Run a scenario (name, path or Scenario) on a ROM; return a :class:`~twin.dataset.Dataset`.
 
@@ -662,7 +670,7 @@ def simulate_rom(rom, scenario, scheme="zoh", theta=None, sample_times=None):
     step at their left-limit value (:func:`held_conditions`); ``"theta"``:
     the FE's θ-method on its step grid (like-for-like with the full model).
     """
-    from .dataset import ChannelInfo, Dataset, project_version
+    from .dataset import ChannelInfo, Dataset
     from .scenario import Scenario, load_scenario
 
     scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
@@ -670,17 +678,18 @@ def simulate_rom(rom, scenario, scheme="zoh", theta=None, sample_times=None):
     times = scenario.times() if sample_times is None else np.asarray(sample_times, float)
     steps, at_output = step_grid(times, scenario.time_step_s)
     z0 = initial_state(rom, scenario)
+    # One evaluation of the scenario on the step grid serves every use (the ambient lags are costly).
+    cond = scenario_conditions(scenario, rom.zones, steps, rom.zone_lags_s)
+    U = rom.inputs_from_conditions(cond.spindle_rpm, cond.feed_mm_min, cond.ambient_C, cond.gradient_K_per_m)
     if scheme == "zoh":
-        held = held_conditions(scenario, rom.zones, steps, rom.zone_lags_s)
-        U = rom.inputs_from_conditions(held.spindle_rpm, held.feed_mm_min, held.ambient_C, held.gradient_K_per_m)
-        _, Z = rom.states(steps, U, z0, "zoh")
+        # held over [tᵢ, tᵢ₊₁): the value at tᵢ₊₁ (held_conditions), i.e. the next row
+        _, Z = rom.states(steps, np.vstack([U[1:], U[-1:]]), z0, "zoh")
     else:
-        cond = scenario_conditions(scenario, rom.zones, steps, rom.zone_lags_s)
-        U = rom.inputs_from_conditions(cond.spindle_rpm, cond.feed_mm_min, cond.ambient_C,
-                                       cond.gradient_K_per_m)
         _, Z = rom.states(steps, U, z0, "theta", scenario.theta if theta is None else theta)
-    out = scenario_conditions(scenario, rom.zones, times, rom.zone_lags_s)
-    U_out = rom.inputs_from_conditions(out.spindle_rpm, out.feed_mm_min, out.ambient_C, out.gradient_K_per_m)
+    out = ScenarioConditions(times, cond.spindle_rpm[at_output],
+                             {a: v[at_output] for a, v in cond.feed_mm_min.items()},
+                             {z: v[at_output] for z, v in cond.ambient_C.items()}, cond.gradient_K_per_m[at_output])
+    U_out = U[at_output]
     Y = rom.outputs(Z[at_output], U_out)
     channels = [ChannelInfo("spindle", "rpm", "spindle_speed", "spindle speed")]
     columns = [out.spindle_rpm]
@@ -702,5 +711,5 @@ def simulate_rom(rom, scenario, scheme="zoh", theta=None, sample_times=None):
                 "scenario_file": scenario.source, "noise": "none", "effects": [],
                 "model": f"ROM {rom.method} r={rom.order} ({scheme})", "rom_digest": rom.digest,
                 "time_step_s": scenario.time_step_s, "wall_seconds": time.perf_counter() - start,
-                "project_version": project_version()}
+                "project_version": _project_version()}
     return Dataset(times, np.column_stack(columns), channels, metadata)

@@ -120,6 +120,25 @@ def error_report(machine, orders=(10, 20, 30, 40, 60, 80, 100), methods=("krylov
     return ErrorReport(rows, fe_seconds, basis_seconds, zoh, failures)
 
 
+def format_summary(report):
+    """One Markdown table: per order, the worst error over all scenarios for each method."""
+    methods = [m for m in ("krylov", "modal") if any(r.method == m for r in report.rows)]
+    n = len({r.scenario for r in report.rows})
+    head = "| r |" + "".join(f" {m} T (K) | {m} TCP (µm) | {m} strain (µε) |" for m in methods) + \
+        " Krylov meets the goal on |"
+    lines = [f"Worst over {n} scenarios (largest |ROM − FE| over time, channels and scenarios):", "",
+             head, "|---:|" + "---:|" * (3 * len(methods) + 1)]
+    for order in sorted({r.order for r in report.rows}):
+        cells = []
+        for m in methods:
+            rows = [r for r in report.rows if r.method == m and r.order == order]
+            cells += [f"{max(r.errors.get(k, 0.0) for r in rows):.2e}" for k, _ in GROUPS]
+        ok = [r for r in report.rows if r.method == "krylov" and r.order == order and
+              r.errors.get("displacement", 0.0) <= GOAL_TCP_UM and r.errors.get("temperature", 0.0) <= GOAL_TEMPERATURE_K]
+        lines.append(f"| {order} | " + " | ".join(cells) + f" | {len(ok)}/{n} |")
+    return "\n".join(lines)
+
+
 def format_markdown(report):
     """The error-vs-order tables (one per scenario: Krylov vs modal side by side) in Markdown."""
     lines = []

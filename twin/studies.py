@@ -96,6 +96,8 @@ def _available(names):
 def simulate_many(scenarios, machine=MachineSpec(), scheduler="local", noise=True, progress=None):
     from .sweep import run_tasks
 
+    machine.build()       # mesh and operator caches ready before the workers start (none meshes twice)
+
     return run_tasks([SimulateTask(machine, s, noise) for s in scenarios], scheduler=scheduler, progress=progress)
 
 
@@ -306,6 +308,8 @@ def hybrid_study(train=HYBRID_TRAIN, test=HYBRID_TEST, axes=("Z", "Y"), model="a
     truth = MachineSpec(machine, mesh_size_m, gap.get("source_scale", 1.0), gap.get("convection_scale", 1.0))
     nominal = MachineSpec(machine, mesh_size_m)
     t0 = time.perf_counter()
+    nominal.build()
+    truth.build()
     measured = run_tasks([SimulateTask(truth, s) for s in list(train) + list(test)], scheduler=scheduler,
                          progress=progress)
     physics = run_tasks([PhysicsTask(nominal, ds, tuple(axes), physics_backend) for ds in measured],
@@ -344,16 +348,16 @@ def hybrid_study(train=HYBRID_TRAIN, test=HYBRID_TEST, axes=("Z", "Y"), model="a
             s = score(ys, ps)
             pooled.append({"axis": axis, "approach": approach, "rmse": s["rmse"], "max_residual": s["max_residual"],
                            "improvement_percent": s["improvement_percent"], "uncompensated_max": s["uncompensated_max"]})
+    scale = gap.get("source_scale", 1.0)
+    powers = (", ".join(f"{n} ×{f:g}" for n, f in scale) if isinstance(scale, (tuple, list))
+              else f"every source ×{float(scale):g}")
     md = ["# Hybrid grey-box compensation vs pure physics vs pure data-driven", "",
-          "\"Measured\" records are made by a perturbed twin: source powers " +
-          ", ".join(f"{n} ×{f:g}" for n, f in (gap.get("source_scale") or ())) if isinstance(
-              gap.get("source_scale"), (tuple, list)) else "\"Measured\" records are made by a perturbed twin: "
-          f"source powers ×{gap.get('source_scale', 1.0)}", ]
-    md[-1] += (f", every convection coefficient ×{gap.get('convection_scale', 1.0):g}, with instrument noise "
-               "(DS18S20, NCDT). The physics model is the *nominal* twin driven by the records' spindle speed, "
-               f"feeds and ambient ({physics_backend.upper()} backend), started at rest. Data-driven and the "
-               f"residual model of the hybrid: {model} on {k} thermometers chosen on the training records "
-               f"({select_method}).")
+          f"\"Measured\" records are made by a perturbed twin — source powers {powers}, every convection "
+          f"coefficient ×{gap.get('convection_scale', 1.0):g} — with instrument noise (DS18S20, NCDT). The physics "
+          f"model is the *nominal* twin driven by the records' spindle speed, feeds and ambient "
+          f"({physics_backend.upper()} backend), started at rest. Data-driven and the residual model of the hybrid: "
+          f"{model} on {k} thermometers chosen on the training records ({select_method}); the hybrid predicts "
+          "physics + the learned residual (measured − physics)."]
     md += ["", f"Training records: {', '.join(train)}; held-out: {', '.join(test)}.", "",
            "## Held-out, pooled (µm)", "",
            format_table(pooled, ["axis", "approach", "rmse", "max_residual", "improvement_percent",

@@ -118,7 +118,7 @@ def run_tasks(tasks, scheduler=LOCAL, n_workers=None, progress=None):
     if scheduler is None or scheduler == LOCAL:
         workers = max(1, min(int(n_workers or os.cpu_count() or 1), total))
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address=None, silence_logs=40)
+                               dashboard_address="127.0.0.1:0", silence_logs=40)
         client = Client(cluster)
     elif isinstance(scheduler, str):
         try:

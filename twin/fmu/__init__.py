@@ -264,21 +264,37 @@ def validate(path):
 def input_table(rom, scenario, times=None):
     """A structured array (``time`` + FMU input names) driving the FMU through a scenario.
 
-    Row i is what the master sets at tᵢ for the step to tᵢ₊₁: the scenario's
-    conditions at tᵢ₊₁ (left limits, :func:`twin.rom.held_conditions`), so the
-    FMU reproduces :func:`twin.rom.simulate_rom` (zero-order hold).
+    Two rows hold the conditions at initialisation — those at t₀, with the
+    machine idle for a steady start (as :func:`twin.simulate.simulate` does) —
+    at t₀ − 1 s (before the start, only so that fmpy sees the event at t₀) and
+    at t₀.  A row at the same time t₀ follows — an input event, which fmpy
+    applies after initialisation, for the first step — and then row i (at tᵢ)
+    holds what the master sets for the step to tᵢ₊₁: the scenario's conditions
+    at tᵢ₊₁ (left limits, :func:`twin.rom.held_conditions`).  So the FMU
+    reproduces :func:`twin.rom.simulate_rom` (zero-order hold) exactly,
+    initial state and feedthrough included.
     """
-    from ..rom import held_conditions
+    from ..rom import scenario_conditions
     from ..scenario import Scenario, load_scenario
 
     scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     t = scenario.times() if times is None else np.asarray(times, float)
-    held = held_conditions(scenario, rom.zones, t, rom.zone_lags_s)
-    cols = [("time", t), ("spindle_speed", held.spindle_rpm)]
-    cols += [(f"feed_{a}", held.feed_mm_min[a]) for a in "xyz"]
-    cols += [(f"ambient_{z}", held.ambient_C[z]) for z in rom.zones]
-    cols += [("ambient_gradient", held.gradient_K_per_m)]
-    table = np.zeros(len(t), dtype=[(name, np.float64) for name, _ in cols])
+    cond = scenario_conditions(scenario, rom.zones, t, rom.zone_lags_s)
+    rpm, feeds, ambient = cond.spindle_rpm, cond.feed_mm_min, cond.ambient_C
+    init = scenario.initial
+    rpm0 = rpm[0] if init["kind"] != "steady" else (init.get("spindle_rpm") or 0.0)
+    feed0 = {a: (feeds[a][0] if init["kind"] != "steady" else 0.0) for a in "xyz"}
+    amb0 = {z: (ambient[z][0] if init["kind"] != "steady" or init.get("ambient_C") is None else init["ambient_C"])
+            for z in rom.zones}
+
+    def held(values, first):
+        return np.r_[first, first, values[1:], values[-1]]
+
+    cols = [("time", np.r_[t[0] - 1.0, t[0], t]), ("spindle_speed", held(rpm, rpm0))]
+    cols += [(f"feed_{a}", held(feeds[a], feed0[a])) for a in "xyz"]
+    cols += [(f"ambient_{z}", held(ambient[z], amb0[z])) for z in rom.zones]
+    cols += [("ambient_gradient", held(cond.gradient_K_per_m, cond.gradient_K_per_m[0]))]
+    table = np.zeros(len(t) + 2, dtype=[(name, np.float64) for name, _ in cols])
     for name, values in cols:
         table[name] = values
     return table
@@ -287,9 +303,8 @@ def input_table(rom, scenario, times=None):
 def scenario_start(rom, scenario):
     """FMU start parameters ``(T_initial, steady_start)`` for a scenario's initial state.
 
-    A steady start uses the inputs set at initialisation (the table's first
-    row, i.e. the conditions just after t = 0), which differs from the twin's
-    steady state at t = 0 only when the conditions change within the first step.
+    A steady start is the steady state for the inputs set at initialisation
+    (the first row of :func:`input_table`).
     """
     init = scenario.initial
     if init["kind"] == "steady":
@@ -309,19 +324,39 @@ def table_inputs(rom, table):
     return rom.inputs_from_conditions(table["spindle_speed"], feeds, ambient, table["ambient_gradient"])
 
 
+def _start_index(t):
+    """Index of the initialisation row: the row before the first repeated time, else 0."""
+    same = np.flatnonzero(np.diff(t) == 0)
+    return int(same[0]) if len(same) else 0
+
+
 def simulate_table(rom, table, T_initial=20.0, steady_start=False, outputs=None):
-    """The in-process twin (ROM, ZOH) on an FMU input table: outputs (k, p) as the FMU reports them."""
+    """The in-process twin (ROM, ZOH) on an FMU input table: outputs (k, p) at the table's distinct times.
+
+    Semantics of fmpy's co-simulation loop: a row at the same time as the one
+    before it is an input event (the first row initialises, the second drives
+    the first step); row i is held over [tᵢ, tᵢ₊₁); an output at tᵢ uses the
+    inputs last set (those of the step just made).
+    """
+    t = np.asarray(table["time"], float)
     U = table_inputs(rom, table)
-    z0 = rom.steady_state(U[0]) if steady_start else rom.uniform(T_initial)
-    Y = rom.simulate(table["time"], U, z0, "zoh")
-    return Y[:, _output_rows(rom, outputs)]
+    k = _start_index(t)
+    init = U[k]
+    if k + 1 < len(t) and t[k + 1] == t[k]:
+        k += 1
+    t, U = t[k:], U[k:]
+    z0 = rom.steady_state(init) if steady_start else rom.uniform(T_initial)
+    _, Z = rom.states(t, U, z0, "zoh")
+    applied = np.vstack([init[None, :], U[:-1]])
+    return rom.outputs(Z, applied)[:, _output_rows(rom, outputs)]
 
 
 def simulate(path, table, T_initial=20.0, steady_start=False, outputs=None, **kwargs):
     """Run an FMU in fmpy on an input table (output interval = the table's step); return fmpy's result."""
     from fmpy import simulate_fmu
 
-    t = table["time"]
+    t = np.asarray(table["time"], float)
+    t = np.unique(t[_start_index(t):])
     step = float(t[1] - t[0])
     return simulate_fmu(str(path), start_time=float(t[0]), stop_time=float(t[-1]), output_interval=step,
                         input=table, output=outputs, validate=True,
