@@ -33,6 +33,12 @@ def main(argv=None):
     p.add_argument("--order", type=int, default=DEFAULT_ORDER)
     p.add_argument("--skip-fe", action="store_true", help="do not run the full FE model (takes ~1 min)")
     args = p.parse_args(argv)
+    try:                                   # one BLAS thread: stable timings on a shared 2-core machine
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(1)
+    except ImportError:
+        pass
 
     machine = build_machine(load_scenario(args.scenario).machine)
     scenario = load_scenario(args.scenario)
@@ -55,7 +61,7 @@ def main(argv=None):
 
     simulate_rom(rom, scenario)                                   # warm-up
     best = np.inf
-    for _ in range(5):
+    for _ in range(20):
         start = time.perf_counter()
         ds = simulate_rom(rom, scenario)
         best = min(best, time.perf_counter() - start)
@@ -65,7 +71,7 @@ def main(argv=None):
     z0 = rom.steady_state(table_inputs(rom, table)[1])
     t = table["time"][2:]
     best = np.inf
-    for _ in range(5):
+    for _ in range(20):
         start = time.perf_counter()
         rom.simulate(t, U, z0, "zoh")
         best = min(best, time.perf_counter() - start)

@@ -209,3 +209,35 @@ def test_python_fmu_with_the_fe_engine_matches_the_full_model(machine, rom, tmp_
     result = simulate(path, table)
     ref = simulate_table(rom, table, outputs=["T18", "Z"])
     assert np.abs(result["Z"] - ref[:, 1]).max() < 0.05 * np.abs(ref[:, 1]).max()
+
+
+@pytest.fixture(scope="module")
+def fmu3(rom, tmp_path_factory):
+    return export_fmu(rom, tmp_path_factory.mktemp("fmu3") / "twin_fmi3.fmu", kind="native", fmi_version=3)
+
+
+def test_fmi3_native_fmu_validates_and_matches_the_twin(fmu3, rom):
+    from fmpy import read_model_description
+
+    assert validate(fmu3) == []
+    md = read_model_description(str(fmu3))
+    assert md.fmiVersion == "3.0"
+    assert {v.name: v.unit for v in md.modelVariables}["Z"] == "um"
+    scenario = load_scenario("heat_cool_9000")
+    table = input_table(rom, scenario)
+    T0, steady = scenario_start(rom, scenario)
+    result = simulate(fmu3, table, T_initial=T0, steady_start=steady)
+    twin = simulate_rom(rom, scenario)
+    assert _relative_difference(result, twin.matrix(rom.output_names), rom.output_names) < 1e-6
+    with zipfile.ZipFile(fmu3) as z:
+        names = set(z.namelist())
+    assert {"sources/buildDescription.xml", "sources/thermal_twin_rom.c",
+            "binaries/x86_64-linux/thermal_twin_rom.so"} <= names
+
+
+def test_fmi3_native_fmu_rejects_bad_inputs(fmu3, rom):
+    scenario = load_scenario("heat_cool_9000")
+    table = input_table(rom, scenario)[:40].copy()
+    table["spindle_speed"][20:] = -5.0
+    with pytest.raises(Exception, match="fmi3DoStep|status"):
+        simulate(fmu3, table)

@@ -32,9 +32,9 @@ def cmd_fmu_export(args):
     fe = dict(machine=args.machine, mesh_size_m=args.mesh_size) if args.engine == "fe" else None
     path = export_fmu(rom, args.out, kind=args.kind, engine=args.engine, outputs=outputs,
                       default_temperature_C=args.initial_temperature, step_s=args.step, fe_options=fe,
-                      compiler=args.compiler)
+                      compiler=args.compiler, fmi_version=args.fmi_version)
     problems = validate(path)
-    print(f"{path}: FMI 2.0 Co-Simulation, {args.kind} FMU, engine {args.engine} "
+    print(f"{path}: FMI {args.fmi_version}.0 Co-Simulation, {args.kind} FMU, engine {args.engine} "
           f"({rom.method} ROM of order {rom.order}, {rom.n_outputs if outputs is None else len(outputs)} outputs)")
     if problems:
         for p in problems:
@@ -133,6 +133,8 @@ def register(sub):
     export.add_argument("--initial-temperature", type=float, default=20.0, help="start value of T_initial, °C")
     export.add_argument("--step", type=float, default=10.0, help="default experiment step size, s")
     export.add_argument("--compiler", default="cc", help="C compiler for --kind native (default cc)")
+    export.add_argument("--fmi-version", type=int, choices=(2, 3), default=2,
+                        help="FMI version: 2 (default) or 3 (native kind only)")
     export.set_defaults(func=cmd_fmu_export)
 
     val = fsub.add_parser("validate", help="check an FMU with fmpy.validate_fmu")

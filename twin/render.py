@@ -65,8 +65,17 @@ def render_machine(machine, path, node_values=None, scalar_label=None, cmap="inf
 
 
 def render_thermal_image(machine, temperature, path, title=None, clim=None):
-    """A false-colour thermal image as the machine's camera would see it (°C), from its position."""
+    """A false-colour thermal image as the machine's camera would see it (°C), from its position.
+
+    Without ``clim`` the colour span is set, as a camera's auto-span on its
+    region of interest would, to the range of the virtual spots on the face.
+    """
     camera = machine.definition.camera
+    if clim is None:
+        spots = machine.thermal.point_weights(camera.spots(), snap_distance=machine.definition.snap_distance_m)
+        values = spots @ temperature
+        margin = max(0.1, 0.1 * float(np.ptp(values)))
+        clim = (float(values.min()) - margin, float(values.max()) + margin)
     grid = machine.mesh.to_pyvista()
     grid.point_data["temperature (°C)"] = machine.thermal.nodal_field(temperature)
     plotter = _plotter((960, 720))

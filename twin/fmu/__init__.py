@@ -1,4 +1,4 @@
-"""FMI 2.0 Co-Simulation export of the thermal twin.
+"""FMI 2.0 (and, for the native kind, 3.0) Co-Simulation export of the thermal twin.
 
 Two kinds, one interface (:mod:`twin.fmu.spec`):
 
@@ -12,6 +12,8 @@ Two kinds, one interface (:mod:`twin.fmu.spec`):
     official FMI 2 headers) compiled with the machine's C compiler into
     ``binaries/linux64/thermal_twin_rom.so``; needs nothing at run time.
     ``modelDescription.xml`` lists the sources so other platforms can rebuild.
+    ``fmi_version=3`` makes an FMI 3.0 FMU instead (``binaries/x86_64-linux``,
+    ``sources/buildDescription.xml``).
 
 Both integrate the ROM exactly for inputs held over each communication step
 (zero-order hold, any step size) and are checked by :func:`validate` (fmpy).
@@ -67,7 +69,7 @@ def _description(rom, engine):
 
 
 def export_fmu(rom, out, kind="python", engine="rom", outputs=None, default_temperature_C=20.0,
-               step_s=spec.DEFAULT_STEP_S, fe_options=None, compiler="cc"):
+               step_s=spec.DEFAULT_STEP_S, fe_options=None, compiler="cc", fmi_version=2):
     """Write an FMI 2.0 Co-Simulation FMU of ``rom`` to ``out``; return its path.
 
     Parameters
@@ -79,6 +81,7 @@ def export_fmu(rom, out, kind="python", engine="rom", outputs=None, default_temp
     step_s : the DefaultExperiment step size (any step works)
     fe_options : for ``engine="fe"``: dict(machine=name or TOML path, mesh_size_m=..., max_step_s=...)
     compiler : C compiler command for the native kind
+    fmi_version : 2 (both kinds) or 3 (native kind only: FMI 3.0 Co-Simulation)
     """
     if kind not in KINDS:
         raise FMUError(f"unknown FMU kind {kind!r}; kinds: {list(KINDS)}")
@@ -86,6 +89,9 @@ def export_fmu(rom, out, kind="python", engine="rom", outputs=None, default_temp
         raise FMUError(f"unknown FMU engine {engine!r}; engines: {list(ENGINES)}")
     if kind == "native" and engine != "rom":
         raise FMUError("the native FMU runs the ROM only; use --kind python for --engine fe")
+    if int(fmi_version) not in (2, 3) or (kind == "python" and int(fmi_version) != 2):
+        raise FMUError(f"FMI version {fmi_version!r} is not available for the {kind} kind "
+                       f"(python: 2; native: 2 or 3)")
     out = Path(out)
     if out.suffix != ".fmu":
         raise FMUError(f"{out}: the FMU file name must end in .fmu")
@@ -95,6 +101,8 @@ def export_fmu(rom, out, kind="python", engine="rom", outputs=None, default_temp
     variables = spec.interface(view, default_temperature_C)
     if kind == "python":
         return _export_python(rom, view, variables, out, engine, step_s, fe_options or {})
+    if int(fmi_version) == 3:
+        return _export_native3(rom, view, variables, rows, out, step_s, compiler)
     return _export_native(rom, view, variables, rows, out, step_s, compiler)
 
 
@@ -244,6 +252,88 @@ def _export_native(rom, view, variables, rows, out, step_s, compiler):
             ". Rebuild on another platform: <code>cc -shared -fPIC -O2 -I sources sources/" + C_FILE +
             " -o binaries/&lt;platform&gt;/" + NATIVE_IDENTIFIER + ".&lt;so|dll|dylib&gt; -lm</code>.</p>"
             "</body></html>\n", encoding="utf-8")
+        partial = out.with_suffix(".fmu.partial")
+        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as z:
+            for f in sorted(tmp.rglob("*")):
+                if f.is_file():
+                    z.write(f, f.relative_to(tmp).as_posix())
+        partial.replace(out)
+    return out
+
+
+# ----------------------------------------------------------------------------- native kind, FMI 3.0
+FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
+FMI3_PLATFORM = "x86_64-linux"
+
+
+def _native_model_description3(view, variables, token, step_s):
+    root = Element("fmiModelDescription", {
+        "fmiVersion": "3.0", "modelName": f"thermal_twin_{view.machine}", "instantiationToken": token,
+        "description": _description(view, "rom"), "generationTool": "thermal-twin",
+        "variableNamingConvention": "structured"})
+    SubElement(root, "CoSimulation", {
+        "modelIdentifier": NATIVE_IDENTIFIER, "canHandleVariableCommunicationStepSize": "true",
+        "canGetAndSetFMUState": "true", "canSerializeFMUState": "true", "hasEventMode": "false",
+        "providesIntermediateUpdate": "false", "canReturnEarlyAfterIntermediateUpdate": "false"})
+    root.append(spec.unit_definitions({v.unit for v in variables if v.unit}))
+    cats = SubElement(root, "LogCategories")
+    for name, text in (("logStatusError", "errors: rejected inputs or calls"), ("logAll", "all messages")):
+        SubElement(cats, "Category", name=name, description=text)
+    root.append(_default_experiment(step_s))
+    mv = SubElement(root, "ModelVariables")
+    SubElement(mv, "Float64", name="time", valueReference=str(max(v.vr for v in variables) + 1),
+               causality="independent", variability="continuous", description="simulation time")
+    for v in variables:
+        attrib = {"name": v.name, "valueReference": str(v.vr), "description": v.description,
+                  "causality": v.causality, "variability": v.variability}
+        if v.initial:
+            attrib["initial"] = v.initial
+        if v.type == "Real":
+            for key in ("unit", "min", "max"):
+                value = getattr(v, key)
+                if value is not None:
+                    attrib[key] = value if key == "unit" else spec._fmt(value)
+            if v.start is not None:
+                attrib["start"] = spec._fmt(v.start)
+            SubElement(mv, "Float64", attrib)
+        else:
+            attrib["start"] = "true" if v.start else "false"
+            SubElement(mv, "Boolean", attrib)
+    ms = SubElement(root, "ModelStructure")
+    outputs = [v for v in variables if v.causality == "output"]
+    for v in outputs:
+        SubElement(ms, "Output", valueReference=str(v.vr))
+    for v in outputs:
+        SubElement(ms, "InitialUnknown", valueReference=str(v.vr))
+    return _pretty(root)
+
+
+def _build_description3():
+    root = Element("fmiBuildDescription", fmiVersion="3.0")
+    config = SubElement(root, "BuildConfiguration", modelIdentifier=NATIVE_IDENTIFIER)
+    files = SubElement(config, "SourceFileSet", language="C99")
+    SubElement(files, "SourceFile", name=C_FILE)
+    SubElement(config, "Library", name="m", description="the C maths library (libm)")
+    return _pretty(root)
+
+
+def _export_native3(rom, view, variables, rows, out, step_s, compiler):
+    from .native_source import fmi3_source, model_data_header
+
+    token = spec.guid(view, "native-fmi3")
+    headers = fmi_headers_dir()
+    with tempfile.TemporaryDirectory(prefix="twin_fmu_native3_") as tmp:
+        tmp = Path(tmp)
+        src = tmp / "sources"
+        src.mkdir()
+        for name in FMI3_HEADERS:
+            shutil.copy2(headers / name, src / name)
+        (src / "model_data.h").write_text(model_data_header(rom, variables, token, rows), encoding="utf-8")
+        (src / C_FILE).write_text(fmi3_source((headers / "fmi3FunctionTypes.h").read_text()), encoding="utf-8")
+        (src / "buildDescription.xml").write_bytes(_build_description3())
+        (tmp / "binaries" / FMI3_PLATFORM).mkdir(parents=True)
+        compile_native(src / C_FILE, tmp / "binaries" / FMI3_PLATFORM / f"{NATIVE_IDENTIFIER}.so", compiler)
+        (tmp / "modelDescription.xml").write_bytes(_native_model_description3(view, variables, token, step_s))
         partial = out.with_suffix(".fmu.partial")
         with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as z:
             for f in sorted(tmp.rglob("*")):
