@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .shapes import Box, Cylinder, HollowBox, StlPart
-from .tomlspec import DefinitionError, Table, read_toml
+from .tomlspec import DefinitionError, Table, read_toml, resolve_definition
 
 MACHINES_DIR = Path(__file__).resolve().parent / "machines"
 
@@ -74,16 +74,7 @@ def _shape_state(shape):
 
 def machine_path(machine):
     """Resolve a machine name (e.g. ``vmc_ram``) or a path to its TOML file."""
-    path = Path(machine)
-    if path.suffix == ".toml" or path.exists():
-        if not path.exists():
-            raise DefinitionError(f"{path}: machine file not found")
-        return path
-    candidate = MACHINES_DIR / f"{machine}.toml"
-    if not candidate.exists():
-        known = sorted(p.stem for p in MACHINES_DIR.glob("*.toml"))
-        raise DefinitionError(f"unknown machine {machine!r}; available: {known}")
-    return candidate
+    return resolve_definition(machine, MACHINES_DIR, "machine")
 
 
 def available_machines():

@@ -38,6 +38,24 @@ def read_toml(path):
     return Table(data, str(path), "")
 
 
+def resolve_definition(name_or_path, folder, kind):
+    """The TOML file of a named definition in ``folder`` (``vmc_ram``) or an explicit path.
+
+    ``kind`` ("machine", "scenario") names what is looked for in the errors,
+    which list the available names.
+    """
+    path = Path(name_or_path)
+    if path.suffix == ".toml" or path.exists():
+        if not path.exists():
+            raise DefinitionError(f"{path}: {kind} file not found")
+        return path
+    candidate = Path(folder) / f"{name_or_path}.toml"
+    if not candidate.exists():
+        known = sorted(p.stem for p in Path(folder).glob("*.toml"))
+        raise DefinitionError(f"unknown {kind} {name_or_path!r}; available: {known}")
+    return candidate
+
+
 _MISSING = object()
 
 

@@ -36,7 +36,7 @@ UNITS = {
 #: Default kind of a channel from its unit, for CSV files without a sidecar.
 KIND_OF_UNIT = {"degC": "temperature", "um": "displacement", "ue": "strain", "rpm": "spindle_speed",
                 "mm_min": "feed", "W": "power", "K_m": "ambient_gradient", "J": "energy", "s": "time"}
-NAN_POLICIES = ("error", "interpolate", "drop")
+NAN_POLICIES = ("error", "interpolate", "drop", "keep")
 
 
 def project_version():
@@ -203,7 +203,8 @@ class Dataset:
         time_column : name of the time column, in s
         nan_policy : ``error`` (default), ``interpolate`` (linear in time,
             per channel; leading/trailing NaNs are held) or ``drop`` (rows
-            with any NaN)
+            with any NaN) or ``keep`` (leave them; the caller masks them, as the gap
+            diagnosis does)
         channel_kinds : optional dict name → kind overriding the unit-based default
 
         The import report (gaps, NaN counts, policy) is stored in
@@ -253,7 +254,9 @@ class Dataset:
                     f"{path}: column {channels[k].column!r} is NaN/empty at t = {time_s[row]} s (data row "
                     f"{row + 1}); {sum(report['nan_counts'].values())} NaNs in {len(report['nan_counts'])} "
                     "column(s); choose nan_policy='interpolate' or 'drop'")
-            if nan_policy == "drop":
+            if nan_policy == "keep":
+                pass
+            elif nan_policy == "drop":
                 keep = ~np.isnan(values).any(axis=1)
                 report["dropped_rows"] = int((~keep).sum())
                 time_s, values = time_s[keep], values[keep]

@@ -344,9 +344,9 @@ class ReducedModel:
         """Outputs (k, p) at ``times_s`` from inputs (k, m) and the initial state ``z0``.
 
         ``scheme="zoh"``: exact for inputs held piecewise constant — ``inputs[i]``
-        acts over [tᵢ, tᵢ₊₁) (the last row only enters the feedthrough at t₀ … see
-        below).  The output at tᵢ (i ≥ 1) uses the input last applied,
-        ``inputs[i−1]``, as an FMU reports it after ``doStep``; at t₀ it uses ``inputs[0]``.
+        acts over [tᵢ, tᵢ₊₁) (the last row is not used by the state).  The output
+        at tᵢ (i ≥ 1) uses the input last applied, ``inputs[i−1]``, as an FMU
+        reports it after ``doStep``; at t₀ it uses ``inputs[0]``.
 
         ``scheme="theta"``: the FE solver's θ-method on the same grid with
         inputs sampled at the step ends (θ = 1 backward Euler); outputs at tᵢ use ``inputs[i]``.

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from meshes.tomlspec import DefinitionError, Table, read_toml
+from meshes.tomlspec import DefinitionError, Table, read_toml, resolve_definition
 
 SCENARIOS_DIR = Path(__file__).resolve().parent.parent / "scenarios"
 HOUR = 3600.0
@@ -195,16 +195,8 @@ def first_order_lag(signal, t, tau_s):
 
 
 def scenario_path(scenario):
-    path = Path(scenario)
-    if path.suffix == ".toml" or path.exists():
-        if not path.exists():
-            raise DefinitionError(f"{path}: scenario file not found")
-        return path
-    candidate = SCENARIOS_DIR / f"{scenario}.toml"
-    if not candidate.exists():
-        known = sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))
-        raise DefinitionError(f"unknown scenario {scenario!r}; available: {known}")
-    return candidate
+    """Resolve a scenario name (e.g. ``heat_cool_9000``) or a path to its TOML file."""
+    return resolve_definition(scenario, SCENARIOS_DIR, "scenario")
 
 
 def _segments(root: Table):
