@@ -3,13 +3,12 @@ import ast
 import math
 import subprocess
 import zipfile
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from twin.cli import main
-from twin.fmu import (export_fmu, input_table, scenario_start, simulate, simulate_table, table_inputs, validate)
+from twin.fmu import (export_fmu, input_table, scenario_start, simulate, simulate_table, validate)
 from twin.fmu.session import FMUSession, FMUStepError
 from twin.machine import build_machine
 from twin.rom import DEFAULT_ORDER, cached_rom, simulate_rom

@@ -50,9 +50,10 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
+from models.selection import SEED_METHODS, SeedSelector, greedy_loso, pod_modes, qr_drift, seed_scores
+
 from .errors import TwinInputError
 
-SEED_METHODS = ("gra+fcm", "gm-influence+fcm", "sensitivity+fuzzy-equivalence", "maximal-tree")
 OWN_METHODS = ("greedy-loso", "qr-drift")
 METHODS = SEED_METHODS + OWN_METHODS
 DEFAULT_PARTS = ("base", "table", "column", "carrier", "ram", "z_motor", "spindle_motor")
@@ -361,7 +362,7 @@ def add_noise(record, kinds, seed):
                   record.seconds, record.from_cache)
 
 
-# ----------------------------------------------------------------------------- selection methods
+# ----------------------------------------------------------------------------- helpers
 def _zero_ref(a):
     return a - a[:1]
 
@@ -370,180 +371,6 @@ def _thin(n, max_rows):
     if n <= max_rows:
         return np.arange(n)
     return np.unique(np.linspace(0, n - 1, max_rows).round().astype(int))
-
-
-def greedy_loso(blocks_X, blocks_y, k_max, ridge=1e-4, exclude=(), normalise="none", criterion="max"):
-    """Greedy forward selection on the leave-one-block-out error of an MLR (with intercept).
-
-    ``blocks_X`` : list of (n_f, p) zero-referenced candidate series, one per training scenario;
-    ``blocks_y`` : matching drift changes.  Each block is predicted by the model fitted on the
-    others (ridge ``ridge`` × mean Gram diagonal on the slopes).  Objective over the blocks f:
-    ``criterion="max"`` (default) Σ_f max|e_f| — the held-out peak residual, the quantity
-    compensation is judged by — or ``"sse"`` Σ_f ‖e_f‖²; each term weighted by
-    ``normalise``: ``"none"`` (µm as they are, default), ``"rows"`` (1/n_f) or ``"peak"``
-    (1/max|y_f|, squared for SSE; makes small-drift records count as much as large ones —
-    which over-weights the nearly drift-free ETVE and transferred worse in our tests).
-    All candidates are scored at once per step from Gram matrices and Schur complements
-    (the max criterion also needs one residual matrix per block), never by refitting.
-    Returns the chosen columns in order, the objective after each step, and every
-    candidate's objective when used alone.
-    """
-    F = len(blocks_X)
-    if F < 2:
-        raise TwinInputError("greedy leave-one-scenario-out selection needs at least two training scenarios")
-    p = blocks_X[0].shape[1]
-    # Augment with the intercept column (index 0); Grams per block.
-    Xa = [np.column_stack([np.ones(len(X)), X]) for X in blocks_X]
-    G = [X.T @ X for X in Xa]
-    b = [X.T @ y for X, y in zip(Xa, blocks_y)]
-    yy = [float(y @ y) for y in blocks_y]
-    if normalise == "peak":
-        w = [1.0 / (len(y) * max(float(np.max(np.abs(y))), 1e-12) ** 2) for y in blocks_y]
-    elif normalise == "rows":
-        w = [1.0 / len(y) for y in blocks_y]
-    else:
-        w = [1.0 for y in blocks_y]
-    G_all, b_all = sum(G), sum(b)
-    diag_scale = np.mean(np.diag(G_all)[1:]) if p else 1.0
-    lam = ridge * diag_scale
-    selected = [0]
-    blocked = np.zeros(p + 1, bool)
-    blocked[0] = True
-    for e in exclude:
-        blocked[e + 1] = True
-    history, alone = [], None
-    for _step in range(k_max):
-        objective = np.zeros(p + 1)
-        S = np.array(selected)
-        for f in range(F):
-            Gt = G_all - G[f]
-            bt = b_all - b[f]
-            A = Gt[np.ix_(S, S)] + lam * np.diag((S != 0).astype(float))
-            A_inv = np.linalg.inv(A)
-            GS = Gt[S]                                      # (s, p+1)
-            V = A_inv @ GS                                  # v_c columns
-            d = np.diag(Gt) + lam - np.einsum("ij,ij->j", GS, V)
-            beta_S0 = A_inv @ bt[S]
-            beta_c = (bt - V.T @ bt[S]) / np.maximum(d, 1e-300)
-            # validation block f
-            Gv, bv = G[f], b[f]
-            e0e0 = yy[f] - 2 * beta_S0 @ bv[S] + beta_S0 @ Gv[np.ix_(S, S)] @ beta_S0
-            # e0ᵀ x_c and e0ᵀ X_S
-            e0x = bv - Gv[S].T @ beta_S0                    # (p+1,)  = X_vᵀ(y − X_S β)
-            e0r = e0x - V.T @ e0x[S]
-            GvS = Gv[S]                                     # (s, p+1)
-            rr = np.diag(Gv) - 2 * np.einsum("ij,ij->j", V, GvS) + np.einsum("ij,ij->j", V, Gv[np.ix_(S, S)] @ V)
-            if criterion == "sse":
-                objective += w[f] * (e0e0 - 2 * beta_c * e0r + beta_c ** 2 * rr)
-            else:                                           # max |residual| over the block, exactly
-                e0 = blocks_y[f] - Xa[f][:, S] @ beta_S0
-                R = Xa[f] - Xa[f][:, S] @ V
-                worst = np.abs(e0[:, None] - R * beta_c).max(axis=0)
-                objective += worst * (np.sqrt(w[f] * len(blocks_y[f])) if normalise != "none" else 1.0)
-        objective[blocked] = np.inf
-        if alone is None:
-            alone = objective[1:].copy()
-        best = int(np.argmin(objective))
-        selected.append(best)
-        blocked[best] = True
-        history.append(float(objective[best]))
-    return np.array(selected[1:]) - 1, np.array(history), alone
-
-
-def pod_modes(X):
-    """POD of the centred snapshot matrix X (n, p): (U, σ, Vᵀ), thin SVD (computed once, shared by axes and K)."""
-    import scipy.linalg as la
-
-    Xc = X - X.mean(axis=0)
-    return la.svd(Xc, full_matrices=False, lapack_driver="gesdd", check_finite=False)
-
-
-def qr_drift(X, y, k, n_modes=20, noise_floor=1e-3, pod=None):
-    """Q-DEIM (QR with column pivoting) on the drift-relevant POD modes of the snapshot matrix X (n, p).
-
-    POD of the centred snapshots, X = U Σ Vᵀ, keeping modes above ``noise_floor`` of σ₁ (at most
-    ``n_modes``); the drift's weight on mode i is |uᵢᵀ y| (its share of the drift signal).  The
-    ``k`` modes of largest weight are the drift-relevant subspace; pivoted QR on their loadings
-    Vᵀ (k × p) picks the ``k`` sensors from which those modal coordinates are best determined
-    (well-conditioned Vᵀ[:, S]).  Returns the sensors (pivot order) and every candidate's
-    drift-weighted loading norm.  ``pod``: the result of :func:`pod_modes` of X, when already known.
-    """
-    from scipy.linalg import qr
-
-    U, s, Vt = pod_modes(X) if pod is None else pod
-    m = int(min(n_modes, np.sum(s > noise_floor * s[0])))
-    yc = y - y.mean()
-    weight = np.abs(U[:, :m].T @ yc) / max(np.linalg.norm(yc), 1e-300)
-    modes = np.sort(np.argsort(-weight)[: min(k, m)])
-    _, _, piv = qr(Vt[modes], pivoting=True, mode="economic")
-    order = [int(c) for c in piv[: len(modes)]]
-    score = np.linalg.norm(weight[:, None] * Vt[:m], axis=0)
-    if len(order) < k:                                  # more sensors than modes: add by drift-weighted loading
-        order += [int(c) for c in np.argsort(-score) if c not in order][: k - len(order)]
-    return np.array(order, dtype=int), score
-
-
-class SeedSelector:
-    """The seed pipelines of :mod:`models.selection` with the per-K FCM/tree grouping shared across axes.
-
-    Equivalent to ``models.select_sensors(X, y, method, K, random_state=seed)``
-    (checked in the tests), but the grouping — which depends on the series,
-    not the target — is computed once per K and reused for Z and Y.
-    """
-
-    def __init__(self, X, random_state=0):
-        self.X = X
-        self.random_state = random_state
-        self._groups = {}
-
-    def groups(self, kind, k, keep=None):
-        from models.selection.clustering import fcm_sensor_clusters, fuzzy_equivalence_clusters
-
-        key = (kind, k, None if keep is None else keep.tobytes())
-        if key not in self._groups:
-            if kind == "fcm":
-                g = fcm_sensor_clusters(self.X, k, random_state=self.random_state)
-            else:
-                sub = self.X if keep is None else self.X[:, keep]
-                g = np.full(self.X.shape[1], -1, dtype=np.intp)
-                inner = fuzzy_equivalence_clusters(sub, n_groups=k)[0]
-                if keep is None:
-                    g = np.asarray(inner, dtype=np.intp)
-                else:
-                    g[keep] = inner
-            self._groups[key] = g
-        return self._groups[key]
-
-    def select(self, method, y, k, scores):
-        from models.selection.select import representatives
-
-        if method in ("gra+fcm", "gm-influence+fcm"):
-            groups = self.groups("fcm", k)
-            s = scores["grade"] if method == "gra+fcm" else scores["influence"]
-        elif method == "sensitivity+fuzzy-equivalence":
-            n = self.X.shape[1]
-            keep = np.argsort(-scores["sensitivity"], kind="stable")[:max(k, int(np.ceil(n / 2)))]
-            groups = self.groups("tree", k, keep)
-            s = scores["grade"]
-        elif method == "maximal-tree":
-            groups = self.groups("tree", k)
-            s = scores["correlation"]
-        else:
-            raise TwinInputError(f"unknown seed method {method!r}; seed methods: {SEED_METHODS}")
-        picks = representatives(groups, s)
-        return picks[np.argsort(-s[picks], kind="stable")]
-
-
-def seed_scores(X, y):
-    from models.selection.ranking import (
-        grey_relational_grade,
-        influence_weights,
-        target_correlation,
-        thermal_error_sensitivity,
-    )
-
-    return {"grade": grey_relational_grade(X, y), "influence": influence_weights(X, y, "gm0n"),
-            "sensitivity": thermal_error_sensitivity(X, y), "correlation": target_correlation(X, y)}
 
 
 # ----------------------------------------------------------------------------- the study
@@ -571,7 +398,7 @@ def _score_sets(train, test, cols, axis, model="mlr"):
 
     X, y = _stack(train, cols, axis)
     est = make_estimator(model).fit(X, y)
-    res, peak, per = [], 0.0, {}
+    res, per = [], {}
     for r in test:
         Xt = _zero_ref(r.temperatures[:, cols])
         yt = _zero_ref(r.drift[axis])
@@ -624,7 +451,6 @@ def placement_study(machine="vmc_ram", mesh_size_m=None, parts=DEFAULT_PARTS, n_
     if noise:
         records = [add_noise(r, cands.kinds, 1000 + i) for i, r in enumerate(records)]
     rec_train, rec_test = records[: len(train)], records[len(train):]
-    all_cols = np.arange(len(cands))
     timings = {"simulation_s": t_sim, "simulated": sum(not r.from_cache for r in records),
                "from_cache": sum(r.from_cache for r in records),
                "simulation_cpu_s": sum(r.seconds for r in records if not r.from_cache)}
@@ -726,7 +552,7 @@ def _cell(rows, method, k, axis):
 def k_method_table(result, axis):
     """Markdown K × method table: held-out max |residual| / RMSE (µm)."""
     methods = result.config["methods"]
-    lines = [f"| K | " + " | ".join(methods) + " |", "|---|" + "---|" * len(methods)]
+    lines = ["| K | " + " | ".join(methods) + " |", "|---|" + "---|" * len(methods)]
     for k in range(1, result.config["k_max"] + 1):
         cells = []
         best = min(_cell(result.table, m, k, axis)["max_residual"] for m in methods)
@@ -828,11 +654,11 @@ def record_dataset(record, candidates, columns, machine, scenario):
     thermometers (°C, with positions) and the drift axes (µm) — what a machine fitted with those sensors
     would log, ready for ``twin train`` / ``twin evaluate``."""
     from .dataset import ChannelInfo, Dataset, project_version
-    from .simulate import ScenarioInputs, _condition_channels
+    from .simulate import ScenarioInputs, machine_condition_channels
 
     sc = _scenario_obj(scenario)
     cond = ScenarioInputs(machine, sc).conditions(record.time_s)
-    channels, cols = _condition_channels(machine, cond)
+    channels, cols = machine_condition_channels(machine, cond)
     for i in columns:
         channels.append(ChannelInfo(candidates.names[i], "degC", "temperature",
                                     f"placement candidate ({candidates.kinds[i]}, {candidates.parts[i]})",
@@ -888,7 +714,7 @@ def write_placement_report(result, machine, folder):
     render_machine(machine, folder / "chosen_sensors.png", points=pts, point_labels=labels,
                    point_values=[("XYZ".index(r["axis"]) if r["axis"] in "XYZ" else 3) for r in chosen],
                    point_label="axis (0 X, 1 Y, 2 Z)",
-                   title=f"chosen sensors: " + ", ".join(f"{a}: {m} K={k}" for a, (m, k, _) in result.best.items()))
+                   title="chosen sensors: " + ", ".join(f"{a}: {m} K={k}" for a, (m, k, _) in result.best.items()))
     _plot_k_curves(result, folder / "k_curves.png")
     if getattr(result, "records", None):
         chosen_idx = sorted({i for _m, _k, idx in result.best.values() for i in idx})

@@ -367,7 +367,6 @@ class ReducedModel:
             raise ROMError("ROM inputs contain NaN or infinite values")
         if np.any(np.diff(t) <= 0):
             raise ROMError("ROM times must increase strictly")
-        lam = self.eigenvalues
         W = U @ self.input_matrix.T                       # (k, r) forcing per coordinate
         Z = np.empty((len(t), self.order))
         Z[0] = z0
@@ -672,6 +671,7 @@ def simulate_rom(rom, scenario, scheme="zoh", theta=None, sample_times=None):
     """
     from .dataset import ChannelInfo, Dataset
     from .scenario import Scenario, load_scenario
+    from .simulate import condition_channels
 
     scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     start = time.perf_counter()
@@ -691,19 +691,8 @@ def simulate_rom(rom, scenario, scheme="zoh", theta=None, sample_times=None):
                              {z: v[at_output] for z, v in cond.ambient_C.items()}, cond.gradient_K_per_m[at_output])
     U_out = U[at_output]
     Y = rom.outputs(Z[at_output], U_out)
-    channels = [ChannelInfo("spindle", "rpm", "spindle_speed", "spindle speed")]
-    columns = [out.spindle_rpm]
-    for axis in "xyz":
-        channels.append(ChannelInfo(f"feed_{axis}", "mm_min", "feed", f"{axis.upper()} axis feed"))
-        columns.append(out.feed_mm_min[axis])
-    for zone in rom.zones:
-        channels.append(ChannelInfo(f"ambient_{zone}", "degC", "ambient", f"ambient of zone {zone} (true)"))
-        columns.append(out.ambient_C[zone])
-    channels.append(ChannelInfo("ambient_gradient", "K_m", "ambient_gradient", "vertical ambient gradient"))
-    columns.append(out.gradient_K_per_m)
-    for src in rom.sources:
-        channels.append(ChannelInfo(f"P_{src['name']}", "W", "power", src["name"]))
-        columns.append(U_out[:, rom.input_names.index(f"power:{src['name']}")])
+    channels, columns = condition_channels(out, rom.zones, [(src["name"], src["name"]) for src in rom.sources],
+                                           rom.input_names, U_out)
     for j, name in enumerate(rom.output_names):
         channels.append(ChannelInfo(name, rom.output_units[j], rom.output_kinds[j]))
         columns.append(Y[:, j])

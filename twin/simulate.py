@@ -142,7 +142,7 @@ def simulate(scenario, machine=None, mesh_size_m=None, fields=False, progress=No
         scale = max(np.abs(change).max(), np.abs(expected).max(), 1e-300)
         balance = float(np.abs(change - expected).max() / scale)
 
-    channels, columns = _condition_channels(machine, cond)
+    channels, columns = machine_condition_channels(machine, cond)
     kinds = [c.kind for c in machine.channels]
     keep = [j for j, c in enumerate(machine.channels) if c.kind != "camera" or scenario.record_camera]
     if noise:
@@ -169,19 +169,30 @@ def simulate(scenario, machine=None, mesh_size_m=None, fields=False, progress=No
     return SimulationResult(dataset, machine, scenario, run.fields, time.perf_counter() - start, balance)
 
 
-def _condition_channels(machine, cond):
+def condition_channels(cond, zones, sources, input_names, inputs):
+    """Dataset channels and columns of the operating conditions.
+
+    ``cond`` has ``spindle_rpm``, ``feed_mm_min``, ``ambient_C`` and
+    ``gradient_K_per_m``; ``sources`` lists ``(name, label)`` of the heat
+    sources whose powers are read from ``inputs`` (n, len(input_names)).
+    """
     channels = [ChannelInfo("spindle", "rpm", "spindle_speed", "spindle speed")]
     columns = [cond.spindle_rpm]
     for axis in "xyz":
         channels.append(ChannelInfo(f"feed_{axis}", "mm_min", "feed", f"{axis.upper()} axis feed"))
         columns.append(cond.feed_mm_min[axis])
-    for zone in machine.zones:
+    for zone in zones:
         channels.append(ChannelInfo(f"ambient_{zone}", "degC", "ambient", f"ambient of zone {zone} (true)"))
         columns.append(cond.ambient_C[zone])
     channels.append(ChannelInfo("ambient_gradient", "K_m", "ambient_gradient", "vertical ambient gradient"))
     columns.append(cond.gradient_K_per_m)
-    names = machine.thermal.input_names
-    for src in machine.definition.sources:
-        channels.append(ChannelInfo(f"P_{src.name}", "W", "power", src.label))
-        columns.append(cond.inputs[:, names.index(f"power:{src.name}")])
+    for name, label in sources:
+        channels.append(ChannelInfo(f"P_{name}", "W", "power", label))
+        columns.append(inputs[:, list(input_names).index(f"power:{name}")])
     return channels, columns
+
+
+def machine_condition_channels(machine, cond):
+    """:func:`condition_channels` for a built machine."""
+    return condition_channels(cond, machine.zones, [(s.name, s.label) for s in machine.definition.sources],
+                              machine.thermal.input_names, cond.inputs)

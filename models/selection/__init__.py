@@ -17,10 +17,19 @@ from .ranking import (
     target_correlation,
     thermal_error_sensitivity,
 )
+from .forward import greedy_loso
+from .modal import pod_modes, qr_drift
+from .pipelines import SEED_METHODS, SeedSelector, seed_scores
 from .select import METHODS, SensorSelection, representatives, select_sensors
 
 __all__ = [
     "METHODS",
+    "SEED_METHODS",
+    "SeedSelector",
+    "greedy_loso",
+    "pod_modes",
+    "qr_drift",
+    "seed_scores",
     "SensorSelection",
     "fcm_sensor_clusters",
     "fuzzy_equivalence_clusters",

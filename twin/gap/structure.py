@@ -198,10 +198,40 @@ def point_info(structure, positions, names=None):
             "height": positions[:, 2] - z_ref}
 
 
-def build_structure(machine, effects=()):
-    """The :class:`Structure` of a machine with every effect's terms registered (see the module docstring)."""
+#: Initial-state shapes estimated as nuisance in every model (the start of a measured record is uncertain).
+NUISANCE_FIELDS = ("initial_uniform", "initial_residual_heat")
+
+
+def build_structure(machine, effects=(), nuisance=True):
+    """The :class:`Structure` of a machine with every effect's terms registered (see the module docstring).
+
+    With ``nuisance`` it also holds the initial-state shapes of :data:`NUISANCE_FIELDS`: a uniform
+    offset of the whole machine, and the heat left by earlier spindle running (the steady rise at the
+    sources' reference speed).
+    """
     structure = Structure(machine)
+    structure.term_bounds = {}
     for effect in effects:
         if effect.applicable(machine):
             effect.prepare(structure)
+            if effect.kind == "system":
+                params = effect.parameters(machine)
+                for bound in ("lower", "upper"):
+                    theta = [getattr(p, bound) for p in params]
+                    for name, a in effect.coefficients(theta, structure).items():
+                        structure.term_bounds.setdefault(name, []).append(a)
+    if nuisance:
+        structure.add_field("initial_uniform", np.ones(structure.n_nodes))
+        d = machine.definition
+        spindle = [src for src in d.sources if src.driver == "spindle"]
+        if spindle:
+            ref = max(src.reference for src in spindle)
+            zeros = {a: np.zeros(1) for a in "xyz"}
+            u = np.zeros(machine.thermal.n_inputs)
+            for src in spindle:
+                u[machine.thermal.input_index(f"power:{src.name}")] = src.power_W(np.array([ref]), zeros)[0]
+            from .engine import _factor
+
+            rise = _factor(machine.thermal.stiffness)(np.asarray(machine.thermal.input_matrix @ u).ravel())
+            structure.add_field("initial_residual_heat", rise / max(float(np.abs(rise).max()), 1e-12))
     return structure

@@ -1,0 +1,237 @@
+"""Fast simulation of the twin with effects switched on: a parametric reduced model, or the full FE.
+
+Both backends run ``M Ṫ + (A₀ + Σ aᵢ dAᵢ) T = (B₀ + Σ aᵢ dBᵢ) u`` on a
+uniform grid with the input held over each step at its end value (the
+scenario convention; zero-order hold), from the steady state for an idle
+start input plus optional initial-field shapes, and return the FE outputs
+(°C, µm, µε; without the operator's constant offset).
+
+:class:`ReducedBackend` (default)
+    One Galerkin basis for the whole library (parametric model reduction by
+    concatenation): the block-Krylov basis of the nominal system on all
+    inputs (machine inputs and the effects' extra columns; via
+    :mod:`twin.rom`'s ``krylov_basis``), plus small Krylov bases of every
+    system term's perturbed system at its parameter bounds, M-orthonormalised
+    together.  The reduced matrices are affine in the coefficients, so one
+    evaluation costs an r×r eigendecomposition and an exact ZOH recursion in
+    modal coordinates (milliseconds).  The basis also maps back to nodes, for
+    attribution, candidate sensors and renders.
+:class:`FullBackend`
+    The assembled FE system, backward Euler or θ-scheme, one factorisation
+    per evaluation.  The fallback when the ROM module is missing something,
+    the reference in the tests, and the truth generator of the benchmark.
+
+:func:`reduction` is the one adapter to :mod:`twin.rom`: if the ROM module
+is unavailable or lacks what is used, it returns None and the caller falls
+back to the full FE.
+"""
+from __future__ import annotations
+
+import time
+from types import SimpleNamespace
+
+import numpy as np
+import scipy.sparse as sp
+
+#: Default orders: the nominal Krylov basis, and the basis added per system term and bound.
+NOMINAL_ORDER = 100
+TERM_ORDER = 30
+
+
+def reduction():
+    """``(krylov_basis, slowest_rate)`` from :mod:`twin.rom`, or None when unavailable (→ full FE)."""
+    try:
+        from ..rom import krylov_basis, slowest_rate
+    except Exception:  # pragma: no cover - depends on the ROM helper's state
+        return None
+    return krylov_basis, slowest_rate
+
+
+def _factor(matrix):
+    from fea.linsolve import factorize
+
+    return factorize(sp.csc_matrix(matrix), symmetric_positive_definite=True)
+
+
+def m_orthonormal_union(mass, blocks, tolerance=1e-7):
+    """An M-orthonormal basis of the span of ``blocks`` (the first must be M-orthonormal already)."""
+    V = np.asarray(blocks[0], float)
+    for W in blocks[1:]:
+        W = np.array(W, float, copy=True)
+        ref = np.sqrt(np.maximum(np.einsum("ij,ij->j", W, mass @ W), 1e-300)).max()
+        for _ in range(2):
+            W -= V @ (V.T @ (mass @ W))
+        G = W.T @ (mass @ W)
+        lam, Q = np.linalg.eigh((G + G.T) / 2)
+        keep = lam > (tolerance * ref) ** 2
+        if keep.any():
+            V = np.hstack([V, (W @ Q[:, keep]) / np.sqrt(lam[keep])])
+    return V
+
+
+class SimulationResult:
+    """Modal states W (N, r) of one reduced run and the map to outputs; see :meth:`ReducedBackend.simulate`."""
+
+    def __init__(self, outputs, W=None, Q=None, backend=None, field_outputs=None, fields=None):
+        self.outputs = outputs
+        self.W, self.Q, self.backend = W, Q, backend
+        self.field_outputs = field_outputs or {}
+        self.fields = fields
+
+    def rows(self, reduced_rows):
+        """Outputs (N, k) of other rows given in the reduced basis (k, r) (e.g. candidate thermometers)."""
+        return self.W @ (np.asarray(reduced_rows) @ self.Q).T
+
+
+class ReducedBackend:
+    """See the module docstring.  ``structure`` is a :class:`~twin.gap.structure.Structure`."""
+
+    name = "rom"
+
+    def __init__(self, structure, nominal_order=NOMINAL_ORDER, term_order=TERM_ORDER, keep_basis=True):
+        krylov_basis, slowest_rate = reduction()
+        start = time.perf_counter()
+        s = structure
+        M, A0, B0 = s.mass, s.stiffness, s.input_matrix
+        lam1 = slowest_rate(SimpleNamespace(mass=M, stiffness=A0))
+        points = [0.0, 10 * lam1, 100 * lam1, 1000 * lam1]
+        order = min(nominal_order, s.n_nodes - 1)
+        blocks = [krylov_basis(SimpleNamespace(n_nodes=s.n_nodes, mass=M, stiffness=A0, input_matrix=B0),
+                               order, points)]
+        for name, param_values in self._term_values(s):
+            dA, dB = s.system_terms[name][0], s.system_input_change(name)
+            for a in param_values:
+                blocks.append(krylov_basis(SimpleNamespace(n_nodes=s.n_nodes, mass=M, stiffness=A0 + a * dA,
+                                                           input_matrix=B0 + a * dB),
+                                           min(term_order, s.n_nodes - 1), points[:2], uniform=False))
+        for f in s.fields.values():
+            blocks.append(f[:, None])
+        V = m_orthonormal_union(M, blocks)
+        self.order = V.shape[1]
+        self.Ar0 = V.T @ (A0 @ V)
+        self.dAr = {n: V.T @ (dA @ V) for n, (dA, _) in s.system_terms.items()}
+        self.Br0 = np.asarray((B0.T @ V).T)
+        self.dBr = {n: np.asarray((s.system_input_change(n).T @ V).T) for n in s.system_terms}
+        self.Cr = np.asarray(s.output_matrix @ V)
+        self.fields = {n: V.T @ (M @ f) for n, f in s.fields.items()}
+        self.basis = V if keep_basis else None
+        self.mass = M
+        self.structure = s
+        self.build_seconds = time.perf_counter() - start
+
+    @staticmethod
+    def _term_values(structure):
+        """For each system term: the coefficients a at which its perturbed system is added to the basis."""
+        out = []
+        for name in structure.system_terms:
+            bounds = structure.term_bounds.get(name, (-0.7, 2.0))
+            out.append((name, [b for b in bounds if abs(b) > 1e-12]))
+        return out
+
+    def reduce_rows(self, rows):
+        """Rows over thermal nodes (k, n) in the reduced basis (k, r)."""
+        if self.basis is None:
+            raise RuntimeError("the reduced backend was built without its basis")
+        return np.asarray(sp.csr_matrix(rows) @ self.basis) if sp.issparse(rows) else np.asarray(rows) @ self.basis
+
+    def simulate(self, U, step_s, coefficients=None, u0=None, fields=None, field_responses=()):
+        """Outputs (N, p_fe) for inputs U (N, m) on a uniform grid of step ``step_s``.
+
+        ``u0`` (m,): the steady start input (default U[0]); ``fields`` {name: coefficient}
+        adds initial-field shapes to the start; ``field_responses`` names fields whose
+        free responses (N, p_fe) per unit coefficient are returned too.
+        """
+        coefficients = coefficients or {}
+        Ar, Br = self.Ar0.copy(), self.Br0.copy()
+        for name, a in coefficients.items():
+            if a:
+                Ar += a * self.dAr[name]
+                Br += a * self.dBr[name]
+        lam, Q = np.linalg.eigh((Ar + Ar.T) / 2)
+        lam = np.maximum(lam, 1e-14)
+        Bm = Q.T @ Br
+        u0 = U[0] if u0 is None else u0
+        w = (Bm @ u0) / lam
+        for name, c in (fields or {}).items():
+            w = w + c * (Q.T @ self.fields[name])
+        F = U @ Bm.T
+        e = np.exp(-lam * step_s)
+        g = -np.expm1(-lam * step_s) / lam
+        W = np.empty((len(U), len(lam)))
+        W[0] = w
+        gF = F * g
+        for k in range(1, len(U)):
+            w = e * w + gF[k]
+            W[k] = w
+        Cm = self.Cr @ Q
+        out = W @ Cm.T
+        responses = {}
+        if field_responses:
+            decay = np.exp(-np.outer(np.arange(len(U)) * step_s, lam))
+            for name in field_responses:
+                responses[name] = (decay * (Q.T @ self.fields[name])) @ Cm.T
+        return SimulationResult(out, W, Q, self, responses)
+
+
+class FullBackend:
+    """The full FE system (see the module docstring); ``theta`` 1 = backward Euler, ½ = Crank–Nicolson."""
+
+    name = "fe"
+
+    def __init__(self, structure, theta=1.0):
+        self.structure = structure
+        self.theta = float(theta)
+        self.build_seconds = 0.0
+
+    def system(self, coefficients):
+        s = self.structure
+        A, B = s.stiffness, s.input_matrix
+        for name, a in (coefficients or {}).items():
+            if a:
+                A = A + a * s.system_terms[name][0]
+                B = B + a * s.system_input_change(name)
+        return sp.csr_matrix(A), sp.csc_matrix(B)
+
+    def simulate(self, U, step_s, coefficients=None, u0=None, fields=None, field_responses=(), keep_fields=()):
+        """As :meth:`ReducedBackend.simulate`; ``keep_fields`` (step indices) keeps full temperature fields."""
+        s = self.structure
+        A, B = self.system(coefficients)
+        M = s.mass
+        th, h = self.theta, float(step_s)
+        u0 = U[0] if u0 is None else u0
+        T = _factor(A)(np.asarray(B @ u0).ravel())
+        for name, c in (fields or {}).items():
+            T = T + c * s.fields[name]
+        names = list(field_responses)
+        X = np.column_stack([T] + [s.fields[n] for n in names])
+        lhs = _factor(M / h + th * A)
+        explicit = sp.csr_matrix(M / h - (1 - th) * A)
+        BU = np.asarray((B @ U.T).T) if sp.issparse(B) else U @ B.T
+        C = s.output_matrix
+        out = np.empty((len(U), C.shape[0]))
+        resp = {n: np.empty((len(U), C.shape[0])) for n in names}
+        kept = {}
+
+        def record(k):
+            Y = np.asarray(C @ X)
+            out[k] = Y[:, 0]
+            for j, n in enumerate(names):
+                resp[n][k] = Y[:, j + 1]
+            if k in keep_fields:
+                kept[k] = X[:, 0].copy()
+
+        record(0)
+        for k in range(1, len(U)):
+            rhs = explicit @ X
+            rhs[:, 0] += th * BU[k] + (1 - th) * BU[k - 1]
+            X = np.asarray(lhs(rhs)).reshape(X.shape)
+            record(k)
+        return SimulationResult(out, backend=self, field_outputs=resp, fields=kept)
+
+
+def make_backend(structure, backend="rom", **options):
+    """A backend by name (``rom`` or ``fe``); ``rom`` falls back to ``fe`` when :mod:`twin.rom` is unavailable."""
+    if backend == "rom" and reduction() is not None:
+        return ReducedBackend(structure, **{k: v for k, v in options.items()
+                                            if k in ("nominal_order", "term_order", "keep_basis")})
+    return FullBackend(structure, **{k: v for k, v in options.items() if k == "theta"})
