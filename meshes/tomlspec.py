@@ -154,7 +154,7 @@ class Table:
         value = self.raw(key, default)
         if value is None:
             return None
-        ok = isinstance(value, list) and all(
+        ok = isinstance(value, (list, tuple)) and all(
             not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v) for v in value)
         if not ok or (length is not None and len(value) != length):
             size = f"{length} " if length else ""

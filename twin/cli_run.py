@@ -38,6 +38,19 @@ def cmd_mesh(args):
     print(f"statistics and render in {out_dir}/")
 
 
+def cmd_report(args):
+    import json
+
+    from .summary import format_summary
+    from .workflows import report_dataset
+
+    column_map = json.loads(open(args.column_map).read()) if args.column_map else None
+    summary, out_dir = report_dataset(args.dataset, args.out, column_map, args.nan_policy,
+                                      iso_test=args.iso)
+    print(format_summary(summary))
+    print(f"report in {out_dir}/")
+
+
 def register(sub):
     """Add the ``run`` and ``mesh`` commands."""
     run = sub.add_parser("run", help="simulate a scenario and write dataset, plots and summary")
@@ -57,5 +70,13 @@ def register(sub):
     mesh.add_argument("--ship", action="store_true",
                       help="copy the mesh and output operator into meshes/cache (for committing)")
     mesh.set_defaults(func=cmd_mesh)
+
+    report = sub.add_parser("report", help="plots and summary of an existing (twin or measured) dataset")
+    report.add_argument("dataset", help="CSV file (with or without a JSON sidecar)")
+    report.add_argument("--out", help="folder (default runs/report_<name>)")
+    report.add_argument("--column-map", help="JSON file mapping CSV columns to <name>_<unit>")
+    report.add_argument("--nan-policy", default="error", choices=["error", "interpolate", "drop"])
+    report.add_argument("--iso", choices=["spindle", "etve"], help="also report the ISO 230-3 quantities")
+    report.set_defaults(func=cmd_report)
 
 

@@ -15,12 +15,11 @@ def run_summary(dataset, wall_seconds, probe_spacing_m=0.1, iso_test=None):
            "duration_h": float(dataset.time_s[-1] / 3600.0), "samples": len(dataset),
            "run_seconds": float(wall_seconds)}
     drift = {}
-    for axis in ("X", "Y", "Z"):
-        if axis in dataset:
-            v = dataset[axis]
-            k = int(np.argmax(np.abs(v)))
-            drift[axis] = {"peak_um": float(v[k]), "at_h": float(dataset.time_s[k] / 3600.0),
-                           "range_um": float(np.ptp(v))}
+    for axis in dataset.names_of_kind("displacement"):
+        v = dataset[axis]
+        k = int(np.argmax(np.abs(v)))
+        drift[axis] = {"peak_um": float(v[k]), "at_h": float(dataset.time_s[k] / 3600.0),
+                       "range_um": float(np.ptp(v))}
     out["drift"] = drift
     surface = dataset.names_of_kind("temperature")
     if surface:
@@ -33,13 +32,13 @@ def run_summary(dataset, wall_seconds, probe_spacing_m=0.1, iso_test=None):
     if iso_test == "etve":
         ambient = [n for n in dataset.names if n.startswith("ambient_") and dataset.info(n).unit == "degC"]
         out["iso230_3_etve"] = {
-            "drift_range_um": {a: drift[a]["range_um"] for a in drift},
+            "drift_range_um": {a: drift[a]["range_um"] for a in drift if a in ("X", "Y", "Z")},
             "ambient_range_K": float(max(np.ptp(dataset[n]) for n in ambient)) if ambient else None,
         }
     if iso_test == "spindle" and "Y_top" in dataset:
         tilt = tilt_urad(dataset, probe_spacing_m)
         out["iso230_3_spindle"] = {
-            "max_abs_drift_um": {a: float(np.abs(dataset[a]).max()) for a in drift},
+            "max_abs_drift_um": {a: float(np.abs(dataset[a]).max()) for a in drift if a in ("X", "Y", "Z")},
             "max_abs_tilt_yz_urad": float(np.abs(tilt).max()),
         }
     return out
@@ -47,16 +46,18 @@ def run_summary(dataset, wall_seconds, probe_spacing_m=0.1, iso_test=None):
 
 def format_summary(summary):
     """The summary as Markdown."""
-    lines = [f"# Run summary: {summary['scenario']} on {summary['machine']}", "",
+    on = f" on {summary['machine']}" if summary.get("machine") else ""
+    lines = [f"# Run summary: {summary['scenario']}{on}", "",
              f"- duration: {summary['duration_h']:.2f} h, {summary['samples']} samples",
-             f"- run time: {summary['run_seconds']:.1f} s (wall clock, simulation only)"]
+             ] + ([f"- run time: {summary['run_seconds']:.1f} s (wall clock, simulation only)"]
+                  if summary["run_seconds"] else [])
     if "hottest_sensor" in summary:
         h = summary["hottest_sensor"]
         lines.append(f"- hottest sensor: {h['name']} at {h['max_C']:.2f} °C (rise {h['rise_K']:.2f} K)")
     if "energy_balance_relative_error" in summary:
         lines.append(f"- energy balance (stored vs in − out), max relative error: "
                      f"{summary['energy_balance_relative_error']:.1e}")
-    lines += ["", "| axis | peak drift (µm) | at (h) | range (µm) |", "|---|---|---|---|"]
+    lines += ["", "| channel | peak drift (µm) | at (h) | range (µm) |", "|---|---|---|---|"]
     for axis, d in summary["drift"].items():
         lines.append(f"| {axis} | {d['peak_um']:.2f} | {d['at_h']:.2f} | {d['range_um']:.2f} |")
     if "iso230_3_etve" in summary:

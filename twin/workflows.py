@@ -73,6 +73,36 @@ def run_scenario(scenario, machine=None, mesh_size_m=None, out_dir=None, fields=
     return RunOutput(out_dir, summary, out_dir / f"{sc.name}.csv")
 
 
+def report_dataset(path, out_dir=None, column_map=None, nan_policy="error", probe_spacing_m=0.1, iso_test=None):
+    """Plots and a readable summary of an existing dataset (a twin run or measured data).
+
+    Measured CSVs without a sidecar go through the validated import
+    (``column_map``, ``nan_policy``); the import report (gaps, NaNs) is
+    written beside the summary.
+    """
+    from .dataset import Dataset
+
+    path = Path(path)
+    if column_map or not (path.with_name(path.name + ".json")).exists():
+        dataset = Dataset.from_measured_csv(path, column_map=column_map, nan_policy=nan_policy)
+    else:
+        dataset = Dataset.read(path)
+    dataset.metadata.setdefault("scenario", path.stem)
+    summary = run_summary(dataset, 0.0, probe_spacing_m, iso_test)
+    out_dir = Path(out_dir or Path("runs") / f"report_{path.stem}")
+    with atomic_directory(out_dir) as tmp:
+        if dataset.names_of_kind("temperature", "air"):
+            plots.plot_temperatures(dataset, tmp / "temperatures.png")
+        if dataset.names_of_kind("displacement"):
+            plots.plot_drift(dataset, tmp / "drift.png")
+        plots.plot_strains(dataset, tmp / "strains.png")
+        (tmp / "summary.json").write_text(json.dumps(summary, indent=1))
+        (tmp / "summary.md").write_text(format_summary(summary))
+        if "import" in dataset.metadata:
+            (tmp / "import_report.json").write_text(json.dumps(dataset.metadata["import"], indent=1))
+    return summary, out_dir
+
+
 def mesh_machine(machine="vmc_ram", mesh_size_m=None, out_dir=None, rebuild=False, ship=False):
     """Build (or load) and describe a machine's mesh; write statistics and an off-screen render.
 
