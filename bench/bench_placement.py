@@ -4,13 +4,15 @@
     python bench/bench_placement.py --no-cache      # simulate every scenario again
     python bench/bench_placement.py --scheduler serial
 
-Prints the wall time of each phase (simulations through the Dask sweep,
-selection by every method for K = 1…8 and both axes, scoring) and the total.
+Prints the wall time of each phase (simulations through the Dask sweep: the scenarios and the
+step responses of ``greedy-physics``; selection by every method for K = 1…8 and both axes;
+scoring) and the total, and the load averages before and after.
 """
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import time
 
 
@@ -25,22 +27,28 @@ def main(argv=None):
 
     from twin.placement import placement_study
 
+    load_before = os.getloadavg()
     start = time.perf_counter()
     res = placement_study(n_candidates=args.candidates, scheduler=args.scheduler, use_cache=not args.no_cache,
                           out_dir=args.out, log=None)
     wall = time.perf_counter() - start
     t = res.timings
     cfg = res.config
-    print(f"placement study: {len(cfg['train']) + len(cfg['test'])} scenarios, {cfg['n_candidates']} candidates, "
+    print(f"placement study: {len(cfg['train']) + len(cfg['test'])} scenarios + {t.get('responses', 0)} step "
+          f"responses, {cfg['n_candidates']} candidates, "
           f"{len(cfg['methods'])} methods × K = 1…{cfg['k_max']} × {len(cfg['axes'])} axes, scheduler {args.scheduler}")
     print(f"  simulations  {t['simulation_s']:7.1f} s  ({t['simulated']} run, {t['from_cache']} from cache; "
           f"{t['simulation_cpu_s']:.1f} s summed over the runs)")
     print(f"  selection    {t['selection_s']:7.1f} s")
     print(f"  scoring      {t['scoring_s']:7.1f} s  (+ ANFIS check {t.get('anfis_s', 0.0):.1f} s)")
     print(f"  total        {wall:7.1f} s  (report written to {args.out}/)")
+    load_after = os.getloadavg()
+    print(f"  load average (1, 5, 15 min) before {', '.join(f'{v:.2f}' for v in load_before)}; after "
+          f"{', '.join(f'{v:.2f}' for v in load_after)} on {os.cpu_count()} cores")
     if args.json:
         with open(args.json, "w") as fh:
-            json.dump({"wall_s": wall, **t, "config": cfg}, fh, indent=1, default=str)
+            json.dump({"wall_s": wall, **t, "load_before": load_before, "load_after": load_after, "config": cfg}, fh,
+                      indent=1, default=str)
 
 
 if __name__ == "__main__":

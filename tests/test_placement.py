@@ -6,7 +6,8 @@ import pytest
 
 from twin.cli import main
 from twin.machine import build_machine
-from twin.placement import CandidateSpec, MachineSpec, RecordTask, candidate_locations, perturbed_definition
+from twin.placement import (CandidateSpec, MachineSpec, RecordTask, ResponseTask, candidate_locations,
+                            elementary_inputs, perturbed_definition)
 from twin.scenario import load_scenario
 
 HEAT = """
@@ -89,6 +90,23 @@ def test_record_task_records_candidates_and_drift_only(machine, tmp_path):
     assert np.allclose(rec.drift["Z"], ds["Z"], atol=1e-9)      # the same run as the full twin
 
 
+def test_step_responses_cover_every_thermal_input(machine):
+    steps = {name: step for name, _j, step in elementary_inputs(machine)}
+    assert list(steps) == list(machine.thermal.input_names)
+    assert steps["ambient:room"] == 2.0 and steps["ambient_gradient"] == 1.0
+    assert all(steps[f"power:{s.name}"] == s.coefficient_W for s in machine.definition.sources)
+    cands = CandidateSpec(("ram", "carrier"), 30, camera=False)
+    room = ResponseTask(MachineSpec(), cands, "ambient:room", ("Y", "Z"), 4 * 3600.0)()
+    assert room.scenario == "step:ambient:room" and len(room.time_s) == 17
+    assert np.all(room.temperatures[0] == 20.0) and room.drift["Z"][0] == pytest.approx(0.0, abs=1e-9)
+    assert room.temperatures.min() >= 20.0 - 1e-9 and room.temperatures.max() <= 22.0 + 1e-9
+    assert np.all(np.diff(room.temperatures.mean(axis=1)) > 0)           # the machine follows the warmer room
+    heat = ResponseTask(MachineSpec(), cands, "power:front_bearings", ("Z",), 4 * 3600.0)()
+    assert heat.temperatures[-1].max() > 20.5 and abs(heat.drift["Z"][-1]) > 5.0
+    with pytest.raises(Exception, match="no thermal input"):
+        ResponseTask(MachineSpec(), cands, "power:coolant", ("Z",), 3600.0)()
+
+
 def test_perturbed_definition_scales_sources_and_convection(machine):
     d = perturbed_definition(machine.definition, (("front_bearings", 2.0),), 0.5)
     before = {s.name: s.coefficient_W for s in machine.definition.sources}
@@ -105,8 +123,8 @@ def test_cli_place_writes_the_report(machine, tmp_path, capsys):
     out = tmp_path / "place"
     code = main(["place", "--parts", "ram,carrier,column,spindle_motor", "--candidates", "120",
                  "--train", f"{sc['p_heat']},{sc['p_steps']},{sc['p_room']}", "--test", sc["p_test"],
-                 "--k-max", "3", "--record-interval", "300", "--scheduler", "serial", "--no-cache",
-                 "--out", str(out)])
+                 "--k-max", "3", "--record-interval", "300", "--response-horizon", "4", "--scheduler", "serial",
+                 "--no-cache", "--out", str(out)])
     assert code == 0, capsys.readouterr().err
     text = capsys.readouterr().out
     assert "## Z: held-out max |residual|" in text and "| K | gra+fcm |" in text
@@ -117,7 +135,11 @@ def test_cli_place_writes_the_report(machine, tmp_path, capsys):
     report = json.loads((out / "placement.json").read_text())
     assert report["config"]["n_candidates"] == 120 + 525
     rows = report["table"]
-    assert len(rows) == 6 * 3 * 2                                   # methods × K × axes
+    assert len(rows) == 7 * 3 * 2                                   # methods × K × axes
+    assert report["timings"]["responses"] == 11                     # every thermal input stepped once
+    physics = {axis: [r["sensors"] for r in rows if r["axis"] == axis and r["method"] == "greedy-physics"]
+               for axis in ("Z", "Y")}
+    assert physics["Z"] == physics["Y"]                             # one sensor set for both axes
     for axis in ("Z", "Y"):
         peak = report["uncompensated"][axis][0]
         greedy = [r for r in rows if r["axis"] == axis and r["method"] == "greedy-loso"]
@@ -125,7 +147,8 @@ def test_cli_place_writes_the_report(machine, tmp_path, capsys):
     import pandas as pd
 
     scores = pd.read_csv(out / "candidate_scores.csv")
-    assert len(scores) == 645 and {"x_m", "grade_Z", "greedy_alone_Y", "chosen_K_greedy-loso_Z"} <= set(scores)
+    assert len(scores) == 645 and {"x_m", "grade_Z", "greedy_alone_Y", "chosen_K_greedy-loso_Z", "physics_alone",
+                                   "chosen_K_greedy-physics_Y"} <= set(scores)
     # the records as datasets with the chosen sensors, ready for `twin train` / `twin evaluate`
     chosen = pd.read_csv(out / "chosen_sensors.csv")
     z_sensors = ",".join(chosen[chosen.axis == "Z"].name)

@@ -88,3 +88,57 @@ def test_farthest_point_sampling_spreads_points():
     assert np.sum(pick >= 500) >= 3                          # the small far cluster is not ignored
     assert np.array_equal(pick, farthest_point_sample(cloud, 10))
     assert len(farthest_point_sample(cloud[:5], 10)) == 5
+
+
+def _brute_multi(Xs, Ys, cols, ridge_abs, weights, folds):
+    """Σ_targets w_a Σ_{f in folds} max|e_fa| by explicit refits on the other blocks (all blocks train)."""
+    total = 0.0
+    for f in folds:
+        Xt = np.vstack([np.column_stack([np.ones(len(X)), X[:, cols]]) for g, X in enumerate(Xs) if g != f])
+        R = ridge_abs * np.diag([0.0] + [1.0] * len(cols))
+        Xv = np.column_stack([np.ones(len(Xs[f])), Xs[f][:, cols]])
+        for a, w in enumerate(weights):
+            yt = np.concatenate([Y[:, a] for g, Y in enumerate(Ys) if g != f])
+            beta = np.linalg.solve(Xt.T @ Xt + R, Xt.T @ yt)
+            total += w * np.abs(Xv @ beta - Ys[f][:, a]).max()
+    return total
+
+
+def test_greedy_loso_several_targets_share_one_set_and_folds_limit_the_held_out_blocks():
+    Xs, ys = _blocks(2, n_blocks=5, p=20)
+    Ys = [np.column_stack([y, 0.3 * y + 0.5 * X[:, 3]]) for X, y in zip(Xs, ys)]
+    weights, folds = [1.0, 2.0], [0, 2, 3]
+    order, history, _alone = greedy_loso(Xs, Ys, 3, ridge=1e-6, target_weights=weights, folds=folds)
+    G = sum(np.column_stack([np.ones(len(X)), X]).T @ np.column_stack([np.ones(len(X)), X]) for X in Xs)
+    lam = 1e-6 * np.mean(np.diag(G)[1:])
+    for k in range(1, 4):
+        assert history[k - 1] == pytest.approx(_brute_multi(Xs, Ys, list(order[:k]), lam, weights, folds), rel=1e-7)
+        brute = [_brute_multi(Xs, Ys, list(order[:k - 1]) + [c], lam, weights, folds) if c not in order[:k - 1]
+                 else np.inf for c in range(20)]
+        assert int(np.argmin(brute)) == order[k - 1]
+    # one target in a 2-D array is the 1-D call
+    one = greedy_loso(Xs, [Y[:, :1] for Y in Ys], 3)
+    ref = greedy_loso(Xs, [Y[:, 0] for Y in Ys], 3)
+    assert list(one[0]) == list(ref[0]) and np.allclose(one[1], ref[1])
+    with pytest.raises(ValueError, match="target_weights"):
+        greedy_loso(Xs, Ys, 2, target_weights=[1.0])
+
+
+def test_step_response_blocks_reveal_the_sensor_that_also_follows_the_ambient():
+    """Two sensors look alike on spindle-only training records; only one also follows the ambient as the drift
+    does.  Without the twin's ambient step response the greedy choice takes the cleaner look-alike, with it the
+    physically right one (what ``greedy-physics`` adds to ``greedy-loso``)."""
+    rng = np.random.default_rng(5)
+    t = np.arange(120.0)
+    blocks_X, blocks_y = [], []
+    for tau in (15.0, 30.0, 50.0):                          # spindle-only training records
+        s = 5 * (1 - np.exp(-t / tau))
+        X = np.column_stack([s + 0.02 * rng.standard_normal(len(t)), s, rng.standard_normal(len(t))])
+        blocks_X.append(X - X[0])
+        blocks_y.append(2 * s)
+    plain, _, _ = greedy_loso(blocks_X, blocks_y, 1)
+    assert plain[0] == 1                                    # the noise-free look-alike wins on training data
+    amb = 2 * (1 - np.exp(-t / 40))                         # ambient step: sensor 0 follows it, sensor 1 does not
+    step_X = np.column_stack([amb, 0.1 * amb, np.zeros(len(t))])
+    physics, _, _ = greedy_loso(blocks_X + [step_X], blocks_y + [2 * amb], 1)
+    assert physics[0] == 0

@@ -12,7 +12,7 @@ import sys
 
 from .errors import USER_ERRORS
 
-COMMAND_MODULES = ("twin.cli_run", "twin.cli_fmu", "twin.cli_models")
+COMMAND_MODULES = ("twin.cli_run", "twin.cli_fmu", "twin.cli_models", "twin.cli_gap")
 
 
 def build_parser():

@@ -79,7 +79,7 @@ def cmd_place(args):
                           test=split_names(args.test) or DEFAULT_TEST, methods=split_names(args.methods) or METHODS,
                           k_max=args.k_max, axes=tuple(split_names(args.axes)), record_interval_s=args.record_interval,
                           scheduler=args.scheduler, use_cache=not args.no_cache, out_dir=args.out,
-                          progress=progress_bar("simulating"))
+                          progress=progress_bar("simulating"), response_horizon_s=args.response_horizon * 3600.0)
     print(res.summary)
     print(f"report, tables, candidate scores and render in {res.out_dir}/")
 
@@ -144,6 +144,8 @@ def register(sub):
     p.add_argument("--k-max", type=int, default=8)
     p.add_argument("--axes", default="Z,Y")
     p.add_argument("--record-interval", type=float, default=60.0, help="recording interval, s (default 60)")
+    p.add_argument("--response-horizon", type=float, default=48.0,
+                   help="greedy-physics: length of the elementary step responses, h (default 48)")
     p.add_argument("--no-cache", action="store_true", help="simulate again even if records are cached")
     p.add_argument("--out", default="runs/placement", help="result folder (default runs/placement)")
     _add_cluster_options(p)

@@ -14,7 +14,8 @@ Procedure (:func:`placement_study`):
    rebuilds the machine from the on-disk caches and keeps it.  Records are
    cached on disk (noise-free) keyed by machine, scenario and candidates.
    Sensor noise (DS18S20 thermometers, S65 camera, NCDT probes) is drawn
-   afterwards from a per-scenario seed.
+   afterwards from a per-scenario seed.  The step responses of
+   ``greedy-physics`` are further tasks of the same sweep, cached alike.
 3. **Selection** on the training scenarios only, per drift axis, for
    K = 1 … K_max, by the seed pipelines (``gra+fcm``, ``gm-influence+fcm``,
    ``sensitivity+fuzzy-equivalence``, ``maximal-tree`` of
@@ -32,6 +33,16 @@ Procedure (:func:`placement_study`):
        training snapshot matrix of candidate temperatures: the K modes that
        carry most of the drift signal (largest |uᵢᵀy|); the pivots are the
        points that best pin down those temperature-field components.
+   ``greedy-physics``
+       one sensor set for every drift axis, chosen like ``greedy-loso`` (Σ over
+       axes, each weighted by 1 / its training peak) but with more blocks: the
+       twin's step response to every thermal input alone — each heat source at
+       its reference power, each ambient zone +2 K, the vertical gradient
+       +1 K/m, 48 h from rest (:class:`ResponseTask`).  A sensor set passes
+       only if one linear model explains the drift across the training
+       scenarios *and* every elementary response, i.e. the drift is a linear
+       function of those temperatures for every input, not only for the
+       combinations the training scenarios happen to excite.
 
 4. **Scoring**: for each method, axis and K, an MLR model (zero-referenced
    inputs and target, with intercept) is fitted on all training rows of the
@@ -54,7 +65,7 @@ from models.selection import SEED_METHODS, SeedSelector, greedy_loso, pod_modes,
 
 from .errors import TwinInputError
 
-OWN_METHODS = ("greedy-loso", "qr-drift")
+OWN_METHODS = ("greedy-loso", "qr-drift", "greedy-physics")
 METHODS = SEED_METHODS + OWN_METHODS
 DEFAULT_PARTS = ("base", "table", "column", "carrier", "ram", "z_motor", "spindle_motor")
 #: Training scenarios cover the speed range (0–12000 rpm through the ISO 230-3 speed spectrum), feeds
@@ -65,6 +76,12 @@ DEFAULT_TRAIN = ("heat_cool_9000", "iso230_3_spindle_spectrum", "thesis_test_4",
 DEFAULT_TEST = ("cutting_hard", "step_speed", "etve_summer", "thesis_test_3")
 DEFAULT_AXES = ("Z", "Y")
 RECORD_CACHE_VERSION = 1
+#: Elementary step responses of ``greedy-physics``: each heat source at its reference power, each ambient
+#: zone +2 K (a day/night half-swing), the vertical ambient gradient +1 K/m; from rest at 20 °C, 48 h.
+RESPONSE_AMBIENT_STEP_K = 2.0
+RESPONSE_GRADIENT_STEP_K_PER_M = 1.0
+RESPONSE_HORIZON_S = 48 * 3600.0
+RESPONSE_INTERVAL_S = 900.0
 NOISE = {"surface": "temperature", "camera": "camera", "installed": "temperature"}
 
 
@@ -283,6 +300,84 @@ class RecordTask:
                       time.perf_counter() - start)
 
 
+def elementary_inputs(machine):
+    """``(input name, index, step)`` of every thermal input of ``machine``: source powers at their reference
+    power (W), ambient zones +:data:`RESPONSE_AMBIENT_STEP_K`, the gradient +:data:`RESPONSE_GRADIENT_STEP_K_PER_M`."""
+    names = machine.thermal.input_names
+    power = {f"power:{s.name}": float(s.coefficient_W) for s in machine.definition.sources}
+    out = []
+    for j, name in enumerate(names):
+        if name in power:
+            step = power[name]
+        elif name.startswith("ambient:"):
+            step = RESPONSE_AMBIENT_STEP_K
+        elif name == "ambient_gradient":
+            step = RESPONSE_GRADIENT_STEP_K_PER_M
+        else:                                       # pragma: no cover - an input kind this study does not know
+            continue
+        out.append((name, j, step))
+    return out
+
+
+class _StepSchedule:
+    """Inputs at rest (every ambient zone at ``base_C``, no gradient, no power) plus a step of one input at t > 0."""
+
+    def __init__(self, names, index, step, base_C=20.0):
+        self.base = np.array([base_C if n.startswith("ambient:") else 0.0 for n in names])
+        self.index, self.step = index, step
+
+    def sample(self, times_s):
+        t = np.atleast_1d(np.asarray(times_s, float))
+        U = np.tile(self.base, (len(t), 1))
+        U[t > 0, self.index] += self.step
+        return U
+
+
+@dataclass(frozen=True)
+class ResponseTask:
+    """A picklable sweep task: the twin's response to a step of one thermal input, from rest at 20 °C.
+
+    Records the candidates and the drift every ``interval_s`` for ``horizon_s`` (the
+    machine's slowest responses take about a day).  The step sizes are those of
+    :func:`elementary_inputs`.  The result is a :class:`Record` named ``step:<input>``.
+    """
+
+    machine: MachineSpec
+    candidates: CandidateSpec
+    input_name: str
+    axes: tuple = ("X", "Y", "Z")
+    horizon_s: float = RESPONSE_HORIZON_S
+    interval_s: float = RESPONSE_INTERVAL_S
+    max_step_s: float = 300.0
+
+    @property
+    def scenario(self):
+        return f"step:{self.input_name}"
+
+    def __call__(self):
+        import fea
+
+        start = time.perf_counter()
+        machine = self.machine.build()
+        cands = self.candidates.build(machine)
+        steps = {name: (j, step) for name, j, step in elementary_inputs(machine)}
+        if self.input_name not in steps:
+            raise TwinInputError(f"no thermal input {self.input_name!r}; inputs: {sorted(steps)}")
+        j, step = steps[self.input_name]
+        drift = machine.outputs.subset(list(self.axes))
+        operator = fea.OutputOperator(list(cands.names) + list(self.axes),
+                                      ["°C"] * len(cands) + ["m"] * len(self.axes),
+                                      sp.vstack([cands.rows, drift.matrix]).tocsr(),
+                                      np.r_[np.zeros(len(cands)), drift.offset])
+        times = np.arange(0.0, self.horizon_s + 1e-9, self.interval_s)
+        schedule = _StepSchedule(machine.thermal.input_names, j, step)
+        run = fea.ThermalSolver(machine.thermal).run(20.0, times, schedule, operator, max_step_s=self.max_step_s)
+        k = len(cands)
+        return Record(self.scenario, times, run.outputs[:, :k].copy(),
+                      {a: run.outputs[:, k + i] * 1e6 for i, a in enumerate(self.axes)},
+                      time.perf_counter() - start)
+
+
 def _file_digest(path):
     try:
         return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
@@ -293,12 +388,16 @@ def _file_digest(path):
 def record_cache_key(task):
     from .machine_definition import load_machine
 
-    sc = _scenario_obj(task.scenario)
     definition = load_machine(task.machine.name)
     payload = {"v": RECORD_CACHE_VERSION, "machine": repr(task.machine), "machine_file": _file_digest(
-        definition.source), "candidates": repr(task.candidates), "scenario": repr(sc) if not Path(
-        str(sc.source)).exists() else [sc.name, _file_digest(sc.source)], "axes": task.axes,
-        "record": task.record_interval_s}
+        definition.source), "candidates": repr(task.candidates), "axes": task.axes}
+    if isinstance(task, ResponseTask):
+        payload.update(response=[task.input_name, task.horizon_s, task.interval_s, task.max_step_s,
+                                 RESPONSE_AMBIENT_STEP_K, RESPONSE_GRADIENT_STEP_K_PER_M])
+    else:
+        sc = _scenario_obj(task.scenario)
+        payload.update(scenario=repr(sc) if not Path(str(sc.source)).exists() else [sc.name, _file_digest(sc.source)],
+                       record=task.record_interval_s)
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:20]
 
 
@@ -413,7 +512,7 @@ def placement_study(machine="vmc_ram", mesh_size_m=None, parts=DEFAULT_PARTS, n_
                     train=DEFAULT_TRAIN, test=DEFAULT_TEST, methods=METHODS, k_max=8, axes=DEFAULT_AXES,
                     record_interval_s=60.0, max_selection_rows=2000, scheduler="local", use_cache=True,
                     noise=True, report_k=5, anfis_check=True, write_datasets=True, out_dir=None, progress=None,
-                    log=print):
+                    log=print, response_horizon_s=RESPONSE_HORIZON_S):
     """Run the placement study; write its report to ``out_dir`` (see the module docstring).
 
     With ``write_datasets`` the report folder gets ``datasets/<scenario>.csv``: every
@@ -445,15 +544,20 @@ def placement_study(machine="vmc_ram", mesh_size_m=None, parts=DEFAULT_PARTS, n_
     tasks = [RecordTask(spec, cspec, s, record_axes, record_interval_s) for s in list(train) + list(test)]
     t0 = time.perf_counter()
     m = spec.build()              # here first: mesh and operator caches are then ready for the workers
+    if "greedy-physics" in methods:
+        tasks += [ResponseTask(spec, cspec, name, record_axes, float(response_horizon_s))
+                  for name, _j, _s in elementary_inputs(m)]
     records = run_records(tasks, scheduler=scheduler, use_cache=use_cache, progress=progress)
     t_sim = time.perf_counter() - t0
     cands = cspec.build(m)
     if noise:
         records = [add_noise(r, cands.kinds, 1000 + i) for i, r in enumerate(records)]
+    n_sc = len(train) + len(test)
+    records, responses = records[:n_sc], records[n_sc:]
     rec_train, rec_test = records[: len(train)], records[len(train):]
-    timings = {"simulation_s": t_sim, "simulated": sum(not r.from_cache for r in records),
-               "from_cache": sum(r.from_cache for r in records),
-               "simulation_cpu_s": sum(r.seconds for r in records if not r.from_cache)}
+    timings = {"simulation_s": t_sim, "simulated": sum(not r.from_cache for r in records + responses),
+               "from_cache": sum(r.from_cache for r in records + responses), "responses": len(responses),
+               "simulation_cpu_s": sum(r.seconds for r in records + responses if not r.from_cache)}
 
     t0 = time.perf_counter()
     selections, cand_scores = {}, {}
@@ -482,6 +586,20 @@ def placement_study(machine="vmc_ram", mesh_size_m=None, parts=DEFAULT_PARTS, n_
                 cand_scores[f"qr_weight_{axis}"] = picks[0][1]
         if log:
             log(f"selection for {axis} done ({time.perf_counter() - t0:.1f} s)")
+    if "greedy-physics" in methods:
+        # One set for every axis: leave-one-block-out over the training scenarios and the step responses,
+        # each axis weighted by 1 / its training peak drift.
+        Ytr = [np.column_stack([_zero_ref(r.drift[a])[idx] for a in axes]) for r, idx in blocks]
+        weights = 1.0 / np.maximum(np.max([np.abs(Y).max(axis=0) for Y in Ytr], axis=0), 1e-12)
+        order, _hist, alone = greedy_loso(
+            [_zero_ref(r.temperatures)[idx] for r, idx in blocks] + [_zero_ref(r.temperatures) for r in responses],
+            Ytr + [np.column_stack([_zero_ref(r.drift[a]) for a in axes]) for r in responses], k_max,
+            target_weights=weights)
+        for axis in axes:
+            selections[("greedy-physics", axis)] = [order[:k] for k in range(1, k_max + 1)]
+        cand_scores["physics_alone"] = alone
+        if log:
+            log(f"greedy-physics selection done ({time.perf_counter() - t0:.1f} s)")
     timings["selection_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -528,7 +646,8 @@ def placement_study(machine="vmc_ram", mesh_size_m=None, parts=DEFAULT_PARTS, n_
                      "train": [getattr(s, "name", s) for s in train], "test": [getattr(s, "name", s) for s in test],
                      "skipped": skipped, "methods": methods, "k_max": k_max, "axes": list(axes),
                      "record_interval_s": record_interval_s, "noise": noise, "model": "mlr",
-                     "selection_rows": int(len(Xsel)), "report_k": report_k}
+                     "selection_rows": int(len(Xsel)), "report_k": report_k,
+                     "response_horizon_s": float(response_horizon_s) if "greedy-physics" in methods else None}
     result.cand_scores = cand_scores
     result.records = records if write_datasets else None
     result.config["scenario_objects"] = list(train) + list(test)

@@ -83,7 +83,8 @@ def initial_temperature(machine, scenario, schedule):
     init = scenario.initial
     if init["kind"] == "uniform":
         value = init.get("temperature_C")
-        return float(schedule.conditions([0.0]).ambient_C[machine.zones[0]][0] if value is None else value)
+        zone = "room" if "room" in machine.zones else machine.zones[0]
+        return float(schedule.conditions([0.0]).ambient_C[zone][0] if value is None else value)
     cond = schedule.conditions([0.0])
     # The machine stands idle before the test unless the scenario names a speed.
     rpm = np.array([init.get("spindle_rpm") or 0.0])

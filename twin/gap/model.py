@@ -30,10 +30,12 @@ class Prediction:
 class GapModel:
     """See the module docstring.  ``initial`` is ``"steady"`` (idle, steady state at t₀) or ``"uniform"``."""
 
-    def __init__(self, structure, backend, drive, times_s, initial="steady"):
+    def __init__(self, structure, backend, drive, times_s, initial="steady", initial_temperature=None):
         self.structure, self.backend, self.drive = structure, backend, drive
         self.times_s = np.asarray(times_s, float)
         self.initial = initial
+        self.initial_temperature = initial_temperature
+        self.effects = []
         s = structure
         n_extra = s.n_inputs - s.n_machine_inputs
         self.U0 = drive.inputs(s.machine, n_extra)
@@ -68,7 +70,8 @@ class GapModel:
             fields = None
         else:
             u0 = np.zeros(U.shape[1])
-            fields = {"initial_uniform": float(self.drive.room()[0])}
+            start = self.drive.room()[0] if self.initial_temperature is None else self.initial_temperature
+            fields = {"initial_uniform": float(start)}
         run = self.backend.simulate(U, self.drive.step_s, coefficients, u0=u0, fields=fields,
                                     field_responses=self.nuisance_names if nuisance else ())
         Y = s.channel_values(run.outputs, U)

@@ -1,0 +1,159 @@
+"""The gap diagnosis: a small blind case, no-effect data, bad channels, robustness of the measured-data path."""
+import json
+
+import numpy as np
+import pytest
+
+from twin.dataset import ChannelInfo, Dataset
+from twin.errors import TwinInputError
+from twin.gap.benchmark import BenchmarkTask, Case, TRUTH_HIDDEN, TRUTH_VALUES, cases
+from twin.gap.effects import default_library
+from twin.gap.measured import match_record
+from twin.sweep import cached, run_tasks
+
+QUICK = "gap_quick_8h"
+LIB = {e.name: e for e in default_library()}
+
+
+@pytest.fixture(scope="module")
+def machine():
+    from twin.gap.diagnose import _machine
+
+    return _machine("vmc_ram")
+
+
+def truth(machine, name=None, seed=None):
+    """A quick truth record (nominal mesh, backward Euler 20 s, noise, truth variants), cached per process."""
+    from twin.gap.truth import truth_dataset
+
+    def make():
+        active = [] if name is None else [(LIB[name].variant(**TRUTH_HIDDEN.get(name, {})),
+                                           np.array(TRUTH_VALUES[name], float))]
+        return truth_dataset(QUICK, machine, active, seed=seed)
+
+    return cached(("gap-test-truth", name, seed), make)
+
+
+@pytest.fixture(scope="module")
+def blind(machine):
+    """The small blind case of the default suite: three effects and no effect, serial sweep, nominal mesh truth."""
+    todo = [c for c in cases("belt_drive,convection_enclosure,fixture_drift,none")]
+    tasks = [BenchmarkTask(c, scenario=QUICK, truth_mesh_size_m=None) for c in todo]
+    return run_tasks(tasks, scheduler="serial")
+
+
+def test_small_blind_case_names_the_hidden_effect(blind):
+    singles = [r for r in blind if r["kind"] == "single"]
+    for r in singles:
+        assert r["correct"], f"{r['case']}: named {r['top']} ({r['verdict']})"
+        fit = r["truth_fit"]["params"]
+        for p in fit:
+            assert abs(p["relative"]) < 0.15, p
+        if (r["drift_gap_over_noise"] or 0) > 3:
+            assert r["shrink_top"]["drift_reduction"] >= 0.7, r["shrink_top"]
+
+
+def test_no_effect_data_gives_no_significant_gap(blind):
+    none = [r for r in blind if r["kind"] == "none"]
+    assert none and all(r["top"] == "none" and not r["significant"] for r in none)
+    assert all(r["verdict"].startswith("no significant gap") for r in none)
+
+
+def test_bad_channel_gives_a_clear_error_listing_valid_names(machine):
+    data = truth(machine)
+    bad = Dataset(data.time_s, np.column_stack([data.values, data["T01"]]),
+                  data.channels + [ChannelInfo("T99", "degC", "temperature")])
+    with pytest.raises(TwinInputError, match=r"T99.*valid names.*T01.*spindle"):
+        match_record(bad, machine)
+    wrong_unit = Dataset(data.time_s, data.values[:, :5],
+                         data.channels[:4] + [ChannelInfo("T01", "um", "displacement")])
+    with pytest.raises(TwinInputError, match="T01.*degC"):
+        match_record(wrong_unit, machine)
+
+
+def test_nan_gaps_offsets_missing_channels_and_other_sampling(machine, tmp_path):
+    """Every third row with jitter (another sampling), NaN gaps, constant offsets, a missing sensor: still named."""
+    from twin.gap import diagnose, write_report
+
+    data = truth(machine, "belt_drive")
+    rng = np.random.default_rng(0)
+    keep = np.arange(0, len(data), 3)
+    t = data.time_s[keep] + np.r_[0.0, rng.uniform(-20, 20, len(keep) - 2), 0.0]
+    names = [c.name for c in data.channels if c.name != "T05"]            # T05 missing
+    values = data.matrix(names)[keep].copy()
+    j = names.index
+    values[40:55, j("T12")] = np.nan                                       # a 1.5 h gap
+    values[100:103, j("Z")] = np.nan
+    values[:, j("T20")] += 1.5                                             # constant offsets
+    values[:, j("Y")] += 4.0
+    perturbed = Dataset(t, values, [data.info(n) for n in names], {"source": "perturbed"})
+    clean = diagnose(data, machine, n_pairs=0)
+    d = diagnose(perturbed, machine, n_pairs=0)
+    assert d.winner is not None and d.winner.name == "belt_drive"
+    rep = d.record.report
+    assert rep["nan_counts"] == {"T12": 15, "Z": 3} and "T05" in rep["sensors_missing"]
+    assert not rep["sampling_regular"] and rep["sampling_interval_s"] == pytest.approx(360, abs=30)
+    off = dict(zip(d.names, d.nominal.residual.offsets))
+    off0 = dict(zip(clean.names, clean.nominal.residual.offsets))
+    assert off["T20"] - off0["T20"] == pytest.approx(1.5, abs=0.1)
+    assert off["Y"] - off0["Y"] == pytest.approx(4.0, abs=0.3)
+    assert np.isnan(d.winner.residual.R[40:55, d.names.index("T12")]).all()
+    out = write_report(d, tmp_path / "report", render=False)
+    text = (out / "report.md").read_text()
+    assert "T12 15" in text and "T05" in text and "belt_drive" in text
+    assert json.loads((out / "diagnosis.json").read_text())["winner"]["name"] == "belt_drive"
+
+
+def test_cli_diagnose_with_column_map(machine, tmp_path):
+    """A measured CSV with its own column names, read through a column map, diagnosed from the command line."""
+    from twin.cli import main
+
+    data = truth(machine, "convection_enclosure")
+    cols = {"time": data.time_s, "rpm": data["spindle"]}
+    mapping = {"rpm": "spindle_rpm"}
+    for c in data.channels:
+        if c.kind in ("temperature", "air", "displacement", "strain"):
+            cols[f"ch_{c.name.lower()}"] = data[c.name]
+            mapping[f"ch_{c.name.lower()}"] = f"{c.name}_{c.unit}"
+    import pandas as pd
+
+    csv = tmp_path / "measured.csv"
+    frame = pd.DataFrame(cols).rename(columns={"time": "time_s"})
+    frame.loc[10:12, "ch_t03"] = np.nan
+    frame.to_csv(csv, index=False)
+    (tmp_path / "map.json").write_text(json.dumps(mapping))
+    out = tmp_path / "diag"
+    code = main(["gap", "diagnose", "--measured", str(csv), "--column-map", str(tmp_path / "map.json"),
+                 "--no-render", "--pairs", "0", "--out", str(out)])
+    assert code == 0
+    report = json.loads((out / "diagnosis.json").read_text())
+    assert report["winner"]["name"] == "convection_enclosure"
+    assert report["data"]["nan_counts"] == {"T03": 3}
+    assert (out / "report.md").exists() and (out / "residuals.png").exists()
+    # an unmapped, unknown column: one clear line and exit code 2
+    frame.rename(columns={"ch_t03": "mystery"}).to_csv(tmp_path / "bad.csv", index=False)
+    mapping.pop("ch_t03")
+    mapping["mystery"] = "T77_degC"
+    (tmp_path / "bad.json").write_text(json.dumps(mapping))
+    assert main(["gap", "diagnose", "--measured", str(tmp_path / "bad.csv"), "--column-map",
+                 str(tmp_path / "bad.json"), "--out", str(tmp_path / "x")]) == 2
+
+
+def test_fl_thermal_import_path(machine, fl_thermal_csv):
+    """The real recording has no twin: only the import path is exercised (map, NaN-free, 15 s sampling)."""
+    from twin.gap.measured import read_measured
+
+    mapping = {"spindle_rpm": "spindle_rpm", "ch3_um": "Z_um", "ch4_um": "Y_um", "t1_degC": "T01_degC",
+               "t2_degC": "T02_degC", "t4_degC": "T15_degC"}
+    import pandas as pd
+
+    header = list(pd.read_csv(fl_thermal_csv, nrows=0).columns)
+    with pytest.raises(TwinInputError, match="ch1.*valid names"):
+        match_record(read_measured(fl_thermal_csv, {}), machine)
+    drop = {c: f"x{i}_s" for i, c in enumerate(header) if c not in mapping and c != "time_s"}
+    ds = read_measured(fl_thermal_csv, {**mapping, **drop})
+    ds = ds.select([n for n in ds.names if not n.startswith("x")])
+    rec = match_record(ds, machine)
+    assert rec.report["sampling_interval_s"] == 15.0 and rec.report["rows"] > 7000
+    assert rec.spindle is not None and [a[0] for a in rec.air] == ["T15"]
+    assert set(rec.names) == {"Z", "Y", "T01", "T02", "T15"}

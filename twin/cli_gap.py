@@ -1,0 +1,64 @@
+"""CLI commands ``twin gap diagnose`` and ``twin gap benchmark``: a thin layer over :mod:`twin.gap`."""
+from __future__ import annotations
+
+from .progress import progress_bar
+
+
+def cmd_diagnose(args):
+    from .compensation import read_column_map, split_names
+    from .gap import diagnose, write_report
+
+    d = diagnose(args.measured, machine=args.machine, scenario=args.scenario,
+                 column_map=read_column_map(args.column_map), holdout_fraction=args.holdout,
+                 effects=split_names(args.effects) or None, n_pairs=args.pairs, backend=args.backend,
+                 step_s=args.step, progress=progress_bar("fitting effects"))
+    out = write_report(d, args.out, render=not args.no_render)
+    print(d.verdict)
+    for r in d.ranking[:5]:
+        print(f"  {r.name:42s} ΔBIC {r.delta_bic:9.1f}")
+    print(f"report in {out}/report.md ({d.timings['total_s']:.0f} s)")
+
+
+def cmd_benchmark(args):
+    from .gap import benchmark
+
+    res = benchmark(args.cases, scheduler=args.scheduler, out_dir=args.out, scenario=args.scenario,
+                    truth_mesh_size_m=None if args.truth_mesh_size <= 0 else args.truth_mesh_size,
+                    holdout_fraction=args.holdout, progress=progress_bar("blind cases"), n_workers=args.workers)
+    print(res.markdown)
+    print(f"results in {res.out_dir}/")
+
+
+def register(sub):
+    """Add the ``gap`` command with its ``diagnose`` and ``benchmark`` subcommands."""
+    from .gap.benchmark import SCENARIO, TRUTH_MESH_SIZE_M
+
+    gap = sub.add_parser("gap", help="sim-to-real gap diagnosis of the twin against measured data")
+    gsub = gap.add_subparsers(dest="gap_command", required=True)
+    d = gsub.add_parser("diagnose", help="where the twin misses, which effect explains it, how far it shrinks")
+    d.add_argument("--measured", required=True,
+                   help="measured CSV (<name>_<unit> columns, or with --column-map) or a twin dataset CSV")
+    d.add_argument("--machine", default="vmc_ram", help="machine name or TOML path (default vmc_ram)")
+    d.add_argument("--scenario", help="scenario for missing inputs (spindle, feeds, ambient) and the initial state")
+    d.add_argument("--column-map", help='JSON file or inline JSON mapping CSV columns, e.g. {"t1": "T01_degC"}')
+    d.add_argument("--holdout", type=float, default=0.3, help="held-out last fraction of the record (default 0.3)")
+    d.add_argument("--effects", help="comma list of candidate effects (default: the whole library)")
+    d.add_argument("--pairs", type=int, default=3, help="fit the pairs of the top N single effects (default 3)")
+    d.add_argument("--backend", choices=("rom", "fe"), default="rom",
+                   help="parametric reduced model (default) or full finite elements (slow)")
+    d.add_argument("--step", type=float, default=60.0, help="the twin's time step, s (default 60)")
+    d.add_argument("--no-render", action="store_true", help="skip the 3-D renders")
+    d.add_argument("--out", required=True, help="result folder (report.md, diagnosis.json, figures)")
+    d.set_defaults(func=cmd_diagnose)
+
+    b = gsub.add_parser("benchmark", help="blind check: effects switched on in a finer, noisy truth, then diagnosed")
+    b.add_argument("--cases", default="all",
+                   help="all | singles | pairs | none | comma list of effects or a+b pairs (default all)")
+    b.add_argument("--scenario", default=SCENARIO, help=f"truth scenario (default {SCENARIO})")
+    b.add_argument("--truth-mesh-size", type=float, default=TRUTH_MESH_SIZE_M,
+                   help=f"truth mesh size, m (default {TRUTH_MESH_SIZE_M}; 0 = the nominal mesh)")
+    b.add_argument("--holdout", type=float, default=0.3)
+    b.add_argument("--scheduler", default="local", help="local (default), serial, or tcp://HOST:8786")
+    b.add_argument("--workers", type=int, help="local Dask workers (default: one per core)")
+    b.add_argument("--out", default="runs/gap_benchmark", help="result folder (default runs/gap_benchmark)")
+    b.set_defaults(func=cmd_benchmark)

@@ -1,0 +1,205 @@
+"""Which part's temperature error explains the drift error, and which sensor would separate two effects.
+
+Drift outputs are linear functionals of the temperature field: d = G (T − T_ref)
+with G the adjoint influence rows over thermal nodes.  Splitting the sum over
+the nodes of each region (part) attributes a drift change to the parts:
+
+- :func:`region_estimate` (model-free, from the residuals alone): a
+  temperature error that is uniform in each part, c_r(t), is estimated by
+  ridge-regularised least squares from the thermometer residuals (each
+  thermometer sees its part's c_r) and the drift residuals (Σ_r g_{a,r} c_r,
+  g_{a,r} = G_a · 1_r, the drift of axis a per kelvin of part r); part r then
+  explains g_{a,r} c_r(t) of axis a.
+- :func:`effect_attribution` (through the fitted winner): the winner's
+  temperature change δT(t) = V δz(t) from the reduced basis is split exactly,
+  G_a δT = Σ_r G_{a,r} δT; what is left of the winner's drift change is the
+  sensor model (fixture drift).
+- :func:`separating_sensor`: the signatures of two fitted effects at candidate
+  thermometer locations (surface nodes, farthest-point sampled) — the point
+  where they differ most is where a new thermometer would separate them.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from .structure import facet_table
+
+
+def _drift_rows(structure, names):
+    """Indices (into the structure's channels) of the drift/strain channels among ``names``."""
+    return [structure.index[n] for n in names if structure.kinds[structure.index[n]] in ("displacement", "strain")]
+
+
+def region_influence(structure, channel_rows):
+    """g (len(rows), n_regions): drift per kelvin of uniform warming of each region (channel units per K)."""
+    regions = structure.region_names
+    C = structure.output_matrix
+    g = np.zeros((len(channel_rows), len(regions)))
+    for k, r in enumerate(regions):
+        ind = (structure.node_region == r).astype(float)
+        g[:, k] = C[channel_rows] @ ind
+    return g
+
+
+def region_estimate(structure, evaluator, residual, names, ridge=1.0):
+    """Model-free attribution (see the module docstring) → dict with c_r(t), per-axis shares and the influence table."""
+    regions = structure.region_names
+    info = structure.thermometer_info()
+    therm_names = [structure.names[i] for i in structure.thermometers]
+    part_of = dict(zip(therm_names, info["part"]))
+    t_cols = [j for j, n in enumerate(names) if n in part_of]
+    d_cols = [j for j, n in enumerate(names) if evaluator.kinds[j] in ("displacement", "strain")]
+    d_rows = [structure.index[names[j]] for j in d_cols]
+    g = region_influence(structure, d_rows) if d_rows else np.zeros((0, len(regions)))
+    R = np.nan_to_num(residual.R)
+    sig_T = evaluator.sigma.get("temperature", 0.1)
+    sig_D = evaluator.sigma.get("displacement", 1.0)
+    rows, rhs = [], []
+    for j in t_cols:
+        a = np.zeros(len(regions))
+        a[regions.index(part_of[names[j]])] = 1.0 / sig_T
+        rows.append(a)
+        rhs.append(R[:, j] / sig_T)
+    for k, j in enumerate(d_cols):
+        sig = sig_D if evaluator.kinds[j] == "displacement" else evaluator.sigma.get("strain", 1.0)
+        rows.append(g[k] / sig)
+        rhs.append(R[:, j] / sig)
+    if not rows:
+        return None
+    A = np.array(rows)
+    prior = max(float(np.sqrt(np.mean(R[:, t_cols] ** 2))) if t_cols else 0.0, 0.05)
+    lhs = A.T @ A + ridge * np.eye(len(regions)) / prior ** 2
+    c = np.linalg.solve(lhs, A.T @ np.array(rhs)).T            # (n_times, n_regions)
+    shares = {}
+    for k, j in enumerate(d_cols):
+        r = R[:, j]
+        denom = max(float(r @ r), 1e-300)
+        contrib = c * g[k]
+        shares[names[j]] = {reg: {"share": float(contrib[:, i] @ r / denom),
+                                  "rms": float(np.sqrt(np.mean(contrib[:, i] ** 2)))}
+                            for i, reg in enumerate(regions)}
+    rms = {reg: float(np.sqrt(np.mean(c[:, i] ** 2))) for i, reg in enumerate(regions)}
+    observed = sorted({part_of[names[j]] for j in t_cols})
+    units = {names[j]: "µm" if evaluator.kinds[j] == "displacement" else "µε" for j in d_cols}
+    return {"regions": regions, "c": c, "rms_K": rms, "shares": shares, "observed_regions": observed,
+            "influence": {names[j]: dict(zip(regions, g[k].tolist())) for k, j in enumerate(d_cols)},
+            "units": units}
+
+
+def effect_attribution(model, result, nominal, names):
+    """Split the winner's drift change over the parts through the reduced basis (see the module docstring)."""
+    backend = model.backend
+    if getattr(backend, "basis", None) is None or result.prediction is None or result.prediction.run is None:
+        return None
+    s = model.structure
+    d_rows = _drift_rows(s, names)
+    if not d_rows:
+        return None
+    regions = s.region_names
+    run_w, run_n = result.prediction.run, nominal.prediction.run
+    dZ = run_w.W @ run_w.Q.T - run_n.W @ run_n.Q.T             # (N, r) change of reduced state
+    C = s.output_matrix[d_rows]
+    out = {}
+    total_field = np.zeros((len(dZ), len(d_rows)))
+    parts = {}
+    for r in regions:
+        ind = sp.diags((s.node_region == r).astype(float))
+        Gr = backend.reduce_rows(C @ ind)                       # (k, r)
+        parts[r] = model.interp(dZ @ Gr.T)
+        total_field += dZ @ Gr.T
+    change = result.prediction.values[:, d_rows] - nominal.prediction.values[:, d_rows]
+    sensor_part = change - model.interp(total_field)
+    for k, row in enumerate(d_rows):
+        name = s.names[row]
+        c = change[:, k]
+        denom = max(float(c @ c), 1e-300)
+        entry = {r: {"share": float(parts[r][:, k] @ c / denom), "rms": float(np.sqrt(np.mean(parts[r][:, k] ** 2)))}
+                 for r in regions}
+        entry["sensor/fixture"] = {"share": float(sensor_part[:, k] @ c / denom),
+                                   "rms": float(np.sqrt(np.mean(sensor_part[:, k] ** 2)))}
+        out[name] = entry
+    k_star = int(np.argmax(np.abs(total_field).max(axis=1)))
+    field = backend.basis @ dZ[k_star]
+    return {"shares": out, "field_time_s": float(model.drive.grid[k_star]), "field": field}
+
+
+def candidate_points(structure, count=300, seed=0):
+    """Candidate thermometer locations: outer-surface thermal nodes, farthest-point sampled → (nodes, points)."""
+    machine = structure.machine
+    nodes, _, _, groups, _, _ = facet_table(machine)
+    inside = {r.name for r in machine.definition.convection if r.inside or r.name == "floor"}
+    keep = ~np.isin(groups, list(inside))
+    cand = np.unique(nodes[keep].ravel())
+    pts = machine.thermal.points[cand]
+    rng = np.random.default_rng(seed)
+    chosen = [int(rng.integers(len(cand)))]
+    dist = np.linalg.norm(pts - pts[chosen[0]], axis=1)
+    for _ in range(min(count, len(cand)) - 1):
+        j = int(np.argmax(dist))
+        chosen.append(j)
+        dist = np.minimum(dist, np.linalg.norm(pts - pts[j], axis=1))
+    return cand[chosen], pts[chosen]
+
+
+def separating_sensor(model, result_a, result_b, nominal, noise_K=0.05, count=300):
+    """Where a new surface thermometer would tell effects A and B apart (dict), or None without a basis."""
+    backend = model.backend
+    if getattr(backend, "basis", None) is None:
+        return None
+    s = model.structure
+    key = ("candidates", count)
+    cache = getattr(model, "_candidate_cache", None)
+    if cache is None or cache[0] != key:
+        nodes, pts = candidate_points(s, count)
+        from .structure import point_info
+
+        info = point_info(s, pts)
+        rows = backend.basis[nodes]                             # (k, r): one-hot node rows
+        air = s.local_air_matrix(info["zone"], info["height"])
+        model._candidate_cache = (key, (nodes, pts, info, rows, air))
+    nodes, pts, info, rows, air = model._candidate_cache[1]
+
+    def temps(result):
+        run = result.prediction.run
+        T = run.rows(rows)
+        active = list(zip([_effect(model, n) for n in result.effects], _split(result, model)))
+        outputs = [(e, th) for e, th in active if e.kind == "output"]
+        U = result.prediction.inputs
+        for e, th in sorted(outputs, key=lambda p: p[0].name != "sensor_mounting"):
+            T = e.thermometer_change(th, T, U @ air.T, model.drive.step_s)
+        return T
+
+    base = temps(nominal)
+    da = temps(result_a) - base
+    db = temps(result_b) - base
+    diff = (da - da.mean(axis=0)) - (db - db.mean(axis=0))
+    score = np.sqrt(np.mean(diff ** 2, axis=0))
+    j = int(np.argmax(score))
+    therm = s.thermometer_info()
+    near = int(np.argmin(np.linalg.norm(therm["position"] - pts[j], axis=1)))
+    # the best existing thermometer, for comparison
+    idx = s.thermometers
+    ya = result_a.prediction.grid_values[:, idx] - nominal.prediction.grid_values[:, idx]
+    yb = result_b.prediction.grid_values[:, idx] - nominal.prediction.grid_values[:, idx]
+    dd = (ya - ya.mean(axis=0)) - (yb - yb.mean(axis=0))
+    existing = np.sqrt(np.mean(dd ** 2, axis=0))
+    e_best = int(np.argmax(existing))
+    return {"a": result_a.name, "b": result_b.name,
+            "position_m": [round(float(v), 3) for v in pts[j]], "part": str(info["part"][j]),
+            "zone": str(info["zone"][j]), "difference_rms_K": float(score[j]),
+            "difference_over_noise": float(score[j] / max(noise_K, 1e-6)),
+            "nearest_sensor": s.names[idx[near]],
+            "nearest_sensor_distance_m": float(np.linalg.norm(therm["position"][near] - pts[j])),
+            "best_existing_sensor": s.names[idx[e_best]], "best_existing_difference_rms_K": float(existing[e_best])}
+
+
+def _effect(model, name):
+    return next(e for e in model.effects if e.name == name)
+
+
+def _split(result, model):
+    from .fit import Coordinates
+
+    effects = [_effect(model, n) for n in result.effects]
+    return [th for _, th in Coordinates(effects, model.structure.machine).split(result.values)]

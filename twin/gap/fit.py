@@ -1,0 +1,361 @@
+"""Fitting candidate effects to a measured record and weighing the evidence on held-out data.
+
+Residuals.  r = measured − twin on every sensor channel, with two nuisances
+eliminated on the *fit* rows in every model, the nominal included: a
+constant offset per channel (thermometer accuracy, probe zero) and the
+free response of the initial-state shapes (:data:`~twin.gap.structure.NUISANCE_FIELDS`;
+the start of a record is never known exactly).  Held-out rows use the
+offsets and nuisance coefficients of the fit rows.
+
+Weights.  Channels are grouped by kind (surface thermometers, air
+sensors, drift, strain); each group carries equal weight: w = 1 / (σ_g² n_g),
+σ_g the nominal model's RMS residual of the group on the fit rows, floored
+at the group's noise level.
+
+Fits.  Effects linear in their parameters are fitted by bounded linear
+least squares on basis responses (one simulation per parameter); the others
+(and any set with one) by bounded nonlinear least squares (trust-region
+reflective, in [0, 1]-scaled and, where marked, log coordinates) after a
+coarse scan of one-parameter effects.  Parameter uncertainty: the Jacobian
+at the optimum with the residual variance per *effective* sample,
+cov = SSE_fit / (n_eff − k) · (JᵀJ)⁻¹.
+
+Evidence.  BIC-like on the held-out rows, relative to the nominal twin:
+BIC = n_eff · ln(SSE_hold / SSE_hold,nominal) + k · ln(n_eff), where n_eff
+counts effectively independent held-out samples (per group: the median over
+channels of n(1 − ρ₁)/(1 + ρ₁), ρ₁ the lag-1 autocorrelation of the nominal
+residual, times the participation ratio of the channels' correlation).
+ΔBIC between two models gives the evidence ratio exp(ΔBIC/2).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares, lsq_linear
+
+GROUPS = ("temperature", "air", "displacement", "strain")
+GROUP_FLOOR = {"temperature": 0.02, "air": 0.02, "displacement": 0.05, "strain": 0.1}
+GROUP_UNIT = {"temperature": "K", "air": "K", "displacement": "µm", "strain": "µε"}
+
+
+@dataclass
+class Residual:
+    """Residuals (n, p) after offsets and nuisance, and the sums of squares on the fit and held-out rows."""
+
+    R: np.ndarray
+    offsets: np.ndarray
+    nuisance: dict
+    sse_fit: float
+    sse_hold: float
+
+
+class Evaluator:
+    """Residuals of predictions against the record's sensor channels (see the module docstring)."""
+
+    def __init__(self, values, channel_index, kinds, fit_rows, hold_rows, noise=None):
+        self.Y = np.asarray(values, float)
+        self.mask = np.isfinite(self.Y)
+        self.Yz = np.where(self.mask, self.Y, 0.0)
+        self.cols = np.asarray(channel_index)
+        self.kinds = list(kinds)
+        self.fit_rows = np.asarray(fit_rows, bool)
+        self.hold_rows = np.asarray(hold_rows, bool)
+        self.fit_mask = self.mask & self.fit_rows[:, None]
+        self.hold_mask = self.mask & self.hold_rows[:, None]
+        self.n_fit = self.fit_mask.sum(axis=0)
+        self.noise = np.zeros(len(self.cols)) if noise is None else np.nan_to_num(np.asarray(noise, float))
+        self.weights = np.ones(len(self.cols))
+        self.sqrt_w = np.ones(len(self.cols))
+
+    def groups(self):
+        return {g: [j for j, k in enumerate(self.kinds) if k == g] for g in GROUPS
+                if any(k == g for k in self.kinds)}
+
+    def set_weights(self, residual):
+        """Equal weight per channel group from a (nominal) residual; see the module docstring."""
+        self.sigma = {}
+        for g, idx in self.groups().items():
+            r = residual.R[:, idx][self.fit_mask[:, idx]]
+            sigma = float(np.sqrt(np.mean(r ** 2))) if r.size else 1.0
+            sigma = max(sigma, GROUP_FLOOR[g], float(np.median(self.noise[idx])))
+            self.sigma[g] = sigma
+            self.weights[idx] = 1.0 / (sigma ** 2 * len(idx))
+        self.sqrt_w = np.sqrt(self.weights)
+
+    def _centre(self, X):
+        """Per-channel mean over the valid fit rows of X (n, p)."""
+        return np.where(self.fit_mask, X, 0.0).sum(axis=0) / np.maximum(self.n_fit, 1)
+
+    def residual(self, prediction, nuisance=True):
+        """:class:`Residual` of a :class:`~twin.gap.model.Prediction` (offsets and nuisance eliminated)."""
+        P = prediction.values[:, self.cols]
+        R0 = self.Yz - P
+        names = list(prediction.nuisance) if nuisance else []
+        beta = {}
+        if names:
+            N = [prediction.nuisance[n][:, self.cols] for n in names]
+            cols = [self._flat_fit((X - self._centre(X)) * self.sqrt_w) for X in N]
+            A = np.column_stack(cols)
+            b = self._flat_fit((R0 - self._centre(R0)) * self.sqrt_w)
+            scale = np.maximum(np.linalg.norm(A, axis=0), 1e-300)
+            coef, *_ = np.linalg.lstsq(A / scale, b, rcond=None)
+            coef = coef / scale
+            for n, c, X in zip(names, coef, N):
+                beta[n] = float(c)
+                R0 = R0 - c * X
+        offsets = self._centre(R0)
+        R = np.where(self.mask, R0 - offsets, np.nan)
+        Rz = np.nan_to_num(R) * self.sqrt_w
+        return Residual(R, offsets, beta, float(np.sum(Rz[self.fit_mask] ** 2)),
+                        float(np.sum(Rz[self.hold_mask] ** 2)))
+
+    def _flat_fit(self, X):
+        return X[self.fit_mask]
+
+    def fit_vector(self, prediction):
+        """Weighted residual entries on the valid fit rows (for least squares)."""
+        res = self.residual(prediction)
+        return (np.nan_to_num(res.R) * self.sqrt_w)[self.fit_mask]
+
+    # ------------------------------------------------------------------ summaries
+    def summary(self, residual, names):
+        """RMS and max |r| per group and per channel on the fit and held-out rows (in channel units)."""
+        out = {"groups": {}, "channels": {}}
+        for g, idx in self.groups().items():
+            out["groups"][g] = _stats(residual.R[:, idx], self.fit_rows, self.hold_rows)
+        for j, n in enumerate(names):
+            out["channels"][n] = _stats(residual.R[:, [j]], self.fit_rows, self.hold_rows)
+        return out
+
+
+def _stats(R, fit_rows, hold_rows):
+    out = {}
+    for part, rows in (("fit", fit_rows), ("hold", hold_rows)):
+        r = R[rows]
+        r = r[np.isfinite(r)]
+        out[f"{part}_rms"] = float(np.sqrt(np.mean(r ** 2))) if r.size else float("nan")
+        out[f"{part}_max"] = float(np.abs(r).max()) if r.size else float("nan")
+    return out
+
+
+def effective_samples(residual, evaluator, rows):
+    """Effectively independent residual samples on ``rows`` (see the module docstring)."""
+    total = 0.0
+    for g, idx in evaluator.groups().items():
+        R = residual.R[rows][:, idx]
+        per = []
+        for j in range(R.shape[1]):
+            r = R[:, j]
+            r = r[np.isfinite(r)]
+            if len(r) < 4 or np.std(r) == 0:
+                continue
+            r = r - r.mean()
+            rho = float(np.clip(np.sum(r[1:] * r[:-1]) / np.sum(r * r), -0.99, 0.9999))
+            per.append(np.clip(len(r) * (1 - rho) / (1 + rho), 1.0, len(r)))
+        if not per:
+            continue
+        X = np.nan_to_num(R)
+        X = X[:, np.std(X, axis=0) > 0]
+        if X.shape[1] > 1:
+            lam = np.clip(np.linalg.eigvalsh(np.corrcoef(X.T)), 0, None)
+            pr = float(lam.sum() ** 2 / max(np.sum(lam ** 2), 1e-300))
+        else:
+            pr = 1.0
+        total += float(np.median(per)) * pr
+    return max(total, 2.0)
+
+
+# ============================================================================= parameter coordinates
+class Coordinates:
+    """[0, 1]-scaled (and log where marked) coordinates of the parameters of a set of effects."""
+
+    def __init__(self, effects, machine):
+        self.effects = list(effects)
+        self.params = [(e, p) for e in self.effects for p in e.parameters(machine)]
+        self.sizes = [len(e.parameters(machine)) for e in self.effects]
+        self.lo = np.array([np.log10(p.lower) if p.log else p.lower for _, p in self.params])
+        self.hi = np.array([np.log10(p.upper) if p.log else p.upper for _, p in self.params])
+        self.log = np.array([p.log for _, p in self.params])
+        self.nominal_values = np.array([p.nominal for _, p in self.params])
+
+    def values(self, u):
+        x = self.lo + np.asarray(u, float) * (self.hi - self.lo)
+        out = x.copy()
+        out[self.log] = 10.0 ** x[self.log]
+        return out
+
+    def unit(self, values):
+        v = np.asarray(values, float)
+        x = np.where(self.log, np.log10(np.maximum(v, 1e-300)), v)
+        return np.clip((x - self.lo) / (self.hi - self.lo), 0.0, 1.0)
+
+    def split(self, values):
+        out, k = [], 0
+        for e, n in zip(self.effects, self.sizes):
+            out.append((e, np.asarray(values[k:k + n], float)))
+            k += n
+        return out
+
+    @property
+    def labels(self):
+        return [f"{e.name}.{p.name}" for e, p in self.params]
+
+
+@dataclass
+class FitResult:
+    """One fitted model (an effect, a pair, or the nominal twin) and its evidence."""
+
+    name: str
+    effects: list
+    labels: list
+    units: list
+    values: np.ndarray
+    sd: np.ndarray
+    residual: Residual
+    summary: dict
+    seconds: float
+    nfev: int
+    linear: bool
+    bic: float = 0.0
+    delta_bic: float = 0.0
+    n_eff_fit: float = 0.0
+    prediction: object = None
+    notes: list = field(default_factory=list)
+
+    @property
+    def k(self):
+        return len(self.values)
+
+    def params(self):
+        return [{"name": lab, "value": float(v), "sd": float(s), "unit": u}
+                for lab, v, s, u in zip(self.labels, self.values, self.sd, self.units)]
+
+
+def fit_effects(model, evaluator, effects, start=None, max_nfev=60):
+    """Fit the parameters of ``effects`` (one or several, jointly) → :class:`FitResult`."""
+    t0 = time.perf_counter()
+    machine = model.structure.machine
+    co = Coordinates(effects, machine)
+    linear = all(e.linear for e in effects)
+    nfev = 0
+    if linear:
+        base = model.predict()
+        deltas = co.hi - co.lo
+        G = []
+        for j in range(len(co.params)):
+            v = co.nominal_values.copy()
+            v[j] += deltas[j]
+            G.append((model.predict(co.split(v)).values - base.values) / deltas[j])
+            nfev += 1
+
+        def predict(values):
+            from .model import Prediction
+
+            d = values - co.nominal_values
+            Y = base.values + sum(dj * Gj for dj, Gj in zip(d, G))
+            return Prediction(Y, base.nuisance, None, None, None)
+
+        # bounded linear LS on the nuisance-projected, centred, weighted design
+        r0 = evaluator.fit_vector(predict(co.nominal_values))
+        cols = []
+        for j in range(len(co.params)):
+            e = np.zeros(len(co.params))
+            e[j] = 1.0
+            cols.append(r0 - evaluator.fit_vector(predict(co.nominal_values + e)))
+        A = np.column_stack(cols)
+        lower = np.array([p.lower for _, p in co.params]) - co.nominal_values
+        upper = np.array([p.upper for _, p in co.params]) - co.nominal_values
+        sol = lsq_linear(A, r0, bounds=(lower, upper), method="bvls")
+        values = co.nominal_values + sol.x
+        J = A
+    else:
+        cache = {}
+
+        def fun(u):
+            key = tuple(np.round(u, 12))
+            if key not in cache:
+                cache[key] = evaluator.fit_vector(model.predict(co.split(co.values(u))))
+            return cache[key]
+
+        u0 = co.unit(co.nominal_values if start is None else start)
+        if len(u0) == 1:
+            grid = np.unique(np.r_[np.linspace(0.0, 1.0, 7), u0])
+            costs = [float(np.sum(fun(np.array([g])) ** 2)) for g in grid]
+            u0 = np.array([grid[int(np.argmin(costs))]])
+        sol = least_squares(fun, u0, bounds=(0.0, 1.0), method="trf", x_scale=1.0, diff_step=1e-3,
+                            max_nfev=max_nfev, xtol=1e-6, ftol=1e-8)
+        values = co.values(sol.x)
+        nfev = len(cache)
+        # Jacobian in parameter units
+        J = _jacobian(lambda v: evaluator.fit_vector(model.predict(co.split(v))), values, co)
+        nfev += len(values)
+        predict = None
+    pred = model.predict(co.split(values))
+    res = evaluator.residual(pred)
+    n_eff = effective_samples(res, evaluator, evaluator.fit_rows)
+    sd = _parameter_sd(J, res.sse_fit, n_eff)
+    result = FitResult("+".join(e.name for e in effects), [e.name for e in effects], co.labels,
+                       [p.unit for _, p in co.params], values, sd, res,
+                       evaluator.summary(res, model_names(model, evaluator)), time.perf_counter() - t0, nfev,
+                       linear, n_eff_fit=n_eff, prediction=pred)
+    at_bound = [lab for lab, u in zip(co.labels, co.unit(values)) if u <= 1e-6 or u >= 1 - 1e-6]
+    if at_bound:
+        result.notes.append(f"at a bound: {', '.join(at_bound)}")
+    return result
+
+
+def model_names(model, evaluator):
+    return [model.structure.names[c] for c in evaluator.cols]
+
+
+def _jacobian(fun, values, co, rel=1e-3):
+    f0 = fun(values)
+    cols = []
+    for j in range(len(values)):
+        v = values.copy()
+        span = (co.hi[j] - co.lo[j]) * rel
+        if co.log[j]:
+            h = values[j] * (10 ** span - 1)
+        else:
+            h = span
+        if values[j] + h > (10 ** co.hi[j] if co.log[j] else co.hi[j]):
+            h = -h
+        v[j] += h
+        cols.append((fun(v) - f0) / h)
+    return -np.column_stack(cols)
+
+
+def _parameter_sd(J, sse, n_eff):
+    k = J.shape[1]
+    JtJ = J.T @ J
+    try:
+        cov = np.linalg.pinv(JtJ) * sse / max(n_eff - k, 1.0)
+    except np.linalg.LinAlgError:
+        return np.full(k, np.nan)
+    return np.sqrt(np.clip(np.diag(cov), 0, None))
+
+
+def nominal_result(model, evaluator):
+    """The nominal twin as a :class:`FitResult` (nuisance and offsets only); sets the evaluator's weights."""
+    t0 = time.perf_counter()
+    pred = model.predict()
+    res = evaluator.residual(pred)
+    evaluator.set_weights(res)
+    res = evaluator.residual(pred)
+    n_eff = effective_samples(res, evaluator, evaluator.fit_rows)
+    return FitResult("nominal", [], [], [], np.zeros(0), np.zeros(0), res,
+                     evaluator.summary(res, model_names(model, evaluator)), time.perf_counter() - t0, 1, True,
+                     n_eff_fit=n_eff, prediction=pred)
+
+
+def score(results, nominal, n_eff_hold):
+    """Set BIC (relative to the nominal) and ΔBIC vs the nominal on every result; return them ranked."""
+    ref = max(nominal.residual.sse_hold, 1e-300)
+    nominal.bic, nominal.delta_bic = 0.0, 0.0
+    for r in results:
+        ratio = max(r.residual.sse_hold, 1e-300) / ref
+        r.bic = float(n_eff_hold * np.log(ratio) + r.k * np.log(n_eff_hold))
+        r.delta_bic = -r.bic
+    return sorted(results, key=lambda r: r.bic)

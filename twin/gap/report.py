@@ -1,0 +1,377 @@
+"""The written diagnosis: ``report.md`` with figures (PNG) and ``diagnosis.json``, in one result folder.
+
+The report answers, in order: is there a significant gap (the verdict); the
+data and how it was read (missing channels, NaNs, gaps, sampling, offsets);
+(a) where the twin misses (sensors, drift axes, phases, frequency bands,
+parts, a render); (b) which effect explains it (ranking with fitted values,
+uncertainty and evidence); (c) how far the residual shrinks on held-out data.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from ..outdir import atomic_directory  # noqa: E402
+from .fit import GROUP_UNIT  # noqa: E402
+
+GROUP_LABEL = {"temperature": "surface temperatures", "air": "air sensors", "displacement": "TCP drift",
+               "strain": "strain lines"}
+
+
+def _f(v, spec=".3g"):
+    if v is None or (isinstance(v, float) and not np.isfinite(v)):
+        return "–"
+    return format(v, spec)
+
+
+def _ratio(x):
+    return "> 1e100" if x > 1e100 else _f(x, ".3g")
+
+
+def _save(fig, path):
+    fig.tight_layout()
+    tmp = Path(path).with_name(f".{Path(path).stem}.partial.png")
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    tmp.replace(path)
+    return Path(path).name
+
+
+def write_report(d, out_dir, render=True):
+    """Write ``report.md``, ``diagnosis.json`` and the figures of a :class:`~twin.gap.diagnose.Diagnosis`."""
+    out_dir = Path(out_dir)
+    with atomic_directory(out_dir) as tmp:
+        figures = {"residuals": plot_residuals(d, tmp / "residuals.png"),
+                   "ranking": plot_ranking(d, tmp / "ranking.png"),
+                   "breakdown": plot_breakdown(d, tmp / "phases_bands.png")}
+        att = plot_attribution(d, tmp / "attribution.png")
+        if att:
+            figures["attribution"] = att
+        if render:
+            try:
+                figures.update(render_figures(d, tmp))
+            except Exception as exc:  # pragma: no cover - off-screen rendering depends on the host
+                d.notes.append(f"render skipped: {exc}")
+        (tmp / "report.md").write_text(format_report(d, figures))
+        (tmp / "diagnosis.json").write_text(json.dumps(to_json(d), indent=1, default=_json))
+    return out_dir
+
+
+def _json(v):
+    if isinstance(v, (np.floating, np.integer, np.bool_)):
+        return v.item()
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    return str(v)
+
+
+def to_json(d):
+    """The machine-readable diagnosis."""
+    def res(r):
+        return {"name": r.name, "params": r.params(), "delta_bic": r.delta_bic, "bic": r.bic,
+                "sse_fit": r.residual.sse_fit, "sse_hold": r.residual.sse_hold, "groups": r.summary["groups"],
+                "seconds": r.seconds, "evaluations": r.nfev, "notes": r.notes}
+    attr = d.attribution.get("regions")
+    win = d.attribution.get("winner")
+    return {
+        "verdict": d.verdict, "significant": d.significant,
+        "winner": res(d.winner) if d.winner is not None else None,
+        "runner_up": d.runner_up.name if d.runner_up is not None else None,
+        "evidence_ratio": d.evidence_ratio, "n_eff_hold": d.n_eff_hold,
+        "split_s": d.split_s, "noise": d.noise, "gap_over_noise": d.gap_over_noise,
+        "nominal": {**res(d.nominal), "channels": d.nominal.summary["channels"],
+                    "offsets": dict(zip(d.names, d.nominal.residual.offsets.tolist())),
+                    "initial_state": d.nominal.residual.nuisance},
+        "ranking": [res(r) for r in d.ranking], "shrinkage": d.shrinkage(),
+        "where": d.where, "separation": d.separation,
+        "attribution": {"regions": None if attr is None else {k: attr[k] for k in ("rms_K", "shares", "influence",
+                                                                                      "observed_regions")},
+                        "winner": None if win is None else {"shares": win["shares"],
+                                                            "field_time_s": win["field_time_s"]}},
+        "data": d.record.report, "notes": d.notes, "skipped_effects": d.skipped, "timings": d.timings,
+    }
+
+
+# ============================================================================= figures
+def plot_residuals(d, path, n_temperatures=6):
+    """Residuals over time: the worst thermometers and every drift axis, nominal and with the winner."""
+    ev, names = d.evaluator, d.names
+    th = d.record.time_s / 3600.0
+    temps = [j for j, k in enumerate(ev.kinds) if k == "temperature"]
+    rms = {j: d.nominal.summary["channels"][names[j]]["hold_rms"] for j in temps}
+    temps = sorted(temps, key=lambda j: -np.nan_to_num(rms[j]))[:n_temperatures]
+    drift = [j for j, k in enumerate(ev.kinds) if k == "displacement"]
+    panels = [("temperature", temps, "K"), ("displacement", drift, "µm")]
+    panels = [p for p in panels if p[1]]
+    fig, axes = plt.subplots(len(panels), 1, figsize=(10, 3.6 * len(panels)), sharex=True, squeeze=False)
+    for ax, (kind, cols, unit) in zip(axes[:, 0], panels):
+        for i, j in enumerate(cols):
+            color = f"C{i}"
+            ax.plot(th, d.nominal.residual.R[:, j], color=color, lw=1.0, label=f"{names[j]} nominal")
+            if d.winner is not None:
+                ax.plot(th, d.winner.residual.R[:, j], color=color, lw=1.0, ls="--", label=f"{names[j]} + effect")
+        ax.axvspan(d.split_s / 3600.0, th[-1], color="grey", alpha=0.12, lw=0)
+        ax.set_ylabel(f"residual, measured − twin ({unit})")
+        ax.set_title(f"{GROUP_LABEL[kind]}: nominal (solid)"
+                     + (f", with {d.winner.name} (dashed)" if d.winner is not None else "")
+                     + "; held-out part shaded")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, ncol=3)
+    axes[-1, 0].set_xlabel("time (h)")
+    return _save(fig, path)
+
+
+def plot_ranking(d, path, n=12):
+    """ΔBIC vs the nominal twin on held-out data of the leading models."""
+    top = d.ranking[:n]
+    fig, ax = plt.subplots(figsize=(9, 0.35 * len(top) + 1.5))
+    values = [max(r.delta_bic, -50) for r in top]
+    colors = ["C2" if d.winner is not None and r is d.winner else "C0" for r in top]
+    ax.barh(range(len(top)), values, color=colors)
+    ax.set_yticks(range(len(top)), [r.name for r in top], fontsize=8)
+    ax.invert_yaxis()
+    ax.axvline(10, color="red", lw=0.8, ls="--")
+    ax.set_xscale("symlog", linthresh=10)
+    ax.set_xlabel("ΔBIC vs nominal on held-out data (higher is better; dashed: significance 10)")
+    ax.grid(alpha=0.3, axis="x")
+    return _save(fig, path)
+
+
+def plot_breakdown(d, path):
+    """RMS residual per phase and per frequency band, per channel group, before (and after) the winner."""
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.2))
+    for ax, key, title in ((axes[0], "phases", "per operating phase (all rows)"),
+                           (axes[1], "bands", "per frequency band (all rows)")):
+        table = d.where[key]
+        labels = list(table)
+        groups = [g for g in ("temperature", "displacement", "strain") if g in d.evaluator.groups()]
+        width = 0.8 / max(len(groups), 1)
+        for i, g in enumerate(groups):
+            before = [table[k].get(g, np.nan) / d.evaluator.sigma.get(g, 1) for k in labels]
+            ax.bar(np.arange(len(labels)) + i * width, before, width, label=f"{GROUP_LABEL[g]} nominal", color=f"C{i}")
+            after = d.where.get(f"{key}_after")
+            if after:
+                ax.bar(np.arange(len(labels)) + i * width, [after[k].get(g, np.nan) / d.evaluator.sigma.get(g, 1)
+                                                            for k in labels], width * 0.5, color="black",
+                       alpha=0.55, label=f"{GROUP_LABEL[g]} with effect" if i == 0 else None)
+        ax.set_xticks(np.arange(len(labels)) + 0.4 - width / 2, labels, rotation=20, fontsize=8)
+        ax.set_ylabel("RMS residual / group scale σ_g (–)")
+        ax.set_title(title)
+        ax.grid(alpha=0.3, axis="y")
+        ax.legend(fontsize=7)
+    return _save(fig, path)
+
+
+def plot_attribution(d, path):
+    """Shares of the drift residual explained by each part (model-free estimate, and through the winner)."""
+    est = d.attribution.get("regions")
+    if not est or not est["shares"]:
+        return None
+    axes_names = list(est["shares"])
+    regions = est["regions"]
+    fig, ax = plt.subplots(figsize=(10, 4))
+    width = 0.8 / len(axes_names)
+    for i, a in enumerate(axes_names):
+        ax.bar(np.arange(len(regions)) + i * width, [est["shares"][a][r]["share"] for r in regions], width,
+               label=f"{a} (model-free estimate)")
+    win = d.attribution.get("winner")
+    if win:
+        for i, a in enumerate(axes_names):
+            if a in win["shares"]:
+                ax.scatter(np.arange(len(regions)) + i * width, [win["shares"][a][r]["share"] for r in regions],
+                           marker="x", color="black", zorder=3, label="through the winner" if i == 0 else None)
+    ax.set_xticks(np.arange(len(regions)) + 0.4 - width / 2, regions, rotation=20, fontsize=8)
+    ax.set_ylabel("share of the drift residual (–)")
+    ax.axhline(0, color="black", lw=0.6)
+    ax.grid(alpha=0.3, axis="y")
+    ax.legend(fontsize=7, ncol=2)
+    ax.set_title("Which part's temperature error explains the drift error")
+    return _save(fig, path)
+
+
+def render_figures(d, tmp):
+    """Off-screen renders: sensors and parts coloured by residual; the winner's temperature change."""
+    from ..render import render_machine
+
+    s = d.model.structure
+    machine = s.machine
+    out = {}
+    est = d.attribution.get("regions")
+    therm = [j for j, k in enumerate(d.evaluator.kinds) if k == "temperature"]
+    pts = np.array([s.channels[s.index[d.names[j]]].position for j in therm])
+    vals = [d.nominal.summary["channels"][d.names[j]]["hold_rms"] for j in therm]
+    node_values = None
+    if est is not None:
+        mesh = machine.mesh
+        region = np.empty(mesh.n_nodes, dtype=int)
+        region[mesh.tets.ravel()] = np.repeat(mesh.regions, 4)
+        rms = np.array([est["rms_K"][mesh.region_names[r]] for r in sorted(mesh.region_names)])
+        ids = {r: i for i, r in enumerate(sorted(mesh.region_names))}
+        node_values = rms[[ids[r] for r in region]]
+    out["render_residuals"] = render_machine(
+        machine, tmp / "render_residuals.png", node_values=node_values,
+        scalar_label="part temperature error, RMS (K)", cmap="Oranges", points=pts,
+        point_labels=[d.names[j] for j in therm], point_values=vals, point_label="sensor residual, held-out RMS (K)",
+        title="Where the twin misses: parts by estimated error, sensors by residual").name
+    win = d.attribution.get("winner")
+    if win is not None:
+        field = machine.thermal.nodal_field(win["field"])
+        lim = float(np.abs(field).max()) or 1.0
+        out["render_effect"] = render_machine(
+            machine, tmp / "render_effect.png", node_values=field, scalar_label="temperature change (K)",
+            cmap="coolwarm", clim=(-lim, lim),
+            title=f"{d.winner.name}: temperature change at t = {win['field_time_s'] / 3600:.1f} h").name
+    return out
+
+
+# ============================================================================= Markdown
+def format_report(d, figures):
+    rec = d.record.report
+    ev = d.evaluator
+    groups = [g for g in ("temperature", "air", "displacement", "strain") if g in ev.groups()]
+    L = [f"# Gap diagnosis: {rec.get('source')} on `{d.machine.name}`", ""]
+    L += [f"**Verdict: {d.verdict}.**", ""]
+    # ---------------------------------------------------------------- data
+    L += ["## Data", "",
+          f"- {rec['rows']} rows over {rec['span_h']:.2f} h, sampling {rec['sampling_interval_s']:g} s"
+          f" ({'regular' if rec['sampling_regular'] else 'irregular'}); {rec['n_gaps']} gap(s)"
+          + (f", the longest {max(g['length_s'] for g in rec['gaps']):g} s" if rec["gaps"] else ""),
+          f"- twin on a {d.model.drive.step_s:g} s grid ({d.model.backend.name} backend"
+          + (f", {d.model.backend.order} states" if hasattr(d.model.backend, "order") else "")
+          + "), interpolated to the measured times",
+          f"- sensors used ({len(d.names)}): {', '.join(d.names)}",
+          f"- sensors of the machine not in the data: {', '.join(rec['sensors_missing']) or 'none'}",
+          f"- channels with no value at all (left out): {', '.join(rec['channels_empty']) or 'none'}",
+          f"- ignored channels: {', '.join(rec['channels_ignored']) or 'none'}",
+          "- NaNs (masked out of the residuals): " + (", ".join(
+              f"{k} {v} (longest run {rec['longest_nan_run_s'][k]:g} s)" for k, v in rec["nan_counts"].items())
+              or "none"),
+          f"- inputs: spindle {'measured' if rec['has_spindle'] else 'from the scenario'}; feeds "
+          f"{', '.join(rec['feeds']) or 'none'}; ambient from {', '.join(rec['air_inputs']) or 'the scenario'}",
+          f"- split: fit on t ≤ {d.split_s / 3600:.2f} h, held out after "
+          f"({int(ev.hold_rows.sum())} rows); effective independent held-out samples n_eff = {d.n_eff_hold:.0f}",
+          "- noise level (median per group, from second differences): "
+          + ", ".join(f"{GROUP_LABEL[g]} {d.noise[g]:.3g} {GROUP_UNIT[g]}" for g in groups)]
+    for note in d.notes:
+        L.append(f"- note: {note}")
+    off = d.nominal.residual.offsets
+    big = [(n, o, GROUP_UNIT[k]) for n, o, k in zip(d.names, off, ev.kinds) if abs(o) > 0.25]
+    L += [f"- constant offsets (estimated on the fit part, every model): largest |offset| "
+          f"{max(np.abs(off)):.3g}; " + (", ".join(f"{n} {o:+.2f} {u}" for n, o, u in big[:12]) or "all small")
+          + " (thermometer accuracy, probe zero, ambient level)",
+          f"- initial state (nuisance, nominal): {', '.join(f'{k} {v:+.3g}' for k, v in d.nominal.residual.nuisance.items())}",
+          ""]
+    # ---------------------------------------------------------------- where
+    L += ["## (a) Where the twin misses", "",
+          "| channel group | fit RMS | held-out RMS | held-out max | held-out RMS / noise |", "|---|---|---|---|---|"]
+    for g in groups:
+        s = d.nominal.summary["groups"][g]
+        L.append(f"| {GROUP_LABEL[g]} ({GROUP_UNIT[g]}) | {_f(s['fit_rms'])} | {_f(s['hold_rms'])} | "
+                 f"{_f(s['hold_max'])} | {_f(d.gap_over_noise[g], '.1f')} |")
+    L += ["", f"![residuals]({figures['residuals']})", "",
+          "Per sensor (nominal twin; after = with the named effect):", "",
+          "| sensor | kind | fit RMS | held-out RMS | held-out max | after: held-out RMS |", "|---|---|---|---|---|---|"]
+    for j, n in enumerate(d.names):
+        s = d.nominal.summary["channels"][n]
+        a = d.winner.summary["channels"][n]["hold_rms"] if d.winner is not None else None
+        L.append(f"| {n} | {ev.kinds[j]} ({GROUP_UNIT[ev.kinds[j]]}) | {_f(s['fit_rms'])} | {_f(s['hold_rms'])} | "
+                 f"{_f(s['hold_max'])} | {_f(a)} |")
+    drift_names = [n for n, k in zip(d.names, ev.kinds) if k == "displacement"]
+    L += ["", "By operating phase (RMS over all rows; phases from spindle speed and ambient activity):", "",
+          "| phase | rows | " + " | ".join(GROUP_LABEL[g] for g in groups if g != "air") + " | "
+          + " | ".join(f"{n} (µm)" for n in drift_names) + " |",
+          "|---|---|" + "---|" * (len([g for g in groups if g != 'air']) + len(drift_names))]
+    for ph, e in d.where["phases"].items():
+        L.append(f"| {ph} | {e['rows']} | " + " | ".join(_f(e.get(g)) for g in groups if g != "air") + " | "
+                 + " | ".join(_f(e.get(n)) for n in drift_names) + " |")
+    L += ["", "By frequency band (RMS over all rows):", "",
+          "| band | " + " | ".join(GROUP_LABEL[g] for g in groups if g != "air") + " | "
+          + " | ".join(f"{n} (µm)" for n in drift_names) + " |",
+          "|---|" + "---|" * (len([g for g in groups if g != 'air']) + len(drift_names))]
+    for band, e in d.where["bands"].items():
+        L.append(f"| {band} | " + " | ".join(_f(e.get(g)) for g in groups if g != "air") + " | "
+                 + " | ".join(_f(e.get(n)) for n in drift_names) + " |")
+    L += ["", f"![phases and bands]({figures['breakdown']})", ""]
+    est = d.attribution.get("regions")
+    if est is not None and est["shares"]:
+        L += ["Which part's temperature error explains the drift error (model-free: a uniform temperature error "
+              "per part, ridge-estimated from the thermometer and drift residuals through the displacement "
+              "influence operators; share = part's contribution · residual / |residual|²):", "",
+              "| part | sensors on it | est. error RMS (K) | " + " | ".join(f"{a} share" for a in est["shares"])
+              + " | " + " | ".join(f"{a} {est['units'][a]}/K" for a in est["influence"]) + " |",
+              "|---|---|---|" + "---|" * (2 * len(est["shares"]))]
+        for r in est["regions"]:
+            L.append(f"| {r} | {'yes' if r in est['observed_regions'] else 'no'} | {est['rms_K'][r]:.3f} | "
+                     + " | ".join(f"{est['shares'][a][r]['share']:+.2f}" for a in est["shares"]) + " | "
+                     + " | ".join(f"{est['influence'][a][r]:+.2f}" for a in est["influence"]) + " |")
+        L.append("")
+    win = d.attribution.get("winner")
+    if win is not None:
+        axes = list(win["shares"])
+        L += [f"Through the named effect ({d.winner.name}): its drift change split exactly over the parts "
+              "(share of the change; 'sensor/fixture' is the part not due to temperature):", "",
+              "| part | " + " | ".join(axes) + " |", "|---|" + "---|" * len(axes)]
+        for r in list(win["shares"][axes[0]]):
+            L.append(f"| {r} | " + " | ".join(f"{win['shares'][a][r]['share']:+.2f}" for a in axes) + " |")
+        L.append("")
+    if "attribution" in figures:
+        L += [f"![attribution]({figures['attribution']})", ""]
+    if "render_residuals" in figures:
+        L += [f"![render]({figures['render_residuals']})", ""]
+    # ---------------------------------------------------------------- which effect
+    L += ["## (b) Which effect", "",
+          f"Candidates: {len(d.singles)} effects of the library"
+          + (f" (not applicable to this machine: {', '.join(d.skipped)})" if d.skipped else "")
+          + f", and {len(d.pairs)} pairs of the leading ones. Ranked by ΔBIC against the nominal twin on the "
+          "held-out part (n_eff · ln(SSE/SSE_nominal) + k · ln n_eff); parameters ± 1 sd from the Jacobian.", "",
+          "| rank | model | parameters | ΔBIC | held-out SSE / nominal | "
+          + " | ".join(f"held-out {GROUP_LABEL[g]} RMS" for g in groups if g != "air") + " | notes |",
+          "|---|---|---|---|---|" + "---|" * len([g for g in groups if g != "air"]) + "---|"]
+    for i, r in enumerate(d.ranking[:20]):
+        params = "; ".join(f"{p['name'].split('.', 1)[1]} = {p['value']:.3g} ± {p['sd']:.2g} {p['unit']}"
+                           for p in r.params())
+        mark = " **(named)**" if d.winner is not None and r is d.winner else ""
+        L.append(f"| {i + 1} | {r.name}{mark} | {params} | {r.delta_bic:.1f} | "
+                 f"{r.residual.sse_hold / max(d.nominal.residual.sse_hold, 1e-300):.3f} | "
+                 + " | ".join(_f(r.summary["groups"][g]["hold_rms"]) for g in groups if g != "air")
+                 + f" | {'; '.join(r.notes)} |")
+    L += ["", f"![ranking]({figures['ranking']})", ""]
+    if d.runner_up is not None:
+        best = d.winner or d.ranking[0]
+        L.append(f"**Confidence:** {best.name} vs the runner-up {d.runner_up.name}: ΔBIC "
+                 f"{d.runner_up.bic - best.bic:.1f}, evidence ratio {_ratio(d.evidence_ratio)} "
+                 "(> 150 is 'very strong' on the Kass–Raftery scale).")
+    if d.separation and "error" not in d.separation:
+        s = d.separation
+        L.append(f"**Separating sensor** ({s['a']} vs {s['b']}): a thermometer on the {s['part']} at "
+                 f"{s['position_m']} m (zone {s['zone']}) would see their fitted signatures differ by "
+                 f"{s['difference_rms_K']:.3f} K RMS ({s['difference_over_noise']:.1f}× the noise); the nearest "
+                 f"existing sensor is {s['nearest_sensor']} ({s['nearest_sensor_distance_m'] * 1e3:.0f} mm away); "
+                 f"the best existing one, {s['best_existing_sensor']}, sees {s['best_existing_difference_rms_K']:.3f} K.")
+    L.append("")
+    if "render_effect" in figures:
+        L += [f"![effect]({figures['render_effect']})", ""]
+    # ---------------------------------------------------------------- shrinkage
+    L += ["## (c) How far the residual shrinks (held-out part)", ""]
+    if d.winner is None:
+        L += ["No effect is named, so the residual stays the nominal one.", ""]
+    else:
+        L += [f"With {d.winner.name} added:", "", "| channels | RMS before → after | max before → after | RMS reduction |",
+              "|---|---|---|---|"]
+        for k, s in d.shrinkage().items():
+            label = f"{GROUP_LABEL[k]} ({GROUP_UNIT[k]})" if k in GROUP_LABEL else f"drift {k} (µm)"
+            L.append(f"| {label} | {_f(s['before_rms'])} → {_f(s['after_rms'])} | {_f(s['before_max'])} → "
+                     f"{_f(s['after_max'])} | {_f(100 * s['reduction'], '.0f')} % |")
+        L.append("")
+    t = d.timings
+    L += ["## Timing", "",
+          f"engine {t.get('engine_s', 0):.1f} s (cached per process), nominal {t.get('nominal_s', 0):.1f} s, fits "
+          f"{t.get('fits_s', 0):.1f} s, where/attribution {t.get('where_s', 0):.1f} s; total {t.get('total_s', 0):.1f} s.",
+          ""]
+    return "\n".join(L)

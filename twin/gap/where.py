@@ -1,0 +1,90 @@
+"""Where the twin misses: residuals by sensor, drift axis, operating phase and frequency band.
+
+Phases come from the measured spindle speed and ambient: a thermal-load
+proxy p(t) = lag((n / n_max)^1.3, 1 h) against its target (n / n_max)^1.3
+separates *heating* (running, p below 85 % of its target), *steady*
+(running, within ±15 %), *cooling* (stopped, or slowed down, with p still
+above its target), *ambient-driven* (idle, the room changing faster than
+0.3 K/h or a door zone departing more than 1 K from the room) and *idle*.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .fit import GROUPS
+from .signals import BANDS, band_split, lag
+
+PHASES = ("heating", "steady", "cooling", "ambient-driven", "idle")
+
+
+def phases(drive, times_s):
+    """Phase label of every measured time (array of str), from a drive on the twin grid."""
+    rpm = np.abs(drive.spindle_rpm)
+    n_max = max(float(rpm.max()), 1.0)
+    target = (rpm / n_max) ** 1.3
+    proxy = lag(target, drive.step_s, 3600.0)
+    running = rpm > 0.01 * n_max
+    room = lag(drive.room(), drive.step_s, 900.0)
+    rate = np.abs(np.gradient(room, drive.step_s)) * 3600.0
+    amb = drive.zone_ambient()
+    door = np.zeros(len(drive.grid), bool)
+    for z, v in amb.items():
+        if z != drive.room_zone and not drive.lags_s.get(z):
+            dev = v - drive.room()
+            door |= np.abs(dev - np.median(dev)) > 1.0
+    label = np.full(len(drive.grid), "idle", dtype=object)
+    busy = proxy > 0.05 * max(float(proxy.max()), 1e-9)
+    label[~running & ((rate > 0.3) | door)] = "ambient-driven"
+    label[~running & busy] = "cooling"
+    label[running & (proxy < 0.85 * target)] = "heating"
+    label[running & (proxy >= 0.85 * target) & (proxy <= 1.15 * target)] = "steady"
+    label[running & (proxy > 1.15 * target)] = "cooling"
+    k = np.clip(np.searchsorted(drive.grid, times_s), 0, len(drive.grid) - 1)
+    return label[k].astype(str)
+
+
+def phase_table(residual, evaluator, labels, names):
+    """RMS residual per phase: per group, and per drift axis, over all rows (dict phase → {key: (rms, n)})."""
+    out = {}
+    groups = evaluator.groups()
+    for ph in PHASES:
+        rows = labels == ph
+        if not rows.any():
+            continue
+        entry = {"rows": int(rows.sum()), "hours": None}
+        for g, idx in groups.items():
+            r = residual.R[rows][:, idx]
+            r = r[np.isfinite(r)]
+            entry[g] = float(np.sqrt(np.mean(r ** 2))) if r.size else float("nan")
+        for j, n in enumerate(names):
+            if evaluator.kinds[j] == "displacement":
+                r = residual.R[rows, j]
+                r = r[np.isfinite(r)]
+                entry[n] = float(np.sqrt(np.mean(r ** 2))) if r.size else float("nan")
+        out[ph] = entry
+    return out
+
+
+def band_table(residual, evaluator, times_s, names):
+    """RMS residual per frequency band (:data:`~twin.gap.signals.BANDS`): per group and per drift axis."""
+    parts = band_split(times_s, residual.R)
+    out = {}
+    groups = evaluator.groups()
+    for (band, _, _), part in zip(BANDS, parts):
+        part = np.where(np.isfinite(residual.R), part, np.nan)
+        entry = {}
+        for g, idx in groups.items():
+            r = part[:, idx]
+            r = r[np.isfinite(r)]
+            entry[g] = float(np.sqrt(np.mean(r ** 2))) if r.size else float("nan")
+        for j, n in enumerate(names):
+            if evaluator.kinds[j] == "displacement":
+                r = part[:, j]
+                r = r[np.isfinite(r)]
+                entry[n] = float(np.sqrt(np.mean(r ** 2))) if r.size else float("nan")
+        out[band] = entry
+    return out
+
+
+def group_order(evaluator):
+    return [g for g in GROUPS if g in evaluator.groups()]
