@@ -41,11 +41,11 @@ from models import (  # noqa: E402
     GNNMCIRegressor,
     MLRRegressor,
     PCRRegressor,
+    chronological_prediction,
     max_abs_residual,
     rmse,
     select_sensors,
 )
-from models.grey import GreySeriesRegressor  # noqa: E402
 from models.selection import METHODS  # noqa: E402
 
 CHANNELS = [f"ch{i}_um" for i in range(1, 6)]
@@ -75,14 +75,6 @@ def model_zoo():
         "GNNMCI(1,N) PSO": GNNMCIRegressor(random_state=SEED),
         "AGO-ANFIS, 3 rules": AGOANFISRegressor(ANFISRegressor(n_rules=3, epochs=50, random_state=SEED)),
     }
-
-
-def chronological_prediction(model, X, y, n_train):
-    """Fit on the first n_train rows, return the prediction of the test rows."""
-    model.fit(X[:n_train], y[:n_train])
-    if isinstance(model, GreySeriesRegressor):
-        return model.predict(X)[n_train:]
-    return model.predict(X[n_train:])
 
 
 def cell(y_test, pred, model) -> str:

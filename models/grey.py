@@ -176,6 +176,22 @@ class GreySeriesRegressor(RegressorMixin, BaseEstimator):
         return self.y_reference_ + self._predict_changes(zero_reference(X))
 
 
+def chronological_prediction(model, X, y, n_train: int) -> np.ndarray:
+    """Fit ``model`` on the first ``n_train`` rows, return its prediction of rows ``n_train:``.
+
+    ``X`` (n_samples, n_features) and ``y`` (n_samples,) are time-ordered;
+    nothing is shuffled. The prediction has the unit of ``y`` (e.g. µm).
+    A grey time-series model predicts changes since the first row of its
+    input, so it is run over the whole series from the training start and
+    the test part read off the tail (the thesis's "calibrate on the first
+    stage, predict the rest"); a static model maps each test row on its own.
+    """
+    model.fit(X[:n_train], y[:n_train])
+    if isinstance(model, GreySeriesRegressor):
+        return model.predict(X)[n_train:]
+    return model.predict(X[n_train:])
+
+
 class GM0NRegressor(GreySeriesRegressor):
     """GM(0,N) predictor: ``x̂₁¹(k) = Σ_j θ_j x_j¹(k)``, restored by IAGO.
 

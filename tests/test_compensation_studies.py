@@ -5,7 +5,6 @@ import numpy as np
 import pytest
 
 from twin.compensation import physics_prediction
-from twin.machine import build_machine
 from twin.placement import MachineSpec
 from twin.simulate import simulate
 from twin.studies import cross_condition_study, hybrid_study
@@ -40,11 +39,6 @@ def records(folder):
         path.write_text(RECORD.format(name=name, end_C=end, h1=h1, rpm1=r1, rpm2=r2))
         out[name] = str(path)
     return out
-
-
-@pytest.fixture(scope="module")
-def machine():
-    return build_machine("vmc_ram")
 
 
 def test_physics_prediction_reproduces_the_twin_from_operating_channels(machine, tmp_path):

@@ -10,21 +10,10 @@ import pytest
 from twin.cli import main
 from twin.fmu import (export_fmu, input_table, scenario_start, simulate, simulate_table, validate)
 from twin.fmu.session import FMUSession, FMUStepError
-from twin.machine import build_machine
-from twin.rom import DEFAULT_ORDER, cached_rom, simulate_rom
+from twin.rom import simulate_rom
 from twin.scenario import load_scenario
 
 KINDS = ("native", "python")
-
-
-@pytest.fixture(scope="module")
-def machine():
-    return build_machine("vmc_ram")
-
-
-@pytest.fixture(scope="module")
-def rom(machine):
-    return cached_rom(machine, DEFAULT_ORDER)
 
 
 @pytest.fixture(scope="module")

@@ -102,10 +102,12 @@ def test_input_effects_change_the_documented_inputs(machine, engine, drive):
     ch = LIB["enclosure_lag"].input_changes([6.0], drive, structure)
     expected = drive.zone_ambient(lags_s={"enclosure": 6 * 3600.0})["enclosure"] - drive.zone_ambient()["enclosure"]
     np.testing.assert_allclose(ch["ambient:enclosure"], expected)
-    ch = LIB["door_draft"].input_changes([1.0], drive, structure)["ambient:enclosure"]
-    assert ch.min() < -4.0 and np.median(np.abs(ch)) < 0.1        # only during the door openings
+    ch = LIB["door_draft"].input_changes([0.5], drive, structure)["ambient:enclosure"]
+    amb = drive.zone_ambient()
+    np.testing.assert_allclose(ch, 0.5 * (amb["front"] - amb["room"]))
+    assert ch.min() == pytest.approx(-3.0) and np.abs(ch[drive.grid < 3.5 * 3600]).max() < 1e-12
     ch = LIB["air_pocket"].input_changes([3.0], drive, structure)["gap:air_pocket"]
-    assert ch.max() == pytest.approx(3.0 * 12000 / 9000, rel=0.05) and ch[0] == 0.0
+    assert ch.max() == pytest.approx(3.0 * 12000 / 9000 * (1 - np.exp(-3.0)), rel=0.02) and ch[0] == 0.0  # 1 h, τ 20 min
 
 
 def test_output_effects():
@@ -137,21 +139,25 @@ def test_linear_effects_are_exactly_linear(machine, engine, drive):
 
 
 def test_reduced_model_matches_the_full_fe(machine, engine, drive):
-    """The parametric ROM agrees with the full FE (backward Euler at 1/6 of the step) to a few % of each effect."""
+    """The parametric ROM agrees with the full FE (backward Euler at 1/3 of the step) within a few % of each effect.
+
+    The two system terms are taken beyond the parameter values their perturbed bases were built at.
+    """
     structure, backend = engine
-    fine = ScenarioDrive(drive.scenario, machine, uniform_grid(0.0, drive.scenario.duration_s, 20.0))
-    rom = GapModel(structure, backend, fine, drive.grid)
-    fe = GapModel(structure, FullBackend(structure), fine, drive.grid)
+    fine = ScenarioDrive(drive.scenario, machine, uniform_grid(0.0, 4 * 3600.0, 40.0))
+    times = fine.grid[::3]
+    rom = GapModel(structure, backend, fine, times)
+    fe = GapModel(structure, FullBackend(structure), fine, times)
     y0_rom, y0_fe = rom.predict().values, fe.predict().values
-    cols = structure.thermometers + structure.displacements
-    scale = np.abs(y0_fe[:, cols]).max(axis=0)
-    assert (np.abs(y0_rom - y0_fe)[:, cols].max(axis=0) <= 0.01 * scale + 0.03).all()
-    for name, theta in (("convection_enclosure", [2.5]), ("joint_ram_guides", [0.1]), ("belt_drive", [100.0])):
+    T, D = structure.thermometers, structure.displacements
+    # nominal: within the backward-Euler time-step error of the FE at 40 s (the ROM steps exactly)
+    assert np.abs(y0_rom - y0_fe)[:, T].max() < 0.15 and np.abs(y0_rom - y0_fe)[:, D].max() < 0.3
+    for name, theta in (("convection_enclosure", [2.5]), ("joint_ram_guides", [0.1])):
         e = LIB[name]
         d_rom = rom.predict([(e, np.array(theta))]).values - y0_rom
         d_fe = fe.predict([(e, np.array(theta))]).values - y0_fe
-        err = np.abs(d_rom - d_fe)[:, cols].max()
-        assert err <= 0.03 * np.abs(d_fe[:, cols]).max(), name
+        for cols in (T, D):
+            assert np.abs(d_rom - d_fe)[:, cols].max() <= 0.03 * np.abs(d_fe[:, cols]).max(), name
 
 
 def test_structure_is_cached_per_process(machine):

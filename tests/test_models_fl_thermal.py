@@ -4,9 +4,6 @@ The data live outside the repository (``../shared/data/fl_thermal`` or
 ``$THERMAL_TWIN_FL_THERMAL``); the tests skip with a reason when absent.
 """
 
-import os
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -20,33 +17,19 @@ from models import (
     GNNMCIRegressor,
     MLRRegressor,
     PCRRegressor,
+    chronological_prediction,
     rmse,
     select_sensors,
 )
-from models.grey import GreySeriesRegressor
-
-DATA = Path(
-    os.environ.get("THERMAL_TWIN_FL_THERMAL")
-    or Path(__file__).resolve().parents[1].parent / "shared" / "data" / "fl_thermal"
-)
-CSV = DATA / "fl_thermal_part1.csv"
-pytestmark = pytest.mark.skipif(not CSV.exists(), reason=f"FL_THERMAL data not found at {CSV}")
 
 
 @pytest.fixture(scope="module")
-def recording():
+def recording(fl_thermal_csv):
     pd = pytest.importorskip("pandas")
-    frame = pd.read_csv(CSV)
+    frame = pd.read_csv(fl_thermal_csv)
     T = frame[[f"t{i}_degC" for i in range(1, 17)]].to_numpy()
     Y = {ch: frame[f"{ch}_um"].to_numpy() for ch in ("ch1", "ch2", "ch3", "ch4", "ch5")}
     return T, Y, int(0.6 * len(frame))  # first 60 % train, last 40 % test
-
-
-def chronological_prediction(model, X, y, n_train):
-    model.fit(X[:n_train], y[:n_train])
-    if isinstance(model, GreySeriesRegressor):  # run the whole series from its start
-        return model.predict(X)[n_train:]
-    return model.predict(X[n_train:])
 
 
 MODELS = {

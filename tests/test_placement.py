@@ -5,7 +5,6 @@ import numpy as np
 import pytest
 
 from twin.cli import main
-from twin.machine import build_machine
 from twin.placement import (CandidateSpec, MachineSpec, RecordTask, ResponseTask, candidate_locations,
                             elementary_inputs, perturbed_definition)
 from twin.scenario import load_scenario
@@ -47,11 +46,6 @@ def short_scenarios(folder):
         path.write_text(HEAT.format(name=name, **kw))
         paths[name] = str(path)
     return paths
-
-
-@pytest.fixture(scope="module")
-def machine():
-    return build_machine("vmc_ram")
 
 
 def test_candidates_are_outer_surface_nodes_and_camera_spots(machine):

@@ -7,22 +7,11 @@ import scipy.linalg
 import scipy.sparse as sp
 
 import fea
-from twin.machine import build_machine
 from twin.rom import (DEFAULT_ORDER, FORMAT_VERSION, ROMError, ReducedModel, build_rom, cached_rom, krylov_basis,
                       simulate_rom)
 from twin.rom_report import GOAL_TCP_UM, GOAL_TEMPERATURE_K, max_errors
 from twin.scenario import load_scenario
 from twin.simulate import simulate
-
-
-@pytest.fixture(scope="module")
-def machine():
-    return build_machine("vmc_ram")
-
-
-@pytest.fixture(scope="module")
-def rom(machine):
-    return cached_rom(machine, DEFAULT_ORDER)
 
 
 def _fe_outputs(machine, rom, T, u):

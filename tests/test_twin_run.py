@@ -6,14 +6,8 @@ import pytest
 
 from twin.cli import main
 from twin.dataset import Dataset
-from twin.machine import build_machine
 from twin.scenario import load_scenario
 from twin.simulate import simulate
-
-
-@pytest.fixture(scope="module")
-def machine():
-    return build_machine("vmc_ram")
 
 
 def _scenario(tmp_path, body, name="probe"):

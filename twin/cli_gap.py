@@ -29,6 +29,29 @@ def cmd_benchmark(args):
     print(f"results in {res.out_dir}/")
 
 
+def cmd_truth(args):
+    import json
+    from pathlib import Path
+
+    from .dataset import sidecar_path
+    from .gap.benchmark import case_record, cases
+
+    if "," in args.effect or args.effect in ("all", "singles", "pairs"):
+        from .errors import TwinInputError
+
+        raise TwinInputError(f"--effect takes one effect, one a+b pair or 'none', got {args.effect!r}")
+    case = cases(args.effect)[0]
+    data = case_record(case, args.scenario, args.machine,
+                       None if args.truth_mesh_size <= 0 else args.truth_mesh_size)
+    out = Path(args.out)
+    data.write(out)
+    # the truth goes beside the CSV, not into its sidecar: the diagnosis must not see it
+    truth = out.with_name(out.stem + ".truth.json")
+    sidecar_path(out).replace(truth)
+    print(f"measured record {out} ({len(data)} rows, {len(data.channels)} channels); "
+          f"hidden truth in {truth.name}: {json.dumps(data.metadata['effects'])}")
+
+
 def register(sub):
     """Add the ``gap`` command with its ``diagnose`` and ``benchmark`` subcommands."""
     from .gap.benchmark import SCENARIO, TRUTH_MESH_SIZE_M
@@ -43,13 +66,24 @@ def register(sub):
     d.add_argument("--column-map", help='JSON file or inline JSON mapping CSV columns, e.g. {"t1": "T01_degC"}')
     d.add_argument("--holdout", type=float, default=0.3, help="held-out last fraction of the record (default 0.3)")
     d.add_argument("--effects", help="comma list of candidate effects (default: the whole library)")
-    d.add_argument("--pairs", type=int, default=3, help="fit the pairs of the top N single effects (default 3)")
+    d.add_argument("--pairs", type=int, default=3, help="pairs: the leading effect with every other, and pairs of the top N (default 3; 0 none)")
     d.add_argument("--backend", choices=("rom", "fe"), default="rom",
                    help="parametric reduced model (default) or full finite elements (slow)")
     d.add_argument("--step", type=float, default=60.0, help="the twin's time step, s (default 60)")
     d.add_argument("--no-render", action="store_true", help="skip the 3-D renders")
     d.add_argument("--out", required=True, help="result folder (report.md, diagnosis.json, figures)")
     d.set_defaults(func=cmd_diagnose)
+
+    t = gsub.add_parser("truth", help="a synthetic 'measured' CSV with an effect of the library switched on "
+                                      "(the benchmark's truth run), to try the diagnosis on")
+    t.add_argument("--effect", required=True,
+                   help="effect of the library at its benchmark value, an a+b pair, or 'none'")
+    t.add_argument("--scenario", default=SCENARIO, help=f"truth scenario (default {SCENARIO})")
+    t.add_argument("--machine", default="vmc_ram")
+    t.add_argument("--truth-mesh-size", type=float, default=TRUTH_MESH_SIZE_M,
+                   help=f"truth mesh size, m (default {TRUTH_MESH_SIZE_M}; 0 = the nominal mesh)")
+    t.add_argument("--out", required=True, help="CSV to write (the truth goes to <stem>.truth.json beside it)")
+    t.set_defaults(func=cmd_truth)
 
     b = gsub.add_parser("benchmark", help="blind check: effects switched on in a finer, noisy truth, then diagnosed")
     b.add_argument("--cases", default="all",

@@ -161,7 +161,7 @@ class Dataset:
             "channels": [asdict(c) for c in self.channels],
             "metadata": self.metadata,
         }
-        _atomic_write_text(sidecar_path(path), json.dumps(sidecar, indent=1, default=_json_default))
+        _atomic_write_text(sidecar_path(path), json.dumps(sidecar, indent=1, default=json_default))
         return path
 
     @classmethod
@@ -286,10 +286,15 @@ def sidecar_path(path):
     return path.with_name(path.name + ".json")
 
 
-def _json_default(value):
+def json_default(value):
+    """``json.dumps`` fallback for numpy arrays and scalars (as lists and Python numbers) and paths (as text).
+
+    Anything else raises ``TypeError``, as ``json`` itself would: metadata
+    that cannot be written faithfully is an error, not a string.
+    """
     if isinstance(value, np.ndarray):
         return value.tolist()
-    if isinstance(value, (np.floating, np.integer)):
+    if isinstance(value, np.generic):
         return value.item()
     if isinstance(value, Path):
         return str(value)

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .dataset import project_version
+from .dataset import json_default, project_version
 from .errors import TwinInputError
 
 FORMAT = "thermal-twin-compensation-model"
@@ -210,7 +210,7 @@ class CompensationModel:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(f".{path.name}.partial")
-        tmp.write_text(json.dumps(self.to_document(), indent=1, default=_json_default), encoding="utf-8")
+        tmp.write_text(json.dumps(self.to_document(), indent=1, default=json_default), encoding="utf-8")
         os.replace(tmp, path)
         return path
 
@@ -246,16 +246,6 @@ class CompensationModel:
         return cls(estimator, doc["model_name"], list(doc["inputs"]), doc["target"], list(doc["input_units"]),
                    doc["target_unit"], dict(doc.get("preprocessing") or {}), list(doc.get("training") or []),
                    doc.get("sampling_interval_s"), dict(doc.get("metadata") or {}))
-
-
-def _json_default(value):
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, (np.floating, np.integer)):
-        return value.item()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"not JSON serialisable: {value!r}")
 
 
 def fit_compensation_model(datasets, inputs, target, model="anfis", params=None, zero_reference=True,

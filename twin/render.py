@@ -47,11 +47,11 @@ def render_machine(machine, path, node_values=None, scalar_label=None, cmap="inf
         size = 0.02 * float(np.ptp(machine.mesh.points, axis=0).max())
         if point_values is not None:
             cloud[point_label or "score"] = np.asarray(point_values, float)
-            plotter.add_mesh(cloud.glyph(geom=pv.Sphere(radius=size / 2), scale=False),
+            plotter.add_mesh(cloud.glyph(geom=pv.Sphere(radius=size / 2), scale=False, orient=False),
                              scalars=point_label or "score", cmap="viridis",
                              scalar_bar_args={"title": point_label or "score", "color": "black"})
         else:
-            plotter.add_mesh(cloud.glyph(geom=pv.Sphere(radius=size / 2), scale=False), color="red")
+            plotter.add_mesh(cloud.glyph(geom=pv.Sphere(radius=size / 2), scale=False, orient=False), color="red")
         if point_labels is not None:
             plotter.add_point_labels(cloud, list(point_labels), font_size=14, text_color="black",
                                      shape_opacity=0.6, always_visible=True)

@@ -111,6 +111,20 @@ def _default_experiment(step_s):
     return Element("DefaultExperiment", startTime="0.0", stepSize=repr(float(step_s)))
 
 
+def _append_units_logs_experiment(root, variables, step_s):
+    """Append UnitDefinitions, LogCategories and DefaultExperiment (step ``step_s`` in s) to ``root``.
+
+    The native FMUs of FMI 2.0 and 3.0 declare these alike, and both
+    standards place them in this order between CoSimulation and
+    ModelVariables.  The categories are the ones the C sources log under.
+    """
+    root.append(spec.unit_definitions({v.unit for v in variables if v.unit}))
+    cats = SubElement(root, "LogCategories")
+    for name, text in (("logStatusError", "errors: rejected inputs or calls"), ("logAll", "all messages")):
+        SubElement(cats, "Category", name=name, description=text)
+    root.append(_default_experiment(step_s))
+
+
 def _pretty(root):
     return parseString(tostring(root, "UTF-8")).toprettyxml(encoding="UTF-8")
 
@@ -126,11 +140,7 @@ def _native_model_description(view, variables, guid, step_s):
         "canNotUseMemoryManagementFunctions": "false", "canInterpolateInputs": "false"})
     files = SubElement(cs, "SourceFiles")
     SubElement(files, "File", name=C_FILE)
-    root.append(spec.unit_definitions({v.unit for v in variables if v.unit}))
-    cats = SubElement(root, "LogCategories")
-    for name, text in (("logStatusError", "errors: rejected inputs or calls"), ("logAll", "all messages")):
-        SubElement(cats, "Category", name=name, description=text)
-    root.append(_default_experiment(step_s))
+    _append_units_logs_experiment(root, variables, step_s)
     mv = SubElement(root, "ModelVariables")
     for v in variables:
         mv.append(spec.scalar_variable(v))
@@ -238,6 +248,22 @@ def compile_native(source, library, compiler="cc"):
     return library
 
 
+def _zip_fmu(folder, out):
+    """Zip every file below ``folder`` (paths relative to it) into the FMU ``out``.
+
+    The archive is written as ``<out>.fmu.partial`` and renamed onto ``out``
+    only when complete, so an interrupted export never leaves a truncated FMU
+    that looks valid.  Files are added in sorted order, so the archive lists
+    them the same way on every run.
+    """
+    partial = out.with_suffix(".fmu.partial")
+    with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as z:
+        for f in sorted(folder.rglob("*")):
+            if f.is_file():
+                z.write(f, f.relative_to(folder).as_posix())
+    partial.replace(out)
+
+
 def _export_native(rom, view, variables, rows, out, step_s, compiler):
     guid = spec.guid(view, "native")
     with tempfile.TemporaryDirectory(prefix="twin_fmu_native_") as tmp:
@@ -252,12 +278,7 @@ def _export_native(rom, view, variables, rows, out, step_s, compiler):
             ". Rebuild on another platform: <code>cc -shared -fPIC -O2 -I sources sources/" + C_FILE +
             " -o binaries/&lt;platform&gt;/" + NATIVE_IDENTIFIER + ".&lt;so|dll|dylib&gt; -lm</code>.</p>"
             "</body></html>\n", encoding="utf-8")
-        partial = out.with_suffix(".fmu.partial")
-        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as z:
-            for f in sorted(tmp.rglob("*")):
-                if f.is_file():
-                    z.write(f, f.relative_to(tmp).as_posix())
-        partial.replace(out)
+        _zip_fmu(tmp, out)
     return out
 
 
@@ -275,11 +296,7 @@ def _native_model_description3(view, variables, token, step_s):
         "modelIdentifier": NATIVE_IDENTIFIER, "canHandleVariableCommunicationStepSize": "true",
         "canGetAndSetFMUState": "true", "canSerializeFMUState": "true", "hasEventMode": "false",
         "providesIntermediateUpdate": "false", "canReturnEarlyAfterIntermediateUpdate": "false"})
-    root.append(spec.unit_definitions({v.unit for v in variables if v.unit}))
-    cats = SubElement(root, "LogCategories")
-    for name, text in (("logStatusError", "errors: rejected inputs or calls"), ("logAll", "all messages")):
-        SubElement(cats, "Category", name=name, description=text)
-    root.append(_default_experiment(step_s))
+    _append_units_logs_experiment(root, variables, step_s)
     mv = SubElement(root, "ModelVariables")
     SubElement(mv, "Float64", name="time", valueReference=str(max(v.vr for v in variables) + 1),
                causality="independent", variability="continuous", description="simulation time")
@@ -334,12 +351,7 @@ def _export_native3(rom, view, variables, rows, out, step_s, compiler):
         (tmp / "binaries" / FMI3_PLATFORM).mkdir(parents=True)
         compile_native(src / C_FILE, tmp / "binaries" / FMI3_PLATFORM / f"{NATIVE_IDENTIFIER}.so", compiler)
         (tmp / "modelDescription.xml").write_bytes(_native_model_description3(view, variables, token, step_s))
-        partial = out.with_suffix(".fmu.partial")
-        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as z:
-            for f in sorted(tmp.rglob("*")):
-                if f.is_file():
-                    z.write(f, f.relative_to(tmp).as_posix())
-        partial.replace(out)
+        _zip_fmu(tmp, out)
     return out
 
 

@@ -192,11 +192,13 @@ class RadiationToWalls(Effect):
 
     name = "radiation_walls"
     label = "radiation to the walls (emissivity ε; walls lag the room air)"
-    params = (Param("emissivity", "–", 0.0, 0.0, 1.0),)
-    defaults = {"groups": ("outside", "front"), "wall_lag_h": 6.0}
+    linear = False
+    # the walls' lag is as unknown as ε: a fixed one leaves a structured residual that a second effect soaks up
+    params = (Param("emissivity", "–", 0.0, 0.0, 1.0), Param("wall_lag_h", "h", 6.0, 0.5, 24.0, log=True))
+    defaults = {"groups": ("outside", "front")}
     how = ("the radiative share ε·h_r (h_r = 4σT³ = 5.7 W/(m² K)) of the exchange of the outer groups sees the "
-           "walls, which follow the room air through a first-order lag (6 h), instead of the air: extra inputs "
-           "ε·(T_walls − T_zone) on lumped h_r facet loads; linear in ε")
+           "walls, which follow the room air through a first-order lag τ_w, instead of the air: extra inputs "
+           "ε·(T_walls − T_zone) on lumped h_r facet loads; ε and τ_w fitted (bounded Gauss–Newton, inputs only)")
 
     def _groups(self, machine):
         return [r.name for r in machine.definition.convection if r.name in self.hidden["groups"]]
@@ -211,7 +213,7 @@ class RadiationToWalls(Effect):
                                 lumped_facet_load(structure.machine, groups == g, RADIATIVE_COEFFICIENT))
 
     def input_changes(self, theta, drive, structure):
-        walls = lag(drive.room(), drive.step_s, self.hidden["wall_lag_h"] * 3600.0)
+        walls = lag(drive.room(), drive.step_s, theta[1] * 3600.0)
         amb = drive.zone_ambient()
         return {f"gap:radiation:{g}": theta[0] * (walls - amb[_zone_of_group(structure.machine, g)])
                 for g in self._groups(structure.machine)}
@@ -355,8 +357,8 @@ class DoorDraft(Effect):
 
     def input_changes(self, theta, drive, structure):
         amb = drive.zone_ambient()
+        # (a constant part, e.g. the air sensors' offsets, shifts the outputs by a constant: the offsets take it)
         signal = amb[self.hidden["door_zone"]] - amb[drive.room_zone]
-        signal = signal - np.median(signal)
         signal = lag(signal, drive.step_s, self.hidden["lag_min"] * 60.0)
         return {f"ambient:{self.hidden['inner_zone']}": theta[0] * signal}
 
@@ -431,14 +433,14 @@ class FixtureDrift(Effect):
     name = "fixture_drift"
     label = "thermal drift of the measurement fixture"
     kind = "output"
+    linear = False
     params = (Param("k_x", "µm/K", 0.0, -10.0, 10.0), Param("k_y", "µm/K", 0.0, -10.0, 10.0),
-              Param("k_z", "µm/K", 0.0, -10.0, 10.0))
-    defaults = {"lag_min": 30.0}
-    how = ("each displacement reading += k_axis·(T_fix − T_fix(0)), T_fix the room air through a 30 min lag "
-           "(the probe nest and its stand); linear in k_x, k_y, k_z")
+              Param("k_z", "µm/K", 0.0, -10.0, 10.0), Param("lag_min", "min", 30.0, 1.0, 240.0, log=True))
+    how = ("each displacement reading += k_axis·(T_fix − T_fix(0)), T_fix the room air through a lag τ_f "
+           "(the probe nest and its stand); k_x, k_y, k_z and τ_f fitted (bounded Gauss–Newton, outputs only)")
 
     def displacement_change(self, theta, D, axes, drive):
-        fix = lag(drive.room(), drive.step_s, self.hidden["lag_min"] * 60.0)
+        fix = lag(drive.room(), drive.step_s, theta[3] * 60.0)
         fix = fix - fix[0]
         k = {"x": theta[0], "y": theta[1], "z": theta[2]}
         return D + np.column_stack([k[a] * fix for a in axes]) if D.size else D

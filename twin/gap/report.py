@@ -17,6 +17,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from ..dataset import json_default  # noqa: E402
 from ..outdir import atomic_directory  # noqa: E402
 from .fit import GROUP_UNIT  # noqa: E402
 
@@ -59,16 +60,8 @@ def write_report(d, out_dir, render=True):
             except Exception as exc:  # pragma: no cover - off-screen rendering depends on the host
                 d.notes.append(f"render skipped: {exc}")
         (tmp / "report.md").write_text(format_report(d, figures))
-        (tmp / "diagnosis.json").write_text(json.dumps(to_json(d), indent=1, default=_json))
+        (tmp / "diagnosis.json").write_text(json.dumps(to_json(d), indent=1, default=json_default))
     return out_dir
-
-
-def _json(v):
-    if isinstance(v, (np.floating, np.integer, np.bool_)):
-        return v.item()
-    if isinstance(v, np.ndarray):
-        return v.tolist()
-    return str(v)
 
 
 def to_json(d):
@@ -85,6 +78,7 @@ def to_json(d):
         "runner_up": d.runner_up.name if d.runner_up is not None else None,
         "evidence_ratio": d.evidence_ratio, "n_eff_hold": d.n_eff_hold,
         "split_s": d.split_s, "noise": d.noise, "gap_over_noise": d.gap_over_noise,
+        "gap_over_tolerance": d.gap_over_tolerance, "group_scale": d.evaluator.sigma,
         "nominal": {**res(d.nominal), "channels": d.nominal.summary["channels"],
                     "offsets": dict(zip(d.names, d.nominal.residual.offsets.tolist())),
                     "initial_state": d.nominal.residual.nuisance},
@@ -269,11 +263,12 @@ def format_report(d, figures):
           ""]
     # ---------------------------------------------------------------- where
     L += ["## (a) Where the twin misses", "",
-          "| channel group | fit RMS | held-out RMS | held-out max | held-out RMS / noise |", "|---|---|---|---|---|"]
+          "| channel group | fit RMS | held-out RMS | held-out max | held-out RMS / noise | / max(noise, tolerance) |",
+          "|---|---|---|---|---|---|"]
     for g in groups:
         s = d.nominal.summary["groups"][g]
         L.append(f"| {GROUP_LABEL[g]} ({GROUP_UNIT[g]}) | {_f(s['fit_rms'])} | {_f(s['hold_rms'])} | "
-                 f"{_f(s['hold_max'])} | {_f(d.gap_over_noise[g], '.1f')} |")
+                 f"{_f(s['hold_max'])} | {_f(d.gap_over_noise[g], '.1f')} | {_f(d.gap_over_tolerance[g], '.1f')} |")
     L += ["", f"![residuals]({figures['residuals']})", "",
           "Per sensor (nominal twin; after = with the named effect):", "",
           "| sensor | kind | fit RMS | held-out RMS | held-out max | after: held-out RMS |", "|---|---|---|---|---|---|"]
@@ -328,7 +323,7 @@ def format_report(d, figures):
     L += ["## (b) Which effect", "",
           f"Candidates: {len(d.singles)} effects of the library"
           + (f" (not applicable to this machine: {', '.join(d.skipped)})" if d.skipped else "")
-          + f", and {len(d.pairs)} pairs of the leading ones. Ranked by ΔBIC against the nominal twin on the "
+          + f", and {len(d.pairs)} pairs (the leading effect with each other one, and pairs of the leaders). Ranked by ΔBIC against the nominal twin on the "
           "held-out part (n_eff · ln(SSE/SSE_nominal) + k · ln n_eff); parameters ± 1 sd from the Jacobian.", "",
           "| rank | model | parameters | ΔBIC | held-out SSE / nominal | "
           + " | ".join(f"held-out {GROUP_LABEL[g]} RMS" for g in groups if g != "air") + " | notes |",

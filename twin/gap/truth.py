@@ -2,7 +2,7 @@
 
 :func:`truth_dataset` runs a scenario on a machine (the benchmark uses a
 finer mesh than the diagnosis) with the *full* finite-element system, the
-scenario's scheme and time step (Crank–Nicolson, 20 s for
+scenario's scheme and time step (backward Euler, 20 s for
 ``gap_blind_24h``, against the diagnosis's reduced model with exact
 zero-order hold at 60 s), the effects' *truth variants* (other hidden
 constants than the library's), and the scenario's sensor noise (offsets and
