@@ -165,11 +165,11 @@ def test_cli_truth_writes_a_blind_record(tmp_path):
     from twin.cli import main
     from twin.dataset import Dataset, sidecar_path
 
-    csv = tmp_path / "measured.csv"
+    csv = tmp_path / "new" / "measured.csv"                                 # the folder is created
     assert main(["gap", "truth", "--effect", "belt_drive", "--scenario", QUICK, "--truth-mesh-size", "0",
                  "--out", str(csv)]) == 0
     assert not sidecar_path(csv).exists()
-    truth = json.loads((tmp_path / "measured.truth.json").read_text())
+    truth = json.loads((csv.parent / "measured.truth.json").read_text())
     assert truth["metadata"]["effects"][0]["name"] == "belt_drive"
     assert truth["metadata"]["effects"][0]["params"] == list(TRUTH_VALUES["belt_drive"])
     data = Dataset.read(csv)

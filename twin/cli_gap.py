@@ -15,7 +15,11 @@ def cmd_diagnose(args):
     out = write_report(d, args.out, render=not args.no_render)
     print(d.verdict)
     for r in d.ranking[:5]:
-        print(f"  {r.name:42s} ΔBIC {r.delta_bic:9.1f}")
+        named = "  ← named" if r is d.winner else ""
+        print(f"  {r.name:42s} ΔBIC {r.delta_bic:9.1f}{named}")
+    if d.winner is not None and d.ranking[0] is not d.winner:
+        print("  (a model ranked above the named one adds an effect to it that the decision rules do not accept: "
+              "the named effect leaves no significant gap, or the addition is not material; see report.md)")
     print(f"report in {out}/report.md ({d.timings['total_s']:.0f} s)")
 
 
@@ -41,9 +45,10 @@ def cmd_truth(args):
 
         raise TwinInputError(f"--effect takes one effect, one a+b pair or 'none', got {args.effect!r}")
     case = cases(args.effect)[0]
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
     data = case_record(case, args.scenario, args.machine,
                        None if args.truth_mesh_size <= 0 else args.truth_mesh_size)
-    out = Path(args.out)
     data.write(out)
     # the truth goes beside the CSV, not into its sidecar: the diagnosis must not see it
     truth = out.with_name(out.stem + ".truth.json")
