@@ -167,3 +167,19 @@ def test_structure_is_cached_per_process(machine):
     b = engine(machine, default_library())
     assert a is b
     assert cached(("machine", "vmc_ram", None), lambda: None) is machine
+
+
+@pytest.mark.parametrize("name, amplitude, rest", [("radiation_walls", [0.3], [8.0]),
+                                                   ("fixture_drift", [0.5, -1.0, 2.0], [45.0])])
+def test_fitted_lags_leave_the_amplitudes_linear(machine, engine, drive, name, amplitude, rest):
+    """ε of radiation and k of the fixture drift stay linear at a fixed (fitted) lag; the lag changes the shape."""
+    structure, backend = engine
+    model = GapModel(structure, backend, drive, drive.grid)
+    base = model.predict().values
+    e = LIB[name]
+    y1 = model.predict([(e, np.r_[amplitude, rest])]).values - base
+    y3 = model.predict([(e, np.r_[3 * np.array(amplitude), rest])]).values - base
+    assert np.abs(y1).max() > 1e-3
+    np.testing.assert_allclose(y3, 3.0 * y1, atol=1e-9 * np.abs(y3).max())
+    other_lag = model.predict([(e, np.r_[amplitude, 4 * np.array(rest)])]).values - base
+    assert np.abs(other_lag - y1).max() > 0.05 * np.abs(y1).max()
