@@ -40,8 +40,11 @@ def render_machine(machine, path, node_values=None, scalar_label=None, cmap="inf
     else:
         grid.point_data[scalar_label or "value"] = np.asarray(node_values)
         surface = grid.extract_surface(algorithm=None)
+        # with coloured points too, this bar goes upright on the right so the two bars do not overlap
+        upright = {"vertical": True, "position_x": 0.86, "position_y": 0.25, "height": 0.5, "width": 0.05} \
+            if point_values is not None else {}
         plotter.add_mesh(surface, scalars=scalar_label or "value", cmap=cmap, clim=clim,
-                         scalar_bar_args={"title": scalar_label or "value", "color": "black"})
+                         scalar_bar_args={"title": scalar_label or "value", "color": "black", **upright})
     if points is not None:
         cloud = pv.PolyData(np.asarray(points, float))
         size = 0.02 * float(np.ptp(machine.mesh.points, axis=0).max())
