@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from doc_examples import check_example, examples
 
 from meshes.tomlspec import DefinitionError, read_toml
 from twin.cli import main
@@ -79,10 +80,9 @@ def test_docs_list_every_scenario():
     assert set(SHIPPED) <= listed
 
 
-@pytest.mark.parametrize("index", range(len(re.findall(r"```python\n", DOC.read_text()))))
-def test_docs_examples_run(index):
-    block = re.findall(r"```python\n(.*?)```", DOC.read_text(), flags=re.S)[index]
-    exec(compile(block, f"{DOC.name} block {index + 1}", "exec"), {"__name__": "__docs__"})
+@pytest.mark.parametrize("index", range(len(examples(DOC))))
+def test_docs_examples_print_what_the_docs_show(index):
+    check_example(DOC, index)
 
 
 # ---------------------------------------------------------------- against their sources
