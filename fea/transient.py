@@ -232,10 +232,8 @@ class ThermalSolver:
             raise FEAInputError(f"initial temperature has shape {T.shape}, the system has {n} nodes")
         require_finite("initial temperature", T)
         intervals = np.diff(times)
-        substeps = np.ones(len(intervals), dtype=int) if max_step_s is None else \
-            np.maximum(1, np.ceil(intervals / float(max_step_s) - 1e-9).astype(int))
-        step_times = np.concatenate([[times[0]]] + [
-            times[k] + intervals[k] * np.arange(1, s + 1) / s for k, s in enumerate(substeps)])
+        step_times, at_output = step_grid(times, max_step_s)
+        substeps = np.diff(at_output)
         u_all = schedule.sample(step_times)
         if len(self.fixed):
             T[self.fixed] = self.system.fixed_values(u_all[0])
@@ -264,6 +262,21 @@ class ThermalSolver:
             recorder.finish()
         return TransientResult(times, history, list(outputs.names) if record else [], T, fields,
                                self.factorisations)
+
+
+def step_grid(times, max_step_s=None):
+    """The solver's step times for output times ``times`` (s): each interval split into equal sub-steps
+    no longer than ``max_step_s``.  Returns the step times and, per output time, its index among them."""
+    times = np.asarray(times, float)
+    intervals = np.diff(times)
+    sub = np.ones(len(intervals), int) if max_step_s is None else \
+        np.maximum(1, np.ceil(intervals / float(max_step_s) - 1e-9).astype(int))
+    at_output = np.concatenate([[0], np.cumsum(sub)])
+    if np.all(sub == 1):
+        return times.copy(), at_output
+    k = np.repeat(np.arange(len(sub)), sub)                 # interval of each step
+    j = np.arange(len(k)) - at_output[k] + 1                # 1..sub within the interval
+    return np.concatenate([[times[0]], times[k] + intervals[k] * j / sub[k]]), at_output
 
 
 class _Recorder:

@@ -62,7 +62,7 @@ def test_seed_selector_equals_select_sensors(method):
     sel = SeedSelector(X, random_state=0)
     scores = seed_scores(X, y)
     for k in (1, 3, 5):
-        ours = sel.select(method, y, k, scores)
+        ours = sel.select(method, k, scores)
         ref = select_sensors(X, y, method=method, n_select=k, random_state=0)
         assert list(ours) == list(ref.indices)
 

@@ -266,6 +266,13 @@ def one_error(excinfo, *fragments):
         assert fragment in message, f"{fragment!r} not in {message!r}"
 
 
+def load_error(path, *fragments):
+    """Loading the scenario at ``path`` fails with one error naming the file and ``fragments``."""
+    with pytest.raises(DefinitionError) as excinfo:
+        load_scenario(path)
+    one_error(excinfo, str(path), *fragments)
+
+
 @pytest.mark.parametrize("body, fragments", [
     (BASE + "[[segments]]\nduration_min = 30\nspindel_rpm = 4000\n", ["segments[0]", "spindel_rpm"]),
     (BASE + "[[segments]]\nduration_min = -5\nspindle_rpm = 4000\n", ["segments[0].duration_min", "-5"]),
@@ -285,16 +292,12 @@ def one_error(excinfo, *fragments):
 ])
 def test_bad_scenarios_give_one_clear_error(tmp_path, body, fragments):
     path = write(tmp_path, body)
-    with pytest.raises(DefinitionError) as excinfo:
-        load_scenario(path)
-    one_error(excinfo, str(path), *fragments)
+    load_error(path, *fragments)
 
 
 def test_malformed_toml(tmp_path):
     path = write(tmp_path, BASE + "[[segments]]\nduration_min = 30\nspindle_rpm = \n")
-    with pytest.raises(DefinitionError) as excinfo:
-        load_scenario(path)
-    one_error(excinfo, str(path), "malformed TOML")
+    load_error(path, "malformed TOML")
 
 
 def test_rpm_above_the_machine_maximum(tmp_path):
@@ -340,9 +343,7 @@ def csv_scenario(tmp_path, rows):
 
 def test_csv_ambient_with_a_non_monotonic_time_column(tmp_path):
     path = csv_scenario(tmp_path, [(0, 20.0), (600, 20.5), (1200, 21.0), (900, 21.5)])
-    with pytest.raises(DefinitionError) as excinfo:
-        load_scenario(path)
-    one_error(excinfo, str(path), "ambient.file", "air.csv", "time_s", "900", "1200")
+    load_error(path, "ambient.file", "air.csv", "time_s", "900", "1200")
 
 
 @pytest.mark.parametrize("rows, fragments", [
@@ -351,16 +352,12 @@ def test_csv_ambient_with_a_non_monotonic_time_column(tmp_path):
 ])
 def test_csv_ambient_other_errors(tmp_path, rows, fragments):
     path = csv_scenario(tmp_path, rows)
-    with pytest.raises(DefinitionError) as excinfo:
-        load_scenario(path)
-    one_error(excinfo, str(path), *fragments)
+    load_error(path, *fragments)
 
 
 def test_csv_ambient_file_missing(tmp_path):
     path = write(tmp_path, BASE + "[ambient]\nkind = \"csv\"\nfile = \"nowhere.csv\"\n")
-    with pytest.raises(DefinitionError) as excinfo:
-        load_scenario(path)
-    one_error(excinfo, str(path), "ambient.file", "nowhere.csv")
+    load_error(path, "ambient.file", "nowhere.csv")
 
 
 def test_unknown_scenario_name_lists_the_library():

@@ -46,7 +46,7 @@ TARGETS = (
 
 
 def calibration_table(machine):
-    """Rows (target, range, simulated value in µm, ok) for the machine, from noise-free runs."""
+    """Rows (target, simulated value in µm, ok) for the machine, from noise-free runs (the range is the target's)."""
     datasets = {}
     rows = []
     for target in TARGETS:

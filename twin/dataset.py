@@ -254,13 +254,11 @@ class Dataset:
                     f"{path}: column {channels[k].column!r} is NaN/empty at t = {time_s[row]} s (data row "
                     f"{row + 1}); {sum(report['nan_counts'].values())} NaNs in {len(report['nan_counts'])} "
                     "column(s); choose nan_policy='interpolate' or 'drop'")
-            if nan_policy == "keep":
-                pass
-            elif nan_policy == "drop":
+            if nan_policy == "drop":
                 keep = ~np.isnan(values).any(axis=1)
                 report["dropped_rows"] = int((~keep).sum())
                 time_s, values = time_s[keep], values[keep]
-            else:
+            elif nan_policy == "interpolate":
                 for k in range(values.shape[1]):
                     bad = np.isnan(values[:, k])
                     if bad.all():

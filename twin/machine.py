@@ -246,6 +246,16 @@ def _build_outputs(definition, mesh, thermal, materials, mesh_digest):
     return operator, channels, cache
 
 
+def _air_feedthrough(definition, thermal):
+    """Rows over the inputs giving the air sensors' readings (their zone's ambient at their height), and the sensors."""
+    air = [s for s in definition.sensors if s.kind == "air"]
+    feedthrough = np.zeros((len(air), thermal.n_inputs))
+    for i, s in enumerate(air):
+        feedthrough[i, thermal.input_index(ambient_input(s.zone))] = 1.0
+        feedthrough[i, thermal.input_index(GRADIENT_INPUT)] = s.position[2] - definition.ambient_reference_height_m
+    return feedthrough, air
+
+
 def build_machine(machine="vmc_ram", mesh_size_m=None, definition=None):
     """Build (or load from caches) the twin of a machine definition.
 
@@ -262,12 +272,8 @@ def build_machine(machine="vmc_ram", mesh_size_m=None, definition=None):
     start = time.perf_counter()
     outputs, channels, operator_path = _build_outputs(definition, mesh, thermal, materials,
                                                       mesh_content_digest(mesh))
-    air = [s for s in definition.sensors if s.kind == "air"]
-    feedthrough = np.zeros((len(air), thermal.n_inputs))
-    for i, s in enumerate(air):
-        feedthrough[i, thermal.input_index(ambient_input(s.zone))] = 1.0
-        feedthrough[i, thermal.input_index(GRADIENT_INPUT)] = s.position[2] - definition.ambient_reference_height_m
-        channels.append(Channel(s.name, "air", "degC", 1.0, s.label, s.position))
+    feedthrough, air = _air_feedthrough(definition, thermal)
+    channels += [Channel(s.name, "air", "degC", 1.0, s.label, s.position) for s in air]
     return Machine(definition, mesh, thermal, outputs, feedthrough, channels, info.seconds,
                    time.perf_counter() - start, info.path, operator_path)
 
@@ -290,11 +296,7 @@ def reassemble(machine, definition):
     thermal, _ = _thermal_system(definition, machine.mesh, groups)
     if thermal.n_nodes != machine.thermal.n_nodes or not np.array_equal(thermal.node_of, machine.thermal.node_of):
         raise DefinitionError(f"{definition.source}: the reassembled thermal numbering differs from the machine's")
-    air = [s for s in definition.sensors if s.kind == "air"]
-    feedthrough = np.zeros((len(air), thermal.n_inputs))
-    for i, s in enumerate(air):
-        feedthrough[i, thermal.input_index(ambient_input(s.zone))] = 1.0
-        feedthrough[i, thermal.input_index(GRADIENT_INPUT)] = s.position[2] - definition.ambient_reference_height_m
+    feedthrough, _ = _air_feedthrough(definition, thermal)
     return Machine(definition, machine.mesh, thermal, machine.outputs, feedthrough, list(machine.channels),
                    machine.mesh_seconds, machine.operator_seconds, machine.mesh_path, machine.operator_path)
 

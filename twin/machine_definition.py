@@ -282,3 +282,8 @@ def load_machine(machine):
         zones=zones,
         zone_lags_s=zone_lags_s,
     )
+
+
+def room_zone(zones):
+    """The zone whose ambient is "the room" (the scenario's ambient): ``room`` if there is one, else the first."""
+    return "room" if "room" in zones else zones[0]

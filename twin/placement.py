@@ -285,19 +285,28 @@ class RecordTask:
         cands = self.candidates.build(machine)
         sc = _scenario_obj(self.scenario)
         sc.check_machine(machine.definition)
-        drift = machine.outputs.subset(list(self.axes))
-        operator = fea.OutputOperator(list(cands.names) + list(self.axes), ["°C"] * len(cands) + ["m"] * len(self.axes),
-                                      sp.vstack([cands.rows, drift.matrix]).tocsr(),
-                                      np.r_[np.zeros(len(cands)), drift.offset])
         schedule = ScenarioInputs(machine, sc)
         T0 = initial_temperature(machine, sc, schedule)
         times = record_times(sc, self.record_interval_s)
-        run = fea.ThermalSolver(machine.thermal, theta=sc.theta).run(T0, times, schedule, operator,
-                                                                     max_step_s=sc.time_step_s)
-        k = len(cands)
-        return Record(sc.name, times, run.outputs[:, :k].copy(),
-                      {a: run.outputs[:, k + j] * 1e6 for j, a in enumerate(self.axes)},
-                      time.perf_counter() - start)
+        run = fea.ThermalSolver(machine.thermal, theta=sc.theta).run(
+            T0, times, schedule, _record_operator(machine, cands, self.axes), max_step_s=sc.time_step_s)
+        return _run_record(sc.name, times, run, len(cands), self.axes, start)
+
+
+def _record_operator(machine, cands, axes):
+    """Output operator of a record: the candidates (°C) followed by the drift ``axes`` (m)."""
+    import fea
+
+    drift = machine.outputs.subset(list(axes))
+    return fea.OutputOperator(list(cands.names) + list(axes), ["°C"] * len(cands) + ["m"] * len(axes),
+                              sp.vstack([cands.rows, drift.matrix]).tocsr(),
+                              np.r_[np.zeros(len(cands)), drift.offset])
+
+
+def _run_record(name, times, run, k, axes, start):
+    """A :class:`Record` from a run through :func:`_record_operator` (``k`` candidates; drift in µm)."""
+    return Record(name, times, run.outputs[:, :k].copy(),
+                  {a: run.outputs[:, k + j] * 1e6 for j, a in enumerate(axes)}, time.perf_counter() - start)
 
 
 def elementary_inputs(machine):
@@ -364,18 +373,11 @@ class ResponseTask:
         if self.input_name not in steps:
             raise TwinInputError(f"no thermal input {self.input_name!r}; inputs: {sorted(steps)}")
         j, step = steps[self.input_name]
-        drift = machine.outputs.subset(list(self.axes))
-        operator = fea.OutputOperator(list(cands.names) + list(self.axes),
-                                      ["°C"] * len(cands) + ["m"] * len(self.axes),
-                                      sp.vstack([cands.rows, drift.matrix]).tocsr(),
-                                      np.r_[np.zeros(len(cands)), drift.offset])
         times = np.arange(0.0, self.horizon_s + 1e-9, self.interval_s)
         schedule = _StepSchedule(machine.thermal.input_names, j, step)
-        run = fea.ThermalSolver(machine.thermal).run(20.0, times, schedule, operator, max_step_s=self.max_step_s)
-        k = len(cands)
-        return Record(self.scenario, times, run.outputs[:, :k].copy(),
-                      {a: run.outputs[:, k + i] * 1e6 for i, a in enumerate(self.axes)},
-                      time.perf_counter() - start)
+        run = fea.ThermalSolver(machine.thermal).run(20.0, times, schedule, _record_operator(machine, cands, self.axes),
+                                                     max_step_s=self.max_step_s)
+        return _run_record(self.scenario, times, run, len(cands), self.axes, start)
 
 
 def _file_digest(path):
@@ -564,20 +566,21 @@ def placement_study(machine="vmc_ram", mesh_size_m=None, parts=DEFAULT_PARTS, n_
     # Rows for selection: thinned evenly within each training scenario.
     per = max(50, max_selection_rows // len(rec_train))
     blocks = [(r, _thin(len(r.time_s), per)) for r in rec_train]
-    Xsel = np.vstack([_zero_ref(r.temperatures)[idx] for r, idx in blocks])
+    Xblocks = [_zero_ref(r.temperatures)[idx] for r, idx in blocks]
+    Xsel = np.vstack(Xblocks)
     seed = SeedSelector(Xsel, random_state=0)
     pod = pod_modes(Xsel) if "qr-drift" in methods else None
     for axis in axes:
-        ysel = np.concatenate([_zero_ref(r.drift[axis])[idx] for r, idx in blocks])
+        yblocks = [_zero_ref(r.drift[axis])[idx] for r, idx in blocks]
+        ysel = np.concatenate(yblocks)
         scores = seed_scores(Xsel, ysel) if set(methods) & set(SEED_METHODS) else {}
         for name, v in scores.items():
             cand_scores[f"{name}_{axis}"] = v
         for method in methods:
             if method in SEED_METHODS:
-                selections[(method, axis)] = [seed.select(method, ysel, k, scores) for k in range(1, k_max + 1)]
+                selections[(method, axis)] = [seed.select(method, k, scores) for k in range(1, k_max + 1)]
             elif method == "greedy-loso":
-                order, _hist, alone = greedy_loso([_zero_ref(r.temperatures)[idx] for r, idx in blocks],
-                                                  [_zero_ref(r.drift[axis])[idx] for r, idx in blocks], k_max)
+                order, _hist, alone = greedy_loso(Xblocks, yblocks, k_max)
                 selections[(method, axis)] = [order[:k] for k in range(1, k_max + 1)]
                 cand_scores[f"greedy_alone_{axis}"] = alone
             elif method == "qr-drift":
@@ -592,7 +595,7 @@ def placement_study(machine="vmc_ram", mesh_size_m=None, parts=DEFAULT_PARTS, n_
         Ytr = [np.column_stack([_zero_ref(r.drift[a])[idx] for a in axes]) for r, idx in blocks]
         weights = 1.0 / np.maximum(np.max([np.abs(Y).max(axis=0) for Y in Ytr], axis=0), 1e-12)
         order, _hist, alone = greedy_loso(
-            [_zero_ref(r.temperatures)[idx] for r, idx in blocks] + [_zero_ref(r.temperatures) for r in responses],
+            Xblocks + [_zero_ref(r.temperatures) for r in responses],
             Ytr + [np.column_stack([_zero_ref(r.drift[a]) for a in axes]) for r in responses], k_max,
             target_weights=weights)
         for axis in axes:
@@ -798,6 +801,7 @@ def write_placement_report(result, machine, folder):
     matplotlib.use("Agg")
     import pandas as pd
 
+    from .dataset import json_default
     from .render import render_machine
 
     folder = Path(folder)
@@ -826,7 +830,7 @@ def write_placement_report(result, machine, folder):
     (folder / "placement.json").write_text(json.dumps({
         "config": {k: v for k, v in result.config.items() if k != "scenario_objects"}, "timings": result.timings, "uncompensated": result.uncompensated,
         "verdicts": verdicts(result), "table": result.table, "anfis": result.anfis, "chosen": chosen},
-        indent=1, default=_json_default))
+        indent=1, default=json_default))
     # One render: the best sets of every axis, labelled axis + rank.
     pts = np.array([[r["x_m"], r["y_m"], r["z_m"]] for r in chosen])
     labels = [f"{r['axis']}{r['rank']}" for r in chosen]
@@ -864,13 +868,3 @@ def _plot_k_curves(result, path):
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
-
-
-def _json_default(value):
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, (np.floating, np.integer)):
-        return value.item()
-    if isinstance(value, (Path, tuple)):
-        return str(value) if isinstance(value, Path) else list(value)
-    raise TypeError(f"not JSON serialisable: {value!r}")

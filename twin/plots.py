@@ -16,7 +16,8 @@ def _hours(dataset):
     return dataset.time_s / 3600.0
 
 
-def _save(fig, path):
+def save_figure(fig, path):
+    """Save a Matplotlib figure to ``path`` (PNG) atomically and close it; returns the path."""
     path = Path(path)
     fig.tight_layout()
     tmp = path.with_name(f".{path.stem}.partial.png")
@@ -41,7 +42,7 @@ def plot_temperatures(dataset, path, max_lines=12):
     ax.set_title(f"Temperatures — {dataset.metadata.get('scenario', '')}")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, ncol=2, loc="best")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_drift(dataset, path):
@@ -58,7 +59,7 @@ def plot_drift(dataset, path):
         twin_ax.set_ylabel("spindle speed (rpm)", color="grey")
     ax.legend(loc="upper left", fontsize=8)
     ax.set_title(f"TCP drift — {dataset.metadata.get('scenario', '')}")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_strains(dataset, path):
@@ -73,7 +74,7 @@ def plot_strains(dataset, path):
     ax.set_ylabel(f"mean axial strain ({UNITS['ue']})")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_measured_vs_predicted(time_s, measured, predicted, unit, title, path):
@@ -90,4 +91,4 @@ def plot_measured_vs_predicted(time_s, measured, predicted, unit, title, path):
     bottom.set_ylabel(f"residual ({UNITS.get(unit, unit)})")
     bottom.set_xlabel("time (h)")
     bottom.grid(alpha=0.3)
-    return _save(fig, path)
+    return save_figure(fig, path)

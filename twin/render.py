@@ -74,9 +74,9 @@ def render_thermal_image(machine, temperature, path, title=None, clim=None):
     region of interest would, to the range of the virtual spots on the face.
     """
     camera = machine.definition.camera
-    if clim is None:
-        spots = machine.thermal.point_weights(camera.spots(), snap_distance=machine.definition.snap_distance_m)
-        values = spots @ temperature
+    if clim is None:                   # the camera spots are rows of the machine's output operator
+        rows = [j for j, c in enumerate(machine.channels) if c.kind == "camera"]
+        values = machine.outputs.matrix[rows] @ temperature + machine.outputs.offset[rows]
         margin = max(0.1, 0.1 * float(np.ptp(values)))
         clim = (float(values.min()) - margin, float(values.max()) + margin)
     grid = machine.mesh.to_pyvista()

@@ -53,7 +53,11 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
+from fea.transient import step_grid
+
+from .dataset import json_default
 from .errors import TwinInputError
+from .machine_definition import room_zone
 
 FORMAT = "thermal-twin-rom"
 FORMAT_VERSION = 1
@@ -415,7 +419,7 @@ class ReducedModel:
                     machine=self.machine, digest=self.digest, info=self.info)
         arrays = dict(eigenvalues=self.eigenvalues, input_matrix=self.input_matrix,
                       output_matrix=self.output_matrix, feedthrough=self.feedthrough, offset=self.offset,
-                      uniform_state=self.uniform_state, meta=np.array(json.dumps(meta, default=_json_default)))
+                      uniform_state=self.uniform_state, meta=np.array(json.dumps(meta, default=json_default)))
         if keep_basis and self.basis is not None:
             arrays["basis"] = self.basis
         tmp = path.with_name(path.name + ".partial.npz")
@@ -440,14 +444,6 @@ class ReducedModel:
                    meta["output_names"], meta["output_units"], meta["output_kinds"], meta["zones"],
                    meta["sources"], meta["limits"], meta["machine"], meta["digest"], meta["info"],
                    data["basis"] if "basis" in data.files else None, meta.get("zone_lags_s", {}))
-
-
-def _json_default(value):
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    raise TypeError(f"not JSON serialisable: {type(value)}")
 
 
 def source_power(src, spindle_rpm, feed_mm_min):
@@ -594,21 +590,6 @@ def cached_rom(machine, order=DEFAULT_ORDER, method="krylov", points=None, kinds
 
 
 # ----------------------------------------------------------------------------- scenarios
-def step_grid(times, max_step_s=None):
-    """The FE solver's step times: each output interval split into equal sub-steps ≤ max_step_s."""
-    times = np.asarray(times, float)
-    intervals = np.diff(times)
-    sub = np.ones(len(intervals), int) if max_step_s is None else \
-        np.maximum(1, np.ceil(intervals / float(max_step_s) - 1e-9).astype(int))
-    at_output = np.concatenate([[0], np.cumsum(sub)])
-    if np.all(sub == 1):
-        return times.copy(), at_output
-    k = np.repeat(np.arange(len(sub)), sub)                 # interval of each step
-    j = np.arange(len(k)) - at_output[k] + 1                # 1..sub within the interval
-    steps = np.concatenate([[times[0]], times[k] + intervals[k] * j / sub[k]])
-    return steps, at_output
-
-
 @dataclass
 class ScenarioConditions:
     times_s: np.ndarray
@@ -632,7 +613,7 @@ def initial_state(rom, scenario):
     cond = scenario_conditions(scenario, rom.zones, [0.0], rom.zone_lags_s)
     if init["kind"] == "uniform":
         value = init.get("temperature_C")
-        return rom.uniform(cond.ambient_C[rom.zones[0]][0] if value is None else value)
+        return rom.uniform(cond.ambient_C[room_zone(rom.zones)][0] if value is None else value)
     # The machine stands idle before the test unless the scenario names a speed (as twin.simulate does).
     rpm = np.array([init.get("spindle_rpm") or 0.0])
     idle = {a: np.zeros(1) for a in "xyz"}

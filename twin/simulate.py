@@ -18,6 +18,7 @@ import fea
 
 from .dataset import ChannelInfo, Dataset, project_version
 from .machine import Machine, build_machine
+from .machine_definition import room_zone
 from .noise import apply_noise
 from .scenario import Scenario, load_scenario
 
@@ -83,7 +84,7 @@ def initial_temperature(machine, scenario, schedule):
     init = scenario.initial
     if init["kind"] == "uniform":
         value = init.get("temperature_C")
-        zone = "room" if "room" in machine.zones else machine.zones[0]
+        zone = room_zone(machine.zones)
         return float(schedule.conditions([0.0]).ambient_C[zone][0] if value is None else value)
     cond = schedule.conditions([0.0])
     # The machine stands idle before the test unless the scenario names a speed.

@@ -25,9 +25,10 @@ from pathlib import Path
 import numpy as np
 
 from .compensation import format_table, physics_prediction, score
+from .dataset import json_default
 from .errors import TwinInputError
 from .model_store import dataset_label, fit_compensation_model
-from .placement import MachineSpec
+from .placement import MachineSpec, _zero_ref
 
 #: Scenario families of the cross-condition study: the first available scenario of each is used.
 FAMILIES = {
@@ -110,7 +111,7 @@ def select_inputs(datasets, target, k=4, method="gm-influence+fcm", candidates=N
     from models import select_sensors
 
     candidates = candidates or installed_thermometers(datasets[0])
-    X = np.vstack([d.matrix(candidates) - d.matrix(candidates)[:1] for d in datasets])
+    X = np.vstack([_zero_ref(d.matrix(candidates)) for d in datasets])
     y = np.concatenate([d[target] - d[target][0] for d in datasets])
     sel = select_sensors(X, y, method=method, n_select=min(k, len(candidates)), random_state=random_state)
     return [candidates[i] for i in sel.indices]
@@ -225,18 +226,10 @@ def _write(result, out_dir, extra=None):
         for name, rows in result.tables.items():
             pd.DataFrame(rows).to_csv(tmp / f"{name}.csv", index=False)
         (tmp / f"{result.name}.json").write_text(json.dumps({"tables": result.tables, "data": result.data},
-                                                            indent=1, default=_json_default))
+                                                            indent=1, default=json_default))
         if extra is not None:
             extra(tmp)
     result.out_dir = Path(out_dir)
-
-
-def _json_default(value):
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, (np.floating, np.integer)):
-        return value.item()
-    return str(value)
 
 
 # ----------------------------------------------------------------------------- thesis protocol
@@ -322,14 +315,14 @@ def hybrid_study(train=HYBRID_TRAIN, test=HYBRID_TEST, axes=("Z", "Y"), model="a
         used[axis] = ins
         data_model = fit_compensation_model([measured[i] for i in tr], ins, axis, model)
         # residual datasets: the target replaced by measured − physics (both zero-referenced)
-        resid = [_with_residual(measured[i], axis, physics[i][axis]) for i in tr]
-        hybrid_model = fit_compensation_model(resid, ins, f"{axis}_residual", model)
+        resid = [_with_residual(ds, axis, phys[axis]) for ds, phys in zip(measured, physics)]
+        hybrid_model = fit_compensation_model([resid[i] for i in tr], ins, f"{axis}_residual", model)
         for i in tr + te:
             ds = measured[i]
             y = ds[axis] - ds[axis][0]
             p_phys = physics[i][axis] - physics[i][axis][0]
             p_data = data_model.predict(ds)
-            p_hyb = p_phys + hybrid_model.predict(_with_residual(ds, axis, physics[i][axis]))
+            p_hyb = p_phys + hybrid_model.predict(resid[i])
             for name, p in (("physics (nominal twin)", p_phys), (f"data-driven ({model})", p_data),
                             (f"hybrid (twin + {model} residual)", p_hyb)):
                 s = score(y, p)

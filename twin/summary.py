@@ -29,16 +29,17 @@ def run_summary(dataset, wall_seconds, probe_spacing_m=0.1, iso_test=None):
                                  "rise_K": rise[hottest]}
     if dataset.metadata.get("energy_balance_relative_error") is not None:
         out["energy_balance_relative_error"] = dataset.metadata["energy_balance_relative_error"]
+    axes = [a for a in drift if a in ("X", "Y", "Z")]       # the ISO quantities are of the X/Y/Z drifts
     if iso_test == "etve":
         ambient = [n for n in dataset.names if n.startswith("ambient_") and dataset.info(n).unit == "degC"]
         out["iso230_3_etve"] = {
-            "drift_range_um": {a: drift[a]["range_um"] for a in drift if a in ("X", "Y", "Z")},
+            "drift_range_um": {a: drift[a]["range_um"] for a in axes},
             "ambient_range_K": float(max(np.ptp(dataset[n]) for n in ambient)) if ambient else None,
         }
     if iso_test == "spindle" and "Y_top" in dataset:
         tilt = tilt_urad(dataset, probe_spacing_m)
         out["iso230_3_spindle"] = {
-            "max_abs_drift_um": {a: float(np.abs(dataset[a]).max()) for a in drift if a in ("X", "Y", "Z")},
+            "max_abs_drift_um": {a: float(np.abs(dataset[a]).max()) for a in axes},
             "max_abs_tilt_yz_urad": float(np.abs(tilt).max()),
         }
     return out

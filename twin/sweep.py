@@ -49,12 +49,6 @@ def cached(key, factory):
         return _CACHE.setdefault(key, value)
 
 
-def clear_cache():
-    """Forget everything :func:`cached` kept in this process."""
-    with _CACHE_LOCK:
-        _CACHE.clear()
-
-
 def _call(task):
     try:
         from threadpoolctl import threadpool_limits

@@ -49,8 +49,9 @@ def run_scenario(scenario, machine=None, mesh_size_m=None, out_dir=None, fields=
         sc.machine = str(machine)
     if camera is not None:
         sc.record_camera = bool(camera)
-    sc.check_machine(load_machine(sc.machine))      # fail on bad speeds before any meshing
-    model = build_machine(sc.machine, mesh_size_m)
+    definition = load_machine(sc.machine)
+    sc.check_machine(definition)      # fail on bad speeds before any meshing
+    model = build_machine(sc.machine, mesh_size_m, definition=definition)
     result = simulate(sc, model, fields=bool(fields), progress=progress)
     out_dir = Path(out_dir or Path("runs") / sc.name)
     summary = run_summary(result.dataset, result.wall_seconds,
@@ -80,10 +81,10 @@ def report_dataset(path, out_dir=None, column_map=None, nan_policy="error", prob
     (``column_map``, ``nan_policy``); the import report (gaps, NaNs) is
     written beside the summary.
     """
-    from .dataset import Dataset
+    from .dataset import Dataset, sidecar_path
 
     path = Path(path)
-    if column_map or not (path.with_name(path.name + ".json")).exists():
+    if column_map or not sidecar_path(path).exists():
         dataset = Dataset.from_measured_csv(path, column_map=column_map, nan_policy=nan_policy)
     else:
         dataset = Dataset.read(path)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 
-def greedy_loso(blocks_X, blocks_y, k_max, ridge=1e-4, exclude=(), normalise="none", criterion="max",
+def greedy_loso(blocks_X, blocks_y, k_max, ridge=1e-4, normalise="none", criterion="max",
                 target_weights=None, folds=None):
     """Greedy forward selection on the leave-one-block-out error of an MLR (with intercept).
 
@@ -64,8 +64,6 @@ def greedy_loso(blocks_X, blocks_y, k_max, ridge=1e-4, exclude=(), normalise="no
     selected = [0]
     blocked = np.zeros(p + 1, bool)
     blocked[0] = True
-    for e in exclude:
-        blocked[e + 1] = True
     history, alone = [], None
     for _step in range(k_max):
         objective = np.zeros(p + 1)
@@ -79,21 +77,23 @@ def greedy_loso(blocks_X, blocks_y, k_max, ridge=1e-4, exclude=(), normalise="no
             d = np.diag(Gt) + lam - np.einsum("ij,ij->j", GS, V)
             Gv = G[f]
             if criterion == "sse":
-                rr = np.diag(Gv) - 2 * np.einsum("ij,ij->j", V, Gv[S]) + np.einsum("ij,ij->j", V, Gv[np.ix_(S, S)] @ V)
+                GvS, Gv_SS = Gv[S], Gv[np.ix_(S, S)]
+                rr = np.diag(Gv) - 2 * np.einsum("ij,ij->j", V, GvS) + np.einsum("ij,ij->j", V, Gv_SS @ V)
             else:
-                R = Xa[f] - Xa[f][:, S] @ V                 # residual of every candidate on X_S (block f)
+                XS = Xa[f][:, S]
+                R = Xa[f] - XS @ V                          # residual of every candidate on X_S (block f)
             for a in range(n_t):
                 bt = b_all[:, a] - b[f][:, a]
                 beta_S0 = A_inv @ bt[S]
                 beta_c = (bt - V.T @ bt[S]) / np.maximum(d, 1e-300)
                 if criterion == "sse":
                     bv = b[f][:, a]
-                    e0e0 = yy[f][a] - 2 * beta_S0 @ bv[S] + beta_S0 @ Gv[np.ix_(S, S)] @ beta_S0
-                    e0x = bv - Gv[S].T @ beta_S0            # X_vᵀ(y − X_S β)
+                    e0e0 = yy[f][a] - 2 * beta_S0 @ bv[S] + beta_S0 @ Gv_SS @ beta_S0
+                    e0x = bv - GvS.T @ beta_S0              # X_vᵀ(y − X_S β)
                     e0r = e0x - V.T @ e0x[S]
                     objective += tw[a] * w[f][a] * (e0e0 - 2 * beta_c * e0r + beta_c ** 2 * rr)
                 else:                                       # max |residual| over the block, exactly
-                    e0 = Ys[f][:, a] - Xa[f][:, S] @ beta_S0
+                    e0 = Ys[f][:, a] - XS @ beta_S0
                     worst = np.abs(e0[:, None] - R * beta_c).max(axis=0)
                     objective += tw[a] * worst * (np.sqrt(w[f][a] * len(Ys[f])) if normalise != "none" else 1.0)
         objective[blocked] = np.inf

@@ -29,18 +29,16 @@ class SeedSelector:
         if key not in self._groups:
             if kind == "fcm":
                 g = fcm_sensor_clusters(self.X, k, random_state=self.random_state)
-            else:
-                sub = self.X if keep is None else self.X[:, keep]
+            elif keep is None:
+                g = np.asarray(fuzzy_equivalence_clusters(self.X, n_groups=k)[0], dtype=np.intp)
+            else:                                   # sensors left out of the tree are in no group (-1)
                 g = np.full(self.X.shape[1], -1, dtype=np.intp)
-                inner = fuzzy_equivalence_clusters(sub, n_groups=k)[0]
-                if keep is None:
-                    g = np.asarray(inner, dtype=np.intp)
-                else:
-                    g[keep] = inner
+                g[keep] = fuzzy_equivalence_clusters(self.X[:, keep], n_groups=k)[0]
             self._groups[key] = g
         return self._groups[key]
 
-    def select(self, method, y, k, scores):
+    def select(self, method, k, scores):
+        """The ``k`` sensors of a seed ``method``, best first; ``scores``: :func:`seed_scores` of X and the target."""
         if method in ("gra+fcm", "gm-influence+fcm"):
             groups = self.groups("fcm", k)
             s = scores["grade"] if method == "gra+fcm" else scores["influence"]

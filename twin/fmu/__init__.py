@@ -413,9 +413,10 @@ def scenario_start(rom, scenario):
         return 20.0, True
     value = init.get("temperature_C")
     if value is None:
+        from ..machine_definition import room_zone
         from ..rom import scenario_conditions
 
-        value = scenario_conditions(scenario, rom.zones, [0.0], rom.zone_lags_s).ambient_C[rom.zones[0]][0]
+        value = scenario_conditions(scenario, rom.zones, [0.0], rom.zone_lags_s).ambient_C[room_zone(rom.zones)][0]
     return float(value), False
 
 

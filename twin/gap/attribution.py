@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from .model import output_effects
 from .structure import facet_table
 
 
@@ -106,8 +107,9 @@ def effect_attribution(model, result, nominal, names):
     for r in regions:
         ind = sp.diags((s.node_region == r).astype(float))
         Gr = backend.reduce_rows(C @ ind)                       # (k, r)
-        parts[r] = model.interp(dZ @ Gr.T)
-        total_field += dZ @ Gr.T
+        part = dZ @ Gr.T
+        parts[r] = model.interp(part)
+        total_field += part
     change = result.prediction.values[:, d_rows] - nominal.prediction.values[:, d_rows]
     sensor_part = change - model.interp(total_field)
     for k, row in enumerate(d_rows):
@@ -164,9 +166,8 @@ def separating_sensor(model, result_a, result_b, nominal, noise_K=0.05, count=30
         run = result.prediction.run
         T = run.rows(rows)
         active = list(zip([_effect(model, n) for n in result.effects], _split(result, model)))
-        outputs = [(e, th) for e, th in active if e.kind == "output"]
         U = result.prediction.inputs
-        for e, th in sorted(outputs, key=lambda p: p[0].name != "sensor_mounting"):
+        for e, th in output_effects(active):
             T = e.thermometer_change(th, T, U @ air.T, model.drive.step_s)
         return T
 

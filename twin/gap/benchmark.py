@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .diagnose import _machine
 from .effects import default_library
 
 #: Truth parameter values of the single-effect cases (in the library's units).
@@ -102,13 +103,6 @@ def cases(which="all"):
     return out
 
 
-def _machine(name, mesh_size_m):
-    from ..machine import build_machine
-    from ..sweep import cached
-
-    return cached(("machine", name, mesh_size_m), lambda: build_machine(name, mesh_size_m))
-
-
 def case_record(case, scenario=SCENARIO, machine="vmc_ram", truth_mesh_size_m=TRUTH_MESH_SIZE_M):
     """The "measured" record of a case: the truth run with the effects' truth variants, the rig's channels only."""
     from .truth import truth_dataset
@@ -169,9 +163,9 @@ def summarise(case, d):
             if r.name in (key_a, key_b):
                 truth_result = r
     if truth_result is not None:
-        truth_values = {f"{n}.{p}": v for n, vals in case.effects
-                        for p, v in zip([p.name for e in default_library() if e.name == n
-                                         for p in e.parameters(d.machine)], vals)}
+        library = {e.name: e for e in default_library()}
+        truth_values = {f"{n}.{p.name}": v for n, vals in case.effects
+                        for p, v in zip(library[n].parameters(d.machine), vals)}
         errors = []
         for p in truth_result.params():
             t = truth_values.get(p["name"])
@@ -349,9 +343,8 @@ def format_benchmark(results, metrics, wall, settings):
 
 def plot_confusion(results, path):
     """Heat map of true effect against top-ranked effect (PNG)."""
-    import matplotlib
+    from ..plots import save_figure  # first: it selects the Agg backend
 
-    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     rows = [r["truth"] for r in results]
@@ -372,9 +365,4 @@ def plot_confusion(results, path):
     ax.set_xlabel("top-ranked by the diagnosis")
     ax.set_ylabel("effect switched on in the truth")
     ax.set_title("Gap benchmark: confusion")
-    fig.tight_layout()
-    tmp = Path(path).with_name(f".{Path(path).stem}.partial.png")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(path)
-    return path
+    return save_figure(fig, path)

@@ -179,12 +179,13 @@ def engine(machine, effects, backend="rom", **options):
     return cached(key, build)
 
 
-def _machine(machine):
+def _machine(machine, mesh_size_m=None):
+    """A built machine as given, or one built by name (and mesh size) once per process."""
     if isinstance(machine, str):
         from ..machine import build_machine
         from ..sweep import cached
 
-        return cached(("machine", machine, None), lambda: build_machine(machine))
+        return cached(("machine", machine, mesh_size_m), lambda: build_machine(machine, mesh_size_m))
     return machine
 
 

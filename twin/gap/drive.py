@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import TwinInputError
+from ..machine_definition import room_zone
 from .signals import lag, step_values
 
 
@@ -112,11 +113,10 @@ class ScenarioDrive(Drive):
     def __init__(self, scenario, machine, grid):
         rpm, feeds = scenario.operating(grid)
         d = machine.definition
-        room_zone = "room" if "room" in d.zones else d.zones[0]
         super().__init__(grid, rpm, feeds, np.full(len(grid), scenario.ambient.gradient_K_per_m), d.zones,
-                         d.zone_lags_s, room_zone)
+                         d.zone_lags_s, room_zone(d.zones))
         self.scenario = scenario
-        self._room = scenario.zone_ambient(self.grid, [room_zone])[room_zone]
+        self._room = scenario.zone_ambient(self.grid, [self.room_zone])[self.room_zone]
         self._cache = {}
 
     def room(self, extra_gradient=None):
@@ -165,11 +165,11 @@ def measured_drive(machine, grid, record, scenario=None):
     air = {}
     for name, zone, height, values in record.air:
         air.setdefault(zone, []).append((np.interp(grid, t, values), height))
-    room_zone = "room" if "room" in d.zones else d.zones[0]
+    room = room_zone(d.zones)
     fallback = None
-    if room_zone not in air and scenario is not None:
-        fallback = scenario.zone_ambient(grid, [room_zone])[room_zone]
-        notes.append(f"no air sensor in zone {room_zone!r}: the ambient of scenario {scenario.name!r} is used")
-    drive = MeasuredDrive(grid, rpm, feeds, gradient, d.zones, d.zone_lags_s, room_zone, air, fallback)
+    if room not in air and scenario is not None:
+        fallback = scenario.zone_ambient(grid, [room])[room]
+        notes.append(f"no air sensor in zone {room!r}: the ambient of scenario {scenario.name!r} is used")
+    drive = MeasuredDrive(grid, rpm, feeds, gradient, d.zones, d.zone_lags_s, room, air, fallback)
     drive.notes = notes + drive.notes
     return drive

@@ -104,10 +104,6 @@ class Effect:
         """Displacement readings (n, k) from the true drift D (n, k); ``axes`` is 'x'/'y'/'z' per column."""
         return D
 
-    @property
-    def output_effect(self):
-        return self.kind == "output"
-
 
 # ============================================================================= system effects
 def _scaled_definition(definition, groups=(), joint=None, factor=2.0):
@@ -376,10 +372,6 @@ class EnclosureLag(Effect):
     def parameters(self, machine):
         tau = machine.definition.zone_lags_s.get(self.hidden["zone"], 3 * 3600.0) / 3600.0
         return (Param("lag_h", "h", tau, 0.25, 12.0, log=True),)
-
-    @property
-    def params(self):
-        return (Param("lag_h", "h", 3.0, 0.25, 12.0, log=True),)
 
     def applicable(self, machine):
         return self.hidden["zone"] in machine.definition.zone_lags_s

@@ -72,11 +72,10 @@ def m_orthonormal_union(mass, blocks, tolerance=1e-7):
 class SimulationResult:
     """Modal states W (N, r) of one reduced run and the map to outputs; see :meth:`ReducedBackend.simulate`."""
 
-    def __init__(self, outputs, W=None, Q=None, backend=None, field_outputs=None, fields=None):
+    def __init__(self, outputs, W=None, Q=None, backend=None, field_outputs=None):
         self.outputs = outputs
         self.W, self.Q, self.backend = W, Q, backend
         self.field_outputs = field_outputs or {}
-        self.fields = fields
 
     def rows(self, reduced_rows):
         """Outputs (N, k) of other rows given in the reduced basis (k, r) (e.g. candidate thermometers)."""
@@ -192,8 +191,8 @@ class FullBackend:
                 B = B + a * s.system_input_change(name)
         return sp.csr_matrix(A), sp.csc_matrix(B)
 
-    def simulate(self, U, step_s, coefficients=None, u0=None, fields=None, field_responses=(), keep_fields=()):
-        """As :meth:`ReducedBackend.simulate`; ``keep_fields`` (step indices) keeps full temperature fields."""
+    def simulate(self, U, step_s, coefficients=None, u0=None, fields=None, field_responses=()):
+        """As :meth:`ReducedBackend.simulate`."""
         s = self.structure
         A, B = self.system(coefficients)
         M = s.mass
@@ -210,15 +209,12 @@ class FullBackend:
         C = s.output_matrix
         out = np.empty((len(U), C.shape[0]))
         resp = {n: np.empty((len(U), C.shape[0])) for n in names}
-        kept = {}
 
         def record(k):
             Y = np.asarray(C @ X)
             out[k] = Y[:, 0]
             for j, n in enumerate(names):
                 resp[n][k] = Y[:, j + 1]
-            if k in keep_fields:
-                kept[k] = X[:, 0].copy()
 
         record(0)
         for k in range(1, len(U)):
@@ -226,7 +222,7 @@ class FullBackend:
             rhs[:, 0] += th * BU[k] + (1 - th) * BU[k - 1]
             X = np.asarray(lhs(rhs)).reshape(X.shape)
             record(k)
-        return SimulationResult(out, backend=self, field_outputs=resp, fields=kept)
+        return SimulationResult(out, backend=self, field_outputs=resp)
 
 
 def make_backend(structure, backend="rom", **options):

@@ -37,6 +37,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares, lsq_linear
 
+from .model import Prediction
+
 GROUPS = ("temperature", "air", "displacement", "strain")
 #: Model tolerance per channel group (K, K, µm, µε): residuals below it are as good as a twin gets (its
 #: discretisation, the time step, sensor positions on a faceted surface); the group scale is the larger of
@@ -254,8 +256,6 @@ def fit_effects(model, evaluator, effects, start=None, max_nfev=60):
             nfev += 1
 
         def predict(values):
-            from .model import Prediction
-
             d = values - co.nominal_values
             Y = base.values + sum(dj * Gj for dj, Gj in zip(d, G))
             return Prediction(Y, base.nuisance, None, None, None)
@@ -293,7 +293,6 @@ def fit_effects(model, evaluator, effects, start=None, max_nfev=60):
         # Jacobian in parameter units
         J = _jacobian(lambda v: evaluator.fit_vector(model.predict(co.split(v))), values, co)
         nfev += len(values)
-        predict = None
     pred = model.predict(co.split(values))
     res = evaluator.residual(pred)
     n_eff = effective_samples(res, evaluator, evaluator.fit_rows)

@@ -90,9 +90,7 @@ class GapModel:
     def sensor_models(self, active, Y, U, additive=True):
         """Apply the output effects (mounting, then lag, then fixture drift) to channel values on the grid."""
         s = self.structure
-        outputs = sorted([(e, th) for e, th in active if e.kind == "output"],
-                         key=lambda p: ["sensor_mounting", "sensor_lag"].index(p[0].name)
-                         if p[0].name in ("sensor_mounting", "sensor_lag") else 9)
+        outputs = output_effects(active)
         if not outputs:
             return Y
         Y = Y.copy()
@@ -107,6 +105,16 @@ class GapModel:
                 D = effect.displacement_change(theta, D, self.axes, self.drive)
             Y[:, s.displacements] = D
         return Y
+
+
+#: Order in which the output effects apply to a reading (the others, after them, in their given order).
+SENSOR_ORDER = ("sensor_mounting", "sensor_lag")
+
+
+def output_effects(active):
+    """The output effects among ``active`` = [(effect, θ), …], in the order they apply (:data:`SENSOR_ORDER`)."""
+    return sorted([(e, th) for e, th in active if e.kind == "output"],
+                  key=lambda p: SENSOR_ORDER.index(p[0].name) if p[0].name in SENSOR_ORDER else len(SENSOR_ORDER))
 
 
 def _idle(drive):

@@ -19,6 +19,7 @@ import numpy as np  # noqa: E402
 
 from ..dataset import json_default  # noqa: E402
 from ..outdir import atomic_directory  # noqa: E402
+from ..plots import save_figure  # noqa: E402
 from .fit import GROUP_UNIT  # noqa: E402
 
 GROUP_LABEL = {"temperature": "surface temperatures", "air": "air sensors", "displacement": "TCP drift",
@@ -36,12 +37,8 @@ def _ratio(x):
 
 
 def _save(fig, path):
-    fig.tight_layout()
-    tmp = Path(path).with_name(f".{Path(path).stem}.partial.png")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(path)
-    return Path(path).name
+    """Save a figure atomically (:func:`twin.plots.save_figure`); the file name, for the Markdown links."""
+    return save_figure(fig, path).name
 
 
 def write_report(d, out_dir, render=True):
@@ -224,6 +221,18 @@ def render_figures(d, tmp):
     return out
 
 
+def _breakdown_table(key, table, groups, drift_names, rows=False):
+    """Markdown lines of a phase or band table (:mod:`.where`): RMS per channel group (no air) and drift axis."""
+    shown = [g for g in groups if g != "air"]
+    head = f"| {key} | " + ("rows | " if rows else "")
+    L = [head + " | ".join(GROUP_LABEL[g] for g in shown) + " | " + " | ".join(f"{n} (µm)" for n in drift_names)
+         + " |", "|---|" + ("---|" if rows else "") + "---|" * (len(shown) + len(drift_names))]
+    for name, e in table.items():
+        L.append(f"| {name} | " + (f"{e['rows']} | " if rows else "") + " | ".join(_f(e.get(g)) for g in shown)
+                 + " | " + " | ".join(_f(e.get(n)) for n in drift_names) + " |")
+    return L
+
+
 # ============================================================================= Markdown
 def format_report(d, figures):
     rec = d.record.report
@@ -278,20 +287,10 @@ def format_report(d, figures):
         L.append(f"| {n} | {ev.kinds[j]} ({GROUP_UNIT[ev.kinds[j]]}) | {_f(s['fit_rms'])} | {_f(s['hold_rms'])} | "
                  f"{_f(s['hold_max'])} | {_f(a)} |")
     drift_names = [n for n, k in zip(d.names, ev.kinds) if k == "displacement"]
-    L += ["", "By operating phase (RMS over all rows; phases from spindle speed and ambient activity):", "",
-          "| phase | rows | " + " | ".join(GROUP_LABEL[g] for g in groups if g != "air") + " | "
-          + " | ".join(f"{n} (µm)" for n in drift_names) + " |",
-          "|---|---|" + "---|" * (len([g for g in groups if g != 'air']) + len(drift_names))]
-    for ph, e in d.where["phases"].items():
-        L.append(f"| {ph} | {e['rows']} | " + " | ".join(_f(e.get(g)) for g in groups if g != "air") + " | "
-                 + " | ".join(_f(e.get(n)) for n in drift_names) + " |")
-    L += ["", "By frequency band (RMS over all rows):", "",
-          "| band | " + " | ".join(GROUP_LABEL[g] for g in groups if g != "air") + " | "
-          + " | ".join(f"{n} (µm)" for n in drift_names) + " |",
-          "|---|" + "---|" * (len([g for g in groups if g != 'air']) + len(drift_names))]
-    for band, e in d.where["bands"].items():
-        L.append(f"| {band} | " + " | ".join(_f(e.get(g)) for g in groups if g != "air") + " | "
-                 + " | ".join(_f(e.get(n)) for n in drift_names) + " |")
+    L += ["", "By operating phase (RMS over all rows; phases from spindle speed and ambient activity):", ""]
+    L += _breakdown_table("phase", d.where["phases"], groups, drift_names, rows=True)
+    L += ["", "By frequency band (RMS over all rows):", ""]
+    L += _breakdown_table("band", d.where["bands"], groups, drift_names)
     L += ["", f"![phases and bands]({figures['breakdown']})", ""]
     est = d.attribution.get("regions")
     if est is not None and est["shares"]:

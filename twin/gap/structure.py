@@ -57,10 +57,7 @@ class Structure:
         self.index = {n: i for i, n in enumerate(self.names)}
         self.thermometers = [i for i, c in enumerate(self.channels) if c.kind == "temperature"]
         self.displacements = [i for i, c in enumerate(self.channels) if c.kind == "displacement"]
-        self.strains = [i for i, c in enumerate(self.channels) if c.kind == "strain"]
         self.air = [i for i, c in enumerate(self.channels) if c.kind == "air"]
-        d = machine.definition
-        self.room_zone = "room" if "room" in d.zones else d.zones[0]
         self._node_region = None
         self._thermometer_info = None
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from .fit import GROUPS
 from .signals import BANDS, band_split, lag
 
 PHASES = ("heating", "steady", "cooling", "ambient-driven", "idle")
@@ -43,6 +42,22 @@ def phases(drive, times_s):
     return label[k].astype(str)
 
 
+def _rms_entry(R, evaluator, groups, names, entry=None):
+    """RMS of the finite residuals R (n, p) per channel group and per drift axis, into ``entry``."""
+    entry = {} if entry is None else entry
+    for g, idx in groups.items():
+        entry[g] = _rms(R[:, idx])
+    for j, n in enumerate(names):
+        if evaluator.kinds[j] == "displacement":
+            entry[n] = _rms(R[:, j])
+    return entry
+
+
+def _rms(r):
+    r = r[np.isfinite(r)]
+    return float(np.sqrt(np.mean(r ** 2))) if r.size else float("nan")
+
+
 def phase_table(residual, evaluator, labels, names):
     """RMS residual per phase: per group, and per drift axis, over all rows (dict phase → {key: (rms, n)})."""
     out = {}
@@ -51,40 +66,14 @@ def phase_table(residual, evaluator, labels, names):
         rows = labels == ph
         if not rows.any():
             continue
-        entry = {"rows": int(rows.sum()), "hours": None}
-        for g, idx in groups.items():
-            r = residual.R[rows][:, idx]
-            r = r[np.isfinite(r)]
-            entry[g] = float(np.sqrt(np.mean(r ** 2))) if r.size else float("nan")
-        for j, n in enumerate(names):
-            if evaluator.kinds[j] == "displacement":
-                r = residual.R[rows, j]
-                r = r[np.isfinite(r)]
-                entry[n] = float(np.sqrt(np.mean(r ** 2))) if r.size else float("nan")
-        out[ph] = entry
+        out[ph] = _rms_entry(residual.R[rows], evaluator, groups, names,
+                             {"rows": int(rows.sum()), "hours": None})
     return out
 
 
 def band_table(residual, evaluator, times_s, names):
     """RMS residual per frequency band (:data:`~twin.gap.signals.BANDS`): per group and per drift axis."""
     parts = band_split(times_s, residual.R)
-    out = {}
     groups = evaluator.groups()
-    for (band, _, _), part in zip(BANDS, parts):
-        part = np.where(np.isfinite(residual.R), part, np.nan)
-        entry = {}
-        for g, idx in groups.items():
-            r = part[:, idx]
-            r = r[np.isfinite(r)]
-            entry[g] = float(np.sqrt(np.mean(r ** 2))) if r.size else float("nan")
-        for j, n in enumerate(names):
-            if evaluator.kinds[j] == "displacement":
-                r = part[:, j]
-                r = r[np.isfinite(r)]
-                entry[n] = float(np.sqrt(np.mean(r ** 2))) if r.size else float("nan")
-        out[band] = entry
-    return out
-
-
-def group_order(evaluator):
-    return [g for g in GROUPS if g in evaluator.groups()]
+    return {band: _rms_entry(np.where(np.isfinite(residual.R), part, np.nan), evaluator, groups, names)
+            for (band, _, _), part in zip(BANDS, parts)}
