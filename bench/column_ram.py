@@ -42,7 +42,9 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-DATA = Path(os.environ.get("COLUMN_RAM_DATA", "/work/shared/bench/column_ram"))
+#: The shared benchmark folder: ``../shared/bench/column_ram`` beside the repository, or $COLUMN_RAM_DATA.
+DATA = Path(os.environ.get("COLUMN_RAM_DATA")
+            or Path(__file__).resolve().parents[2] / "shared" / "bench" / "column_ram")
 N_STEPS, DT = 480, 60.0
 REPORT_STEPS = (120, 240, 480)
 T_TOL_K, D_TOL_REL = 0.05, 0.02

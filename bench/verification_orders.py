@@ -63,6 +63,14 @@ def main(argv=None):
     _table("unit cube sin·sin·sin mode, P1 in space (CN dt = 2.5e-4 s, t = 0.02 s)", "h (m)",
            *heat.cube_space_study(cube_cells), theory=2)
 
+    print("\n== heat: NAFEMS T3, time-step error estimated by step doubling against the truth (CN, dt/64)")
+    for theta in (1.0, 0.5):
+        r = heat.nafems_t3_step_error(theta)
+        name = "Crank-Nicolson" if theta == 0.5 else "backward Euler"
+        print(f"{name} dt = 0.5 s: T(0.08 m, 32 s) = {r['T_32']:.4f} °C (truth {r['truth_32']:.4f}, NAFEMS "
+              f"{heat.NAFEMS_T3_REFERENCE_C}); error at 32 s estimated {r['estimated_32']:+.4f} K, true "
+              f"{r['true_32']:+.4f} K; largest over 0-32 s estimated {r['estimated_max']:.4f} K, true {r['true_max']:.4f} K")
+
     print("\n== heat: steady, lumped, radiation, joints, energy")
     profile, surface = heat.steady_slab_errors()
     print(f"slab with source + convection: max error / rise {profile:.2e} (faces {surface:.2e})")
@@ -102,6 +110,11 @@ def main(argv=None):
     _sequence("  same, P1 with one cell across the width (does not converge)", elastic.P1_BEAM_MESHES, p1_stall)
     bimetal_exact, p2_bi = elastic.bimetal_study(2, elastic.P2_BEAM_MESHES)
     _sequence(f"bimetal strip, Timoshenko κ = {bimetal_exact:.6g} 1/m: P2", elastic.P2_BEAM_MESHES, p2_bi)
+    _, p2_nu = elastic.bimetal_study(2, elastic.P2_BEAM_MESHES, poisson=(0.3, 0.3))
+    _sequence("  same, ν = 0.3 in both layers: P2", elastic.P2_BEAM_MESHES, p2_nu)
+    _, p2_mixed = elastic.bimetal_study(2, elastic.P2_BEAM_MESHES, poisson=(0.3, 0.33))
+    _sequence("  same, ν = 0.30 / 0.33 (unequal; the formula leaves the coupling out): P2", elastic.P2_BEAM_MESHES,
+              p2_mixed)
     bi_meshes = elastic.P1_BEAM_MESHES + (((320, 1, 32),) if args.slow else ())
     _, p1_bi = elastic.bimetal_study(1, bi_meshes)
     _sequence("  same, P1", bi_meshes, p1_bi)

@@ -20,7 +20,7 @@ from . import elastic_forms
 from .errors import FEAInputError, require_finite
 from .lagrange import LagrangeSpace, barycentric_gradients
 from .linsolve import blas_threads, factorize
-from .materials import per_tet
+from .materials import ELASTIC_PROPERTIES, per_tet, region_materials
 
 #: Below this many free dofs a sparse direct factorisation is used, above it AMG.
 DIRECT_SOLVE_LIMIT = 20_000
@@ -76,18 +76,19 @@ class _StiffnessSolver:
             with blas_threads(1):
                 self.hierarchy = pyamg.smoothed_aggregation_solver(self.K, B=near_nullspace, **AMG_OPTIONS)
 
-    def __call__(self, b):
+    def __call__(self, b, tolerance=AMG_TOLERANCE, initial_guess=None):
         if self.kind == "direct":
             return self._solve(b)
         residuals = []
         with blas_threads(1):
-            x = self.hierarchy.solve(b, tol=AMG_TOLERANCE, accel="cg", maxiter=1000, residuals=residuals)
+            x = self.hierarchy.solve(b, x0=initial_guess, tol=tolerance, accel="cg", maxiter=1000,
+                                     residuals=residuals)
             # pyamg stops silently at maxiter: check the true residual.
             relative = np.linalg.norm(b - self.K @ x) / max(np.linalg.norm(b), 1e-300)
         self.iterations.append(len(residuals) - 1)
-        if relative > 100 * AMG_TOLERANCE:
+        if relative > 100 * tolerance:
             raise RuntimeError(f"AMG-CG stopped at relative residual {relative:.1e} "
-                               f"(required {AMG_TOLERANCE:.0e}); the elastic solve did not converge")
+                               f"(required {tolerance:.0e}); the elastic solve did not converge")
         return x
 
 
@@ -106,6 +107,7 @@ class ElasticProblem:
         self.mesh = mesh
         self.space = LagrangeSpace(mesh.points, mesh.tets, degree)
         self.reference_temperature = float(require_finite("reference_temperature", reference_temperature))
+        materials = region_materials(mesh, materials, ELASTIC_PROPERTIES, "an elastic problem")
         E = per_tet(mesh, materials, "youngs_modulus")
         nu = per_tet(mesh, materials, "poisson_ratio")
         self.lame_lambda = E * nu / ((1 + nu) * (1 - 2 * nu))
@@ -257,23 +259,37 @@ class ElasticProblem:
         return self._solver
 
     # ---------------------------------------------------------------- solves
-    def solve_load(self, load):
-        """Displacements (3N,) for a load vector (or (3N, k) block) in N, zero at the supports."""
+    def prepare(self):
+        """Assemble K and factorise it (or set up AMG) now, e.g. in a worker before the loads are known."""
+        self._free_solver()
+        return self
+
+    def solve_load(self, load, tolerance=AMG_TOLERANCE, initial_guess=None):
+        """Displacements (3N,) for a load vector (or (3N, k) block) in N, zero at the supports.
+
+        ``tolerance`` is the relative residual at which the iterative (AMG-CG)
+        solves stop, and ``initial_guess`` (3N,) their start (one load vector
+        only); a direct factorisation ignores both.
+        """
         free, solver = self._free_solver()
         load = np.asarray(load, dtype=float)
         out = np.zeros(load.shape)
         if load.ndim == 1:
-            out[free] = solver(load[free])
+            guess = None if initial_guess is None else np.asarray(initial_guess, float)[free]
+            out[free] = solver(load[free], tolerance, guess)
         else:
             for k in range(load.shape[1]):
-                out[free, k] = solver(load[free, k])
+                out[free, k] = solver(load[free, k], tolerance)
         return out
 
-    def displacement(self, temperature, thermal_system=None):
-        """Displacement field (N, 3) in m for a temperature on thermal nodes (°C), by a direct solve."""
+    def thermal_load(self, temperature, thermal_system=None):
+        """The load vector (3N,) in N of a temperature on the thermal nodes (°C)."""
         T = require_finite("temperature", temperature)
-        F = self.thermal_load_operator(thermal_system)
-        return self.solve_load(F @ (T - self.reference_temperature)).reshape(-1, 3)
+        return self.thermal_load_operator(thermal_system) @ (T - self.reference_temperature)
+
+    def displacement(self, temperature, thermal_system=None):
+        """Displacement field (N, 3) in m for a temperature on thermal nodes (°C), by a forward solve."""
+        return self.solve_load(self.thermal_load(temperature, thermal_system)).reshape(-1, 3)
 
     def stress(self, displacement, temperature, thermal_system=None):
         """Element-mean stress tensors (m, 3, 3) in Pa."""

@@ -32,5 +32,6 @@ def require_positive(name, value):
     except (TypeError, ValueError):
         raise FEAInputError(f"{name} must be a number, got {value!r}") from None
     if not math.isfinite(number) or number <= 0.0:
-        raise FEAInputError(f"{name} must be positive, got {value!r}")
+        shown = value.tolist() if type(value).__module__ == "numpy" else value    # 3600, not np.int64(3600)
+        raise FEAInputError(f"{name} must be positive, got {shown!r}")
     return number

@@ -22,7 +22,7 @@ from skfem import Basis, ElementTetP1, FacetBasis, MeshTet
 from . import heat_forms as forms
 from .contact import Joint, interface_matrix, joint_facets, split_nodes
 from .errors import FEAInputError, require_positive
-from .materials import per_tet
+from .materials import HEAT_PROPERTIES, per_tet, region_materials
 from .mesh import LOCAL_FACES
 
 #: Units of each kind of input.
@@ -57,14 +57,6 @@ class RadiationTerm:
         """Jacobian of :meth:`excess` with respect to T, W/K."""
         return forms.radiation_tangent.assemble(self.basis, **self._fields(T, u))
 
-    def power_in(self, T, u):
-        """Net radiative power into the body, W (negative when it cools)."""
-        T_q = self.basis.interpolate(T)
-        T_amb = float(u[self.ambient_column])
-        flux = self.emissivity * forms.STEFAN_BOLTZMANN * (
-            (T_amb + forms.KELVIN) ** 4 - (T_q + forms.KELVIN) ** 4)
-        return float(np.sum(flux * self.basis.dx))
-
 
 @dataclass
 class ThermalSystem:
@@ -88,6 +80,7 @@ class ThermalSystem:
     radiation: list = field(default_factory=list)
     heat_flows: dict = field(default_factory=dict)
     constant_inputs: dict = field(default_factory=dict)
+    fixed_groups: dict = field(default_factory=dict)   # group → its fixed thermal nodes (disjoint)
 
     @property
     def n_nodes(self):
@@ -116,12 +109,27 @@ class ThermalSystem:
         """∫ ρc T dV in J (relative to 0 °C)."""
         return float(np.sum(self.mass @ T))
 
-    def power_in(self, T, u):
-        """Heat flow into the body through each load, W, keyed by load name."""
+    def power_in(self, T, u, rate=None):
+        """Heat flow into the body through each load, W, keyed by load name.
+
+        Fixed temperatures appear as ``fixed:<group>``: the reaction heat
+        flow the boundary must supply to hold them, Σ over the group's nodes
+        of (M Ṫ + A T + r(T) − B u).  ``rate`` is Ṫ (K/s on the thermal
+        nodes) for the capacity of those nodes in a transient; omit it at
+        steady state.  The flows then sum to d/dt ∫ ρcT dV.
+        """
         flows = {name: float(r_u @ u - r_T @ T) for name, (r_T, r_u) in self.heat_flows.items()}
+        excess = np.zeros(self.n_nodes)
         for term in self.radiation:
-            key = f"radiation:{term.group}"
-            flows[key] = flows.get(key, 0.0) + term.power_in(T, u)
+            # heat_flows holds the linearisation h_r (T_amb − T); the rest of εσ(T_amb⁴ − T⁴) is the excess
+            part = term.excess(T, u)
+            flows[f"radiation:{term.group}"] -= float(part.sum())
+            excess += part
+        for group, nodes in self.fixed_groups.items():
+            balance = self.stiffness[nodes] @ T + excess[nodes] - self.input_matrix[nodes] @ u
+            if rate is not None:
+                balance = balance + self.mass[nodes] @ rate
+            flows[f"fixed:{group}"] = float(np.sum(balance))
         return flows
 
     def nodal_field(self, T):
@@ -154,6 +162,7 @@ class HeatProblem:
 
     def __init__(self, mesh, materials):
         self.mesh = mesh
+        materials = region_materials(mesh, materials, HEAT_PROPERTIES, "a heat problem")
         self.conductivity = per_tet(mesh, materials, "conductivity")
         self.heat_capacity = per_tet(mesh, materials, "volumetric_heat_capacity")
         self._inputs = {}
@@ -351,25 +360,29 @@ class HeatProblem:
             B[:, col[amb]] += b
             if full:
                 radiation.append(RadiationTerm(group, full_facet_basis(group), eps, h_r, col[amb]))
-            else:
-                r_u = np.zeros(len(names))
-                r_u[col[amb]] = b.sum()
-                add_flow(f"radiation:{group}", np.asarray(H.sum(axis=0)).ravel(), r_u)
+            r_u = np.zeros(len(names))
+            r_u[col[amb]] = b.sum()
+            add_flow(f"radiation:{group}", np.asarray(H.sum(axis=0)).ravel(), r_u)
 
-        fixed_rows, fixed_cols = [], []
-        for group, name in self._fixed:
+        fixed_rows, fixed_cols, fixed_of = [], [], []
+        for k, (group, name) in enumerate(self._fixed):
             tet, loc = mesh.facet_group(group)
             nodes = np.unique(tets[tet[:, None], LOCAL_FACES[loc]])
             fixed_rows.append(nodes)
             fixed_cols.append(np.full(len(nodes), col[name]))
+            fixed_of.append(np.full(len(nodes), k))
         if fixed_rows:
             nodes = np.concatenate(fixed_rows)
             cols = np.concatenate(fixed_cols)
-            # A node on two fixed groups takes the value of the last one given.
+            # A node on two fixed groups takes the value (and belongs to the group) of the last one given.
             nodes, last = np.unique(nodes[::-1], return_index=True)
             cols = cols[::-1][last]
+            owner = np.concatenate(fixed_of)[::-1][last]
+            fixed_groups = {}
+            for k, (group, _) in enumerate(self._fixed):
+                fixed_groups[group] = np.union1d(fixed_groups.get(group, []), nodes[owner == k]).astype(np.int64)
         else:
-            nodes, cols = np.zeros(0, np.int64), np.zeros(0, np.int64)
+            nodes, cols, fixed_groups = np.zeros(0, np.int64), np.zeros(0, np.int64), {}
         fixed_matrix = sp.csr_matrix((np.ones(len(nodes)), (np.arange(len(nodes)), cols)),
                                      shape=(len(nodes), len(names)))
         return ThermalSystem(
@@ -377,6 +390,7 @@ class HeatProblem:
             input_names=names, input_units=[INPUT_UNITS[self._inputs[k]] for k in names],
             mesh=mesh, tets=tets, node_of=node_of, fixed_nodes=nodes, fixed_matrix=fixed_matrix,
             radiation=radiation, heat_flows=flows, constant_inputs=dict(self._constants),
+            fixed_groups=fixed_groups,
         )
 
 

@@ -1,9 +1,66 @@
-"""Time histories of a thermal system's named inputs (ambient °C, power W, …)."""
+"""Time histories of a thermal system's named inputs (ambient °C, power W, …) and their means over time steps.
+
+The θ-method is driven by the mean of each input over each step, so that the
+energy a load injects in a step is exactly ∫ u dt whatever the step grid:
+a heat source switched off in the middle of a step injects its power for
+the part of the step it ran.  :func:`interval_means` computes those means by
+Gauss–Legendre quadrature on the sub-intervals between the step times and
+the inputs' *breakpoints* (the times where an input jumps or kinks), which
+is exact for inputs that are polynomials of degree ≤ 5 between breakpoints:
+piecewise-constant duty cycles, piecewise-linear samples.
+"""
 from __future__ import annotations
 
 import numpy as np
 
 from .errors import FEAInputError
+
+#: Gauss–Legendre nodes per sub-interval: exact for polynomials of degree ≤ 2·3 − 1 = 5.
+QUADRATURE_NODES = 3
+#: Sub-intervals evaluated at once (bounds the temporary arrays of long runs).
+QUADRATURE_CHUNK = 2**16
+
+
+def interval_means(values_at, times_s, breakpoints_s=(), nodes=QUADRATURE_NODES):
+    """Mean of a vector-valued input over each interval [tᵢ, tᵢ₊₁] of ``times_s`` → (len(times_s) − 1, m).
+
+    ``values_at(t)`` returns the input at the times ``t`` (k,) as (k, m) (or
+    (k,)).  Each interval is split at the ``breakpoints_s`` inside it and
+    every piece integrated by ``nodes``-point Gauss–Legendre quadrature; the
+    input is evaluated only inside pieces, so a value exactly at a jump is
+    never used.
+    """
+    t = np.asarray(times_s, float)
+    cuts = np.asarray(breakpoints_s, float).ravel()
+    edges = np.union1d(t, cuts[(cuts > t[0]) & (cuts < t[-1])])
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    interval = np.searchsorted(t, edges[:-1], side="right") - 1          # the step each piece lies in
+    sums = None
+    for start in range(0, len(edges) - 1, QUADRATURE_CHUNK):
+        a, b = edges[:-1][start:start + QUADRATURE_CHUNK], edges[1:][start:start + QUADRATURE_CHUNK]
+        half = 0.5 * (b - a)
+        points = (0.5 * (a + b))[:, None] + half[:, None] * x
+        values = np.asarray(values_at(points.ravel()), float)
+        values = values.reshape(len(a), nodes, -1)
+        pieces = np.einsum("pnm,pn->pm", values, half[:, None] * w)
+        if sums is None:
+            sums = np.zeros((len(t) - 1, pieces.shape[1]))
+        np.add.at(sums, interval[start:start + len(a)], pieces)
+    return sums / np.diff(t)[:, None]
+
+
+def step_means(schedule, step_times_s, theta):
+    """Inputs driving each step of the θ-method (len − 1, m): the schedule's step means.
+
+    A schedule without ``means`` (an object with ``sample`` only, e.g. a
+    measured record whose samples describe the interval before them) is
+    taken at its θ-weighted step ends, θ u(tᵢ₊₁) + (1 − θ) u(tᵢ).
+    """
+    means = getattr(schedule, "means", None)
+    if means is not None:
+        return np.asarray(means(step_times_s), float)
+    u = schedule.sample(step_times_s)
+    return theta * u[1:] + (1.0 - theta) * u[:-1]
 
 
 class SampledSeries:
@@ -25,17 +82,25 @@ class SampledSeries:
     def __call__(self, t):
         return np.interp(t, self.times_s, self.values)
 
+    @property
+    def breakpoints_s(self):
+        """Where the series kinks: its sample times, s."""
+        return self.times_s
+
 
 class InputSchedule:
-    """Evaluates the input vector ``u(t)`` of a :class:`~fea.heat.ThermalSystem`.
+    """Evaluates the input vector ``u(t)`` of a :class:`~fea.heat.ThermalSystem` and its step means.
 
     ``sources`` maps each input name to a number, a vectorised callable
     ``f(t_s) -> value`` or a :class:`SampledSeries`.  Constant inputs set in
-    the problem itself are filled in.  A missing or unknown name, or a value
-    that is not finite, raises :class:`FEAInputError` naming it and the time.
+    the problem itself are filled in.  ``breakpoints_s`` lists the times
+    where a callable input jumps or kinks (e.g. when a heater switches), so
+    that step means are exact however the steps fall (a
+    :class:`SampledSeries` gives its own).  A missing or unknown name, or a
+    value that is not finite, raises :class:`FEAInputError` naming it and the time.
     """
 
-    def __init__(self, system, sources):
+    def __init__(self, system, sources, breakpoints_s=()):
         self.names = list(system.input_names)
         given = dict(system.constant_inputs)
         given.update(sources)
@@ -46,6 +111,9 @@ class InputSchedule:
         if missing:
             raise FEAInputError(f"no value given for input(s) {missing}")
         self.sources = [given[n] for n in self.names]
+        cuts = [np.asarray(breakpoints_s, float).ravel()]
+        cuts += [s.breakpoints_s for s in self.sources if isinstance(s, SampledSeries)]
+        self.breakpoints_s = np.unique(np.concatenate(cuts))
 
     def sample(self, times_s):
         """Input matrix (len(times_s), n_inputs) at the given times."""
@@ -63,8 +131,12 @@ class InputSchedule:
         bad = ~np.isfinite(out)
         if bad.any():
             i, j = np.argwhere(bad)[0]
-            raise FEAInputError(f"input {self.names[j]!r} is {out[i, j]} at t = {t[i]} s")
+            raise FEAInputError(f"input {self.names[j]!r} is {out[i, j]} at t = {t[i]:.6g} s")
         return out
+
+    def means(self, step_times_s):
+        """Mean input over each step between ``step_times_s`` (len − 1, n_inputs), see :func:`interval_means`."""
+        return interval_means(self.sample, step_times_s, self.breakpoints_s)
 
     def __call__(self, t):
         return self.sample([t])[0]

@@ -8,37 +8,53 @@ import numpy as np
 from .errors import FEAInputError, require_positive
 
 
+#: The properties each kind of problem needs, with their units (for messages).
+HEAT_PROPERTIES = {"conductivity": "W/(m K)", "density": "kg/m³", "specific_heat": "J/(kg K)"}
+ELASTIC_PROPERTIES = {"youngs_modulus": "Pa", "poisson_ratio": "-", "expansion": "1/K"}
+
+
 @dataclass(frozen=True)
 class Material:
     """An isotropic thermo-elastic material.
 
+    Every property is optional here; a problem requires those it uses
+    (:class:`~fea.heat.HeatProblem`: conductivity, density, specific heat;
+    :class:`~fea.elastic.ElasticProblem`: Young's modulus, Poisson's ratio,
+    expansion), so a forgotten one is an error, never a silent default.
+
     Attributes
     ----------
-    conductivity : W/(m K)
-    density : kg/m³
-    specific_heat : J/(kg K)
-    youngs_modulus : Pa
+    conductivity : W/(m K), > 0
+    density : kg/m³, > 0
+    specific_heat : J/(kg K), > 0
+    youngs_modulus : Pa, > 0
     poisson_ratio : dimensionless, in (-1, 0.5)
-    expansion : linear thermal expansion coefficient α, 1/K
+    expansion : linear thermal expansion coefficient α, 1/K (finite; 0 is a valid value)
     name : label used in messages
     """
 
-    conductivity: float
-    density: float
-    specific_heat: float
-    youngs_modulus: float = 1.0
-    poisson_ratio: float = 0.0
-    expansion: float = 0.0
+    conductivity: float | None = None
+    density: float | None = None
+    specific_heat: float | None = None
+    youngs_modulus: float | None = None
+    poisson_ratio: float | None = None
+    expansion: float | None = None
     name: str = "material"
 
     def __post_init__(self):
         for attr in ("conductivity", "density", "specific_heat", "youngs_modulus"):
-            require_positive(f"{self.name}.{attr}", getattr(self, attr))
-        nu = float(self.poisson_ratio)
-        if not -1.0 < nu < 0.5:
-            raise FEAInputError(f"{self.name}.poisson_ratio must lie in (-1, 0.5), got {nu!r}")
-        if not np.isfinite(self.expansion):
+            if getattr(self, attr) is not None:
+                require_positive(f"{self.name}.{attr}", getattr(self, attr))
+        if self.poisson_ratio is not None:
+            nu = float(self.poisson_ratio)
+            if not -1.0 < nu < 0.5:
+                raise FEAInputError(f"{self.name}.poisson_ratio must lie in (-1, 0.5), got {nu!r}")
+        if self.expansion is not None and not np.isfinite(self.expansion):
             raise FEAInputError(f"{self.name}.expansion must be finite, got {self.expansion!r}")
+
+    def missing(self, properties):
+        """The names among ``properties`` that this material does not give."""
+        return [p for p in properties if getattr(self, p) is None]
 
     @property
     def volumetric_heat_capacity(self):
@@ -62,11 +78,11 @@ CAST_IRON = Material(48.0, 7200.0, 500.0, 110e9, 0.26, 10.5e-6, "cast iron")
 STEEL = Material(45.0, 7850.0, 470.0, 210e9, 0.30, 11.5e-6, "steel")
 
 
-def per_tet(mesh, materials, attribute):
-    """Array of one material attribute per tetrahedron.
+def region_materials(mesh, materials, required, problem):
+    """``materials`` keyed by region id, checked: every region has a :class:`Material` giving ``required``.
 
-    ``materials`` maps region ids or region names to :class:`Material`; every
-    region of the mesh must have one.
+    ``materials`` maps region ids or names to materials; ``required`` maps
+    property names to units, ``problem`` names the problem in messages.
     """
     table = {}
     for key, material in materials.items():
@@ -77,6 +93,18 @@ def per_tet(mesh, materials, attribute):
     if missing:
         names = [mesh.region_names.get(r, r) for r in missing]
         raise FEAInputError(f"no material given for region(s) {names}")
+    for rid, material in sorted(table.items()):
+        lacking = material.missing(required)
+        if lacking:
+            given = ", ".join(f"{p} ({required[p]})" for p in lacking)
+            raise FEAInputError(f"material {material.name!r} of region {mesh.region_names.get(rid, rid)!r} "
+                                f"gives no {given}, which {problem} needs")
+    return table
+
+
+def per_tet(mesh, materials, attribute):
+    """Array of one material attribute per tetrahedron (``materials`` keyed by region id or name)."""
+    table = {mesh.region_id(key): material for key, material in materials.items()}
     values = {rid: getattr(mat, attribute) for rid, mat in table.items()}
     out = np.empty(mesh.n_tets)
     for rid, value in values.items():

@@ -1,8 +1,15 @@
 """Time integration of a thermal system by the θ-method, and its steady state.
 
-    (M/Δt + θA) Tⁿ⁺¹ = (M/Δt − (1−θ)A) Tⁿ + B (θuⁿ⁺¹ + (1−θ)uⁿ) − θ r(Tⁿ⁺¹) − (1−θ) r(Tⁿ)
+    (M/Δt + θA) Tⁿ⁺¹ = (M/Δt − (1−θ)A) Tⁿ + B ū − θ r(Tⁿ⁺¹) − (1−θ) r(Tⁿ)
 
-θ = 1 is backward Euler, θ = ½ Crank–Nicolson.  The left-hand matrix is
+with ū the mean of the inputs over the step (:func:`fea.inputs.step_means`),
+so each load injects exactly ∫ u dt over the step whatever the grid.
+θ = 1 is backward Euler (first order, no overshoot), θ = ½ Crank–Nicolson
+(second order; it can ring after a sudden change when the step is long
+against the fastest time constants).  :meth:`ThermalSolver.step_error`
+estimates the time-discretisation error of a run by step doubling.
+
+The left-hand matrix is
 factorised once per distinct step size and kept in a cache, so a run with a
 constant step factorises once and a change of step reuses earlier factors.
 Full T⁴ radiation (the ``r`` term) is solved per step by chord iterations
@@ -17,7 +24,9 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from .energy import EnergyLedger
 from .errors import FEAInputError, require_finite
+from .inputs import step_means
 from .linsolve import factorize
 
 #: Absolute change (K) below which the radiation iterations stop.
@@ -42,6 +51,21 @@ class TransientResult:
     final_temperature: np.ndarray
     fields: dict = field(default_factory=dict)
     factorisations: int = 0
+    energy: EnergyLedger | None = None
+
+
+@dataclass
+class StepErrorEstimate:
+    """Estimated time-discretisation error (run − exact) of a run's outputs at ``times_s``.
+
+    ``error`` has one row per time and one column per output (the run's
+    units); ``method`` says how it was found.
+    """
+
+    times_s: np.ndarray
+    error: np.ndarray
+    output_names: list
+    method: str
 
 
 class ThermalSolver:
@@ -168,15 +192,23 @@ class ThermalSolver:
         T0 = np.full(self.system.n_nodes, float(np.mean(u))) if T_guess is None else T_guess
         return self._solve(factors, rhs, self.system.fixed_values(u), 1.0, u, T0)
 
-    def step(self, T, u_old, u_new, dt):
-        """Advance the temperature ``T`` (°C) by one step of ``dt`` s."""
+    def step(self, T, u_old, u_new, dt, u_mean=None):
+        """Advance the temperature ``T`` (°C) by one step of ``dt`` s.
+
+        ``u_mean`` is the mean input over the step (default θ u_new + (1 − θ)
+        u_old); ``u_new`` sets fixed temperatures and, with ``u_old``, the
+        ambient of full radiation (both may be None without those).
+        """
         factors = self._factors(dt)
         th = self.theta
-        rhs = factors[3] @ T + self.system.input_matrix @ (th * u_new + (1.0 - th) * u_old)
+        if u_mean is None:
+            u_mean = th * u_new + (1.0 - th) * u_old
+        rhs = factors[3] @ T + self.system.input_matrix @ u_mean
         if self.system.radiation and th < 1.0:
             rhs -= (1.0 - th) * self._radiation(T, u_old)
         guess = self._extrapolate(T, dt) if getattr(factors[4], "accepts_guess", False) else None
-        T_new = self._solve(factors, rhs, self.system.fixed_values(u_new), th, u_new, T, guess)
+        fixed = self.system.fixed_values(u_new) if len(self.fixed) else None
+        T_new = self._solve(factors, rhs, fixed, th, u_new, T, guess)
         if guess is not None:
             self._remember(T, T_new, dt)
         return T_new
@@ -205,20 +237,24 @@ class ThermalSolver:
         else:
             self._trail = (dt, [T, T_new])
 
-    def run(self, T0, times_s, schedule, outputs=None, field_times_s=(), max_step_s=None, progress=None):
+    def run(self, T0, times_s, schedule, outputs=None, field_times_s=(), max_step_s=None, progress=None,
+            energy=False, substeps=None):
         """Integrate from ``times_s[0]`` through ``times_s``; record outputs at each time.
 
         Parameters
         ----------
         T0 : initial temperature on thermal nodes (°C), or a number for a uniform start
         times_s : increasing output times, s; the first is the initial time
-        schedule : :class:`~fea.inputs.InputSchedule` (or any object with ``sample(times)``)
+        schedule : :class:`~fea.inputs.InputSchedule`, or any object with ``sample(times)`` and
+            optionally ``means(step_times)`` (see :func:`fea.inputs.step_means`)
         outputs : :class:`~fea.outputs.OutputOperator` evaluated at every output time; rows that
             are still computed in the background (``build_output_operator(concurrent=True)``)
             are filled in when they arrive, so the run overlaps with their computation
         field_times_s : times whose full temperature field is kept
         max_step_s : split output intervals into equal sub-steps no longer than this
         progress : optional callable ``progress(done, total)``
+        energy : keep an :class:`~fea.energy.EnergyLedger` of the run (``result.energy``)
+        substeps : number of equal sub-steps of each output interval, instead of ``max_step_s``
         """
         times = np.asarray(times_s, dtype=float)
         if times.ndim != 1 or len(times) < 1:
@@ -232,28 +268,39 @@ class ThermalSolver:
             raise FEAInputError(f"initial temperature has shape {T.shape}, the system has {n} nodes")
         require_finite("initial temperature", T)
         intervals = np.diff(times)
-        step_times, at_output = step_grid(times, max_step_s)
+        step_times, at_output = step_grid(times, max_step_s, substeps)
         substeps = np.diff(at_output)
-        u_all = schedule.sample(step_times)
+        u_mean = step_means(schedule, step_times, self.theta) if len(times) > 1 else None
+        # Point values only where the scheme needs them: fixed temperatures and T⁴ radiation.
+        u_point = schedule.sample(step_times) if len(self.fixed) or self.system.radiation else None
         if len(self.fixed):
-            T[self.fixed] = self.system.fixed_values(u_all[0])
+            T[self.fixed] = self.system.fixed_values(u_point[0])
         wanted = {int(np.argmin(np.abs(times - float(t)))) for t in field_times_s}
         record = outputs is not None
         history = np.empty((len(times), outputs.n_outputs)) if record else None
         recorder = _Recorder(outputs, history) if record else None
+        ledger = EnergyLedger(self.system, self.theta, len(times)) if energy else None
         fields = {}
         if record:
             recorder.record(0, T)
+        if ledger is not None:
+            ledger.record(0, T)
         if 0 in wanted:
             fields[float(times[0])] = T.copy()
         j = 0
         for k, s in enumerate(substeps):
             dt = intervals[k] / s
             for _ in range(s):
-                T = self.step(T, u_all[j], u_all[j + 1], dt)
+                u_old, u_new = (None, None) if u_point is None else (u_point[j], u_point[j + 1])
+                T_new = self.step(T, u_old, u_new, dt, u_mean[j])
+                if ledger is not None:
+                    ledger.step(T, T_new, u_mean[j], dt, u_old, u_new)
+                T = T_new
                 j += 1
             if record:
                 recorder.record(k + 1, T)
+            if ledger is not None:
+                ledger.record(k + 1, T)
             if k + 1 in wanted:
                 fields[float(times[k + 1])] = T.copy()
             if progress is not None:
@@ -261,16 +308,58 @@ class ThermalSolver:
         if record:
             recorder.finish()
         return TransientResult(times, history, list(outputs.names) if record else [], T, fields,
-                               self.factorisations)
+                               self.factorisations, ledger)
+
+    def step_error(self, T0, times_s, schedule, outputs, fine, max_step_s=None):
+        """Estimate the time-discretisation error of ``fine`` by step doubling (Richardson extrapolation).
+
+        ``fine`` is the :class:`TransientResult` of :meth:`run` with the same
+        arguments.  The run is repeated with steps r ≈ 2 times longer (each
+        output interval in half as many sub-steps, or every other output time
+        when an interval is one step); with p the order of the scheme (1 for
+        backward Euler, 2 for Crank–Nicolson) the fine run's error at the
+        common times is ≈ (y_coarse − y_fine) / (rᵖ − 1).  The estimate is
+        asymptotic: it holds while the steps resolve the response, i.e. while
+        the error is small, which is when one relies on it.
+        """
+        times = np.asarray(times_s, float)
+        _, at_output = step_grid(times, max_step_s)
+        substeps = np.diff(at_output)
+        if len(times) < 3 and np.all(substeps == 1):
+            raise FEAInputError("a step-doubling error estimate needs at least two steps")
+        if np.any(substeps == 1) and not np.all(substeps == 1):
+            raise FEAInputError("a step-doubling error estimate needs every output interval in one step, "
+                                "or every one in two or more")
+        h = np.diff(times) / substeps
+        if np.all(substeps == 1):
+            keep = np.arange(0, len(times), 2)
+            first, second = h[0:2 * (len(keep) - 1):2], h[1:2 * (len(keep) - 1):2]
+            coarse = self.run(T0, times[keep], schedule, outputs)
+            ratio = float(np.min((first + second) / np.maximum(first, second)))
+        else:
+            keep = np.arange(len(times))
+            coarse_substeps = (substeps + 1) // 2
+            coarse = self.run(T0, times, schedule, outputs, substeps=coarse_substeps)
+            ratio = float(np.min(substeps / coarse_substeps))
+        order = 2 if self.theta == 0.5 else 1
+        error = (coarse.outputs - fine.outputs[keep]) / (ratio ** order - 1.0)
+        scheme = {1.0: "backward Euler", 0.5: "Crank–Nicolson"}.get(self.theta, f"θ = {self.theta:g}")
+        return StepErrorEstimate(times[keep], error, list(fine.output_names),
+                                 f"step doubling ({scheme}, order {order}, step ratio {ratio:g})")
 
 
-def step_grid(times, max_step_s=None):
+def step_grid(times, max_step_s=None, substeps=None):
     """The solver's step times for output times ``times`` (s): each interval split into equal sub-steps
-    no longer than ``max_step_s``.  Returns the step times and, per output time, its index among them."""
+    no longer than ``max_step_s`` (or into ``substeps[i]`` sub-steps).  Returns the step times and, per
+    output time, its index among them."""
     times = np.asarray(times, float)
     intervals = np.diff(times)
-    sub = np.ones(len(intervals), int) if max_step_s is None else \
-        np.maximum(1, np.ceil(intervals / float(max_step_s) - 1e-9).astype(int))
+    if substeps is not None:
+        sub = np.broadcast_to(np.asarray(substeps, int), intervals.shape)
+    elif max_step_s is None:
+        sub = np.ones(len(intervals), int)
+    else:
+        sub = np.maximum(1, np.ceil(intervals / float(max_step_s) - 1e-9).astype(int))
     at_output = np.concatenate([[0], np.cumsum(sub)])
     if np.all(sub == 1):
         return times.copy(), at_output

@@ -1,4 +1,4 @@
-"""Meshing a machine: part surfaces → pytetwild → a labelled tetrahedral mesh, cached by content hash.
+"""Meshing a machine: part surfaces → pytetwild → a labelled tetrahedral mesh, cached by geometry.
 
 fTetWild (through pytetwild) tetrahedralises the union of all part surfaces
 and keeps every input triangle as a mesh face (within a small envelope), so
@@ -6,17 +6,27 @@ the interfaces between parts are conforming.  Each tetrahedron is then given
 the part whose shape contains its centroid most deeply, later parts winning
 where parts overlap (a ram passing through its carrier belongs to the ram).
 
-fTetWild is multithreaded and not bit-reproducible, so meshes are cached by
-a hash of the definition, the mesh size and the mesher version.  Shipped
-meshes live in ``meshes/cache``; new ones go to the user cache
-(``$THERMAL_TWIN_CACHE`` or ``~/.cache/thermal-twin``).
+fTetWild is multithreaded and not bit-reproducible, so meshes are cached,
+named ``mesh-h<size>mm-<digest>.vtu`` by the geometry digest
+(:meth:`~meshes.definition.MachineGeometry.digest`: parts, shapes, STL
+contents, mesh size and fTetWild settings; not the machine's name, materials,
+sources or joints).  A renamed copy of a machine, or one with other heat
+sources or joint conductances, therefore reuses the mesh.  Shipped meshes
+live in ``meshes/cache``; new ones go to the user cache, each with a SHA-256
+sidecar checked before it is read (:mod:`meshes.cachefiles`).
+
+Meshing takes minutes: :func:`build_mesh` says what it builds and roughly
+how long it will take on the ``thermal_twin`` logger, and sends fTetWild's
+console output (hundreds of lines) to a log file beside the mesh.
 """
 from __future__ import annotations
 
 import json
 import os
+import sys
 import tempfile
 import time
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,26 +35,18 @@ import pyvista as pv
 
 from fea import TetMesh
 
+from .cachefiles import find_cached, log, user_cache_dir, write_checked
 from .tomlspec import DefinitionError
 
 BUILDER_VERSION = 2
-SHIPPED_CACHE = Path(__file__).resolve().parent / "cache"
 
-
-def user_cache_dir():
-    """Where new meshes and other derived data are cached."""
-    root = os.environ.get("THERMAL_TWIN_CACHE")
-    path = Path(root) if root else Path.home() / ".cache" / "thermal-twin"
-    path.mkdir(parents=True, exist_ok=True)
-    return path
-
-
-def find_cached(name):
-    """A cached file by name: shipped with the package first, then the user cache; ``None`` if absent."""
-    for folder in (SHIPPED_CACHE, user_cache_dir()):
-        if (folder / name).exists():
-            return folder / name
-    return None
+#: Tetrahedra per h³ of part volume that fTetWild makes at target edge length h (the shipped
+#: meshes: 11.7 and 12.8 for vmc_ram at 35 and 45 mm, 13.2 for machine_a at 45 mm).
+TETS_PER_CUBED_EDGE = 12.0
+#: Meshing time ≈ fixed + per-tetrahedron seconds, measured on a 2-core VM: 46 s for the
+#: 1,063-tetrahedron test machine, 698 s for a 49,535-tetrahedron vmc_ram mesh.
+MESHING_FIXED_S = 45.0
+MESHING_S_PER_TET = 0.014
 
 
 @dataclass
@@ -58,7 +60,24 @@ class MeshInfo:
 
 
 def cache_file_name(geometry, size_m):
-    return f"{geometry.name}-h{size_m * 1e3:g}mm-{geometry.digest(size_m)[:12]}.vtu"
+    """File name of a geometry's mesh at ``size_m`` (m): the size and the geometry digest, no machine name."""
+    return f"mesh-h{size_m * 1e3:g}mm-{geometry.digest(size_m)[:16]}.vtu"
+
+
+def meshing_estimate(geometry, size_m):
+    """Rough (tetrahedra, seconds) of meshing a geometry at ``size_m`` (m), from its part volumes."""
+    volume = sum(abs(p.shape.surface(size_m).volume) for p in geometry.parts)
+    tets = TETS_PER_CUBED_EDGE * volume / size_m ** 3
+    return tets, MESHING_FIXED_S + MESHING_S_PER_TET * tets
+
+
+def duration_text(seconds):
+    """``"40 s"`` / ``"12 min"`` / ``"1.5 h"`` for a rough duration."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
 
 
 def build_mesh(geometry, size_m=None, rebuild=False, quiet=True):
@@ -68,9 +87,12 @@ def build_mesh(geometry, size_m=None, rebuild=False, quiet=True):
     ----------
     size_m : target tetrahedron edge length in m (default: the definition's ``mesh.size_m``)
     rebuild : mesh again even if a cached mesh exists
+    quiet : send fTetWild's console output to ``<mesh>.log`` beside the mesh (else show it)
 
     Returns ``(TetMesh, MeshInfo)``; region ids are 1… in part order and
-    ``mesh.region_names`` maps them to part names.
+    ``mesh.region_names`` maps them to part names.  A cached mesh that fails
+    its content check is rebuilt (user cache) or refused (shipped cache,
+    :class:`~meshes.cachefiles.CacheFileError`).
     """
     size_m = float(size_m or geometry.mesh_size_m)
     if not size_m > 0:
@@ -82,13 +104,62 @@ def build_mesh(geometry, size_m=None, rebuild=False, quiet=True):
         start = time.perf_counter()
         mesh = read_labelled_mesh(path)
         return mesh, MeshInfo(path, True, time.perf_counter() - start, digest)
-    start = time.perf_counter()
-    grid = tetrahedralize(geometry, size_m, quiet)
-    mesh = label_parts(geometry, grid)
     path = user_cache_dir() / name
-    write_labelled_mesh(mesh, path, {"machine": geometry.name, "size_m": size_m, "digest": digest,
-                                      "source": geometry.source})
-    return mesh, MeshInfo(path, False, time.perf_counter() - start, digest)
+    tets, seconds = meshing_estimate(geometry, size_m)
+    log.info("meshing %s at %g mm (about %s tetrahedra): roughly %s on a 2-core machine",
+             geometry.name, size_m * 1e3, f"{float(f'{tets:.2g}'):,.0f}", duration_text(seconds))
+    start = time.perf_counter()
+    mesher_log = path.with_suffix(".log")
+    if quiet:
+        log.info("fTetWild output goes to %s", mesher_log)
+    try:
+        with _console_to(mesher_log) if quiet else nullcontext():
+            grid = tetrahedralize(geometry, size_m, quiet)
+    except DefinitionError as exc:
+        raise DefinitionError(f"{exc} (fTetWild output: {mesher_log})" if quiet else str(exc)) from None
+    mesh = label_parts(geometry, grid)
+    write_labelled_mesh(mesh, path, {"built_for": geometry.name, "size_m": size_m, "digest": digest,
+                                     "source": Path(geometry.source).name, "mesher": _mesher_version()})
+    seconds = time.perf_counter() - start
+    log.info("meshed %s: %s tetrahedra in %s: %s", geometry.name, f"{mesh.n_tets:,}", duration_text(seconds), path)
+    return mesh, MeshInfo(path, False, seconds, digest)
+
+
+def _mesher_version():
+    import pytetwild
+
+    return f"pytetwild {getattr(pytetwild, '__version__', '?')}"
+
+
+@contextmanager
+def _console_to(path):
+    """Send everything written to file descriptors 1 and 2 into ``path`` (fTetWild prints from C++, which
+    Python's ``sys.stdout`` does not see), restoring them afterwards."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    try:
+        with open(path, "wb") as f:
+            os.dup2(f.fileno(), 1)
+            os.dup2(f.fileno(), 2)
+            try:
+                yield
+            finally:
+                _flush_c_stdio()
+    finally:
+        for fd, saved_fd in zip((1, 2), saved):
+            os.dup2(saved_fd, fd)
+            os.close(saved_fd)
+
+
+def _flush_c_stdio():
+    """Flush C's stdio buffers, so buffered fTetWild lines land in the log and not later on the console."""
+    import ctypes
+
+    try:
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError, TypeError):   # no C runtime handle (Windows): nothing to flush this way
+        pass
 
 
 def tetrahedralize(geometry, size_m, quiet=True):
@@ -148,17 +219,15 @@ def label_parts(geometry, grid):
 
 
 def write_labelled_mesh(mesh, path, metadata):
-    """Save a mesh with its region names atomically as ``.vtu``."""
+    """Save a mesh with its region names atomically as ``.vtu``, with its SHA-256 sidecar."""
     grid = mesh.to_pyvista()
     grid.field_data["region_names"] = [json.dumps({str(k): v for k, v in mesh.region_names.items()})]
     grid.field_data["metadata"] = [json.dumps(metadata)]
-    path = Path(path)
-    tmp = path.with_name(f".{path.stem}.partial.vtu")
-    grid.save(tmp)
-    os.replace(tmp, path)
+    write_checked(path, grid.save)
 
 
 def read_labelled_mesh(path):
+    """The :class:`~fea.TetMesh` with region names of a ``.vtu`` written by :func:`write_labelled_mesh`."""
     grid = pv.read(path)
     names = {int(k): v for k, v in json.loads(str(grid.field_data["region_names"][0])).items()}
     return TetMesh.from_pyvista(grid, "region", names)

@@ -49,9 +49,16 @@ class MachineGeometry:
         return [p.name for p in self.parts]
 
     def digest(self, mesh_size_m):
-        """Hash of everything that changes the mesh: shapes, STL contents, settings and mesher version."""
-        import pytetwild
+        """SHA-256 (hex) of what the labelled mesh is made from: the parts' names, shapes and STL contents,
+        the mesh size and fTetWild settings, and :data:`~meshes.builder.BUILDER_VERSION`.
 
+        Nothing else of a machine enters: not its name, materials, heat sources
+        or joints, so a renamed or re-powered copy finds the same mesh.  Part
+        names do, as the mesh stores them as region names.  The fTetWild
+        version does not: a mesh made by an older fTetWild is still a valid
+        mesh of the geometry, and the shipped meshes must stay found after an
+        upgrade (``twin mesh --rebuild`` meshes again on purpose).
+        """
         from .builder import BUILDER_VERSION
 
         payload = {
@@ -59,7 +66,6 @@ class MachineGeometry:
             "size": round(float(mesh_size_m), 9),
             "epsilon": self.envelope_epsilon,
             "stop_energy": self.stop_energy,
-            "pytetwild": getattr(pytetwild, "__version__", "?"),
             "builder": BUILDER_VERSION,
         }
         text = json.dumps(payload, sort_keys=True, default=str)

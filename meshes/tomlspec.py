@@ -59,6 +59,21 @@ def resolve_definition(name_or_path, folder, kind):
 _MISSING = object()
 
 
+def plain_value(value):
+    """``value`` with numpy scalars and arrays (inside lists, tuples and dicts too) as plain Python values.
+
+    Error messages show values with ``repr``; a numpy scalar would show as
+    ``np.int64(3600)`` where the user wrote ``3600``.
+    """
+    if type(value) in (list, tuple):
+        return type(value)(map(plain_value, value))
+    if isinstance(value, dict):
+        return {plain_value(k): plain_value(v) for k, v in value.items()}
+    if type(value).__module__ == "numpy" and hasattr(value, "tolist"):
+        return value.tolist()
+    return value
+
+
 class Table:
     """A TOML table that knows where it came from.
 
@@ -69,7 +84,7 @@ class Table:
 
     def __init__(self, data, file, path):
         if not isinstance(data, dict):
-            raise DefinitionError(f"{file}: {path or 'the file'} must be a table, got {data!r}")
+            raise DefinitionError(f"{file}: {path or 'the file'} must be a table, got {plain_value(data)!r}")
         self.data, self.file, self.path = data, file, path
 
     def where(self, key=None):
@@ -77,7 +92,7 @@ class Table:
         return f"{self.file}: {dotted or '(top level)'}"
 
     def error(self, key, message, value=_MISSING):
-        shown = "" if value is _MISSING else f", got {value!r}"
+        shown = "" if value is _MISSING else f", got {plain_value(value)!r}"
         return DefinitionError(f"{self.where(key)} {message}{shown}")
 
     def __contains__(self, key):

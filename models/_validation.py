@@ -43,9 +43,29 @@ def require_samples(n_samples: int, min_samples: int, what: str) -> None:
     """Raise ``ValueError`` when there are fewer samples than ``what`` needs."""
     if n_samples < min_samples:
         noun = "sample" if n_samples == 1 else "samples"
+        raise ValueError(f"{what} needs at least {min_samples} samples, got {n_samples} {noun}.")
+
+
+def require_parameters(
+    n_samples: int, n_parameters: int, what: str, lost: int = 0, lost_reason: str = "", hint: str = ""
+) -> None:
+    """Raise ``ValueError`` unless the samples give more equations than there are parameters.
+
+    ``lost`` samples give no equation, for the reason ``lost_reason`` (a grey
+    model's first sample, a delay, an early-stopping split). With as many
+    parameters as equations a fit reproduces its training data exactly
+    (training error 0, "100 %" improvement) whatever the data mean; with more
+    parameters it is underdetermined. Neither says anything about the model,
+    so both are refused; ``hint`` is appended to the message.
+    """
+    need = n_parameters + lost + 1
+    if n_samples < need:
+        noun = "sample" if n_samples == 1 else "samples"
+        why = f" ({lost_reason})" if lost_reason else ""
         raise ValueError(
-            f"{what} needs at least {min_samples} samples, got {n_samples} {noun} "
-            "(fewer samples than parameters to estimate)."
+            f"{what} has {n_parameters} parameters to fit and needs at least {need} samples{why}, "
+            f"got {n_samples} {noun}: with no more equations than parameters the fit is exact or "
+            f"underdetermined and its training error means nothing.{hint}"
         )
 
 

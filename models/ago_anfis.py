@@ -39,7 +39,10 @@ class AGOANFISRegressor(GreySeriesRegressor):
         return self.anfis if self.anfis is not None else ANFISRegressor(init="fcm", n_rules=3)
 
     def _n_parameters(self, n_features):
-        return self._template()._n_rules_for(n_features) * (n_features + 1)
+        return self._template().n_parameters(n_features)
+
+    def _samples_without_equation(self):
+        return 0, ""  # ANFIS maps every accumulated sample X¹(k) → y¹(k)
 
     def _fit_changes(self, X0, y0):
         self.anfis_ = clone(self._template()).fit(ago(X0), ago(y0))

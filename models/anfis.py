@@ -22,12 +22,26 @@ move by one of two documented updates (``premise_update``):
   ``step_size`` (0.01), grows ×``step_increase`` (1.1) after four
   consecutive error decreases and shrinks ×``step_decrease`` (0.9) after two
   consecutive increase–decrease oscillations.
-* ``"levenberg-marquardt"``: a damped Gauss–Newton step on the premise
-  Jacobian (consequents held fixed while it is formed); a step is kept only
-  if the training error falls, the damping shrinks ×1/3 on success and grows
-  ×4 on failure. Jang's first-order rule stalls on some problems with
-  Gaussian MFs (on the two-input sinc it sits at RMSE ≈ 0.034, a plateau of
-  the symmetric solution); this update leaves it in tens of epochs.
+* ``"levenberg-marquardt"``: a damped Gauss–Newton step on the
+  variable-projection (Kaufman) Jacobian of the premises, i.e. with the
+  consequents' own dependence on the premises projected out. A step is kept
+  when the error falls by a fair share (gain ratio > 1e-3) of the predicted
+  decrease; the damping follows Nielsen's rule; the first step is no longer
+  than ``step_size`` (Jang's κ₀), so the premises leave the initial guess
+  gradually; training stops once a step is predicted to lower the squared
+  error by less than 1e-12 of it. Jang's first-order rule stalls on some
+  problems with Gaussian MFs (on the two-input sinc at RMSE ≈ 0.03); this
+  update converges in tens of epochs.
+
+**Reproducibility.** ``random_state`` seeds the FCM initialisation and, for
+``init="grid"``, an offset of every grid centre by up to ±1.5 % of the MF
+spacing. A grid on symmetric data (Jang's sinc is even in x and y and
+symmetric under x ↔ y) starts on a saddle of the training error: without the
+offset the premises leave it in a direction that rounding decides, which
+differs between CPUs and BLAS builds, and training then ends in a different
+minimum (RMSE 0.0085–0.015 on the sinc for inputs changed by 1e-14). ``fit``
+runs with one BLAS thread (:mod:`models._threads`), so a seed gives the same
+model whatever ``OPENBLAS_NUM_THREADS`` is.
 
 Every premise step is followed by a least-squares solve, so training ends
 with a final LSE after the last premise step and the consequents are never
@@ -53,16 +67,24 @@ Conventions:
 from __future__ import annotations
 
 import itertools
+from typing import NamedTuple
 
 import numpy as np
 import scipy.linalg
 from sklearn.base import BaseEstimator, RegressorMixin
+from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
-from ._validation import check_n_features, check_positive_int, validate_x, validate_xy
+from ._threads import one_blas_thread
+from ._validation import check_n_features, check_positive_int, require_parameters, validate_x, validate_xy
 from .fcm import FuzzyCMeans
 
 _SIGMA_FLOOR = 1e-3  # z units; keeps a Gaussian MF from collapsing to a spike
+_GRID_JITTER = 3e-2  # seeded offset of the grid centres, as a fraction of the MF spacing (module doc)
+_MAX_GRID_RULES = 4096  # the firing strengths alone take n_samples × rules × inputs floats
+_LM_DAMPING0 = 1e-3  # initial LM damping, relative to the Marquardt scaling diag(JᵀJ)
+_LM_RTOL = 1e-12  # LM has converged once a step is predicted to lower the squared error by less
+_LM_MAX_REJECTIONS = 30
 
 
 def _standardise(X):
@@ -98,14 +120,38 @@ def _output(wbar, Z1, consequents):
     return np.einsum("nr,nr->n", wbar, f), f
 
 
-def _least_squares(wbar, Z1, y, ridge):
-    """Consequents (R, d+1) minimising ‖Φθ - y‖² + ridge·mean(diag ΦᵀΦ)‖θ‖²."""
+def _design(wbar, Z1):
+    """Consequent design matrix Φ, (n_samples, n_rules·(d+1)): column (r, j) is w̄_r·[z, 1]_j."""
     n, R = wbar.shape
-    phi = (wbar[:, :, None] * Z1[:, None, :]).reshape(n, -1)
+    return (wbar[:, :, None] * Z1[:, None, :]).reshape(n, -1)
+
+
+class _LeastSquares(NamedTuple):
+    """The consequent least squares for fixed premises, and what the premise steps reuse."""
+
+    wbar: np.ndarray  # (n, R) normalised firing strengths
+    phi: np.ndarray  # (n, R·(d+1)) design matrix Φ
+    factor: tuple  # Cholesky factor of ΦᵀΦ + ridge·mean(diag ΦᵀΦ) I
+    theta: np.ndarray  # (R, d+1) consequents
+    F: np.ndarray  # (n,) output
+    f: np.ndarray  # (n, R) rule outputs
+    sse: float  # Σ (F - y)²
+
+
+def _solve_consequents(wbar, Z1, y, ridge):
+    """Consequents minimising ‖Φθ - y‖² + ridge·mean(diag ΦᵀΦ)‖θ‖², as a :class:`_LeastSquares`."""
+    phi = _design(wbar, Z1)
     gram = phi.T @ phi
     gram[np.diag_indices_from(gram)] += ridge * max(np.trace(gram) / gram.shape[0], 1e-300)
-    theta = scipy.linalg.solve(gram, phi.T @ y, assume_a="pos")
-    return theta.reshape(R, Z1.shape[1])
+    factor = scipy.linalg.cho_factor(gram)
+    theta = scipy.linalg.cho_solve(factor, phi.T @ y).reshape(wbar.shape[1], Z1.shape[1])
+    F, f = _output(wbar, Z1, theta)
+    return _LeastSquares(wbar, phi, factor, theta, F, f, float((F - y) @ (F - y)))
+
+
+def _least_squares(wbar, Z1, y, ridge):
+    """Consequents (R, d+1) minimising ‖Φθ - y‖² + ridge·mean(diag ΦᵀΦ)‖θ‖²."""
+    return _solve_consequents(wbar, Z1, y, ridge).theta
 
 
 def _premise_jacobian(Z, wbar, f, F, centers, sigmas, rule_mfs):
@@ -129,6 +175,21 @@ def _premise_jacobian(Z, wbar, f, F, centers, sigmas, rule_mfs):
     j_c = np.matmul(g_c.transpose(2, 0, 1), share).transpose(1, 0, 2)
     j_s = np.matmul(g_s.transpose(2, 0, 1), share).transpose(1, 0, 2)
     return np.hstack([j_c.reshape(n, -1), j_s.reshape(n, -1)])
+
+
+def _projected_normal_equations(J, residual, ls):
+    """``(J_Kᵀ J_K, J_Kᵀ r)`` for Kaufman's variable-projection Jacobian ``J_K = (I - Φ(ΦᵀΦ)⁻¹Φᵀ) J``.
+
+    The consequents are the least-squares solution for the premises, so the
+    residual depends on the premises also through them; Kaufman's
+    approximation of that dependence projects the premise Jacobian onto the
+    complement of the consequent basis Φ. The gradient barely changes (the
+    residual is already orthogonal to Φ, up to the ridge), but the
+    Gauss–Newton model no longer proposes premise moves that the next
+    least-squares solve undoes, so LM converges in tens of steps.
+    """
+    J = J - ls.phi @ scipy.linalg.cho_solve(ls.factor, ls.phi.T @ J)
+    return J.T @ J, J.T @ residual
 
 
 def _adapt_step(step, errors, increase, decrease):
@@ -175,7 +236,8 @@ class ANFISRegressor(RegressorMixin, BaseEstimator):
     premise_update : {"jang", "levenberg-marquardt"}, default "jang"
         Premise learning rule (see the module docstring).
     random_state : int, RandomState or None
-        Seeds the FCM initialisation (grid init is deterministic).
+        Seeds the FCM initialisation and the offset of the grid centres;
+        an int gives the same model on every run and BLAS thread count.
 
     Attributes
     ----------
@@ -221,7 +283,7 @@ class ANFISRegressor(RegressorMixin, BaseEstimator):
         self.random_state = random_state
 
     # ----------------------------------------------------------------- init
-    def _initial_premises(self, Z, y):
+    def _initial_premises(self, Z, y, rng):
         d = Z.shape[1]
         if self.init == "grid":
             n_mfs = check_positive_int(self.n_mfs, "n_mfs")
@@ -234,12 +296,13 @@ class ANFISRegressor(RegressorMixin, BaseEstimator):
                 # neighbouring MFs cross at μ = 0.5
                 spacing = (hi - lo) / (n_mfs - 1)
                 sigmas = np.repeat((spacing / (2.0 * np.sqrt(2.0 * np.log(2.0))))[:, None], n_mfs, 1)
+                centers += _GRID_JITTER * spacing[:, None] * rng.uniform(-0.5, 0.5, centers.shape)
             rule_mfs = np.array(list(itertools.product(range(n_mfs), repeat=d)), dtype=np.intp)
         elif self.init == "fcm":
             n_rules = check_positive_int(self.n_rules, "n_rules")
             y_mean, y_scale = _standardise(y[:, None])
             data = np.hstack([Z, (y[:, None] - y_mean) / y_scale])
-            fcm = FuzzyCMeans(n_clusters=n_rules, m=self.fcm_m, random_state=self.random_state).fit(data)
+            fcm = FuzzyCMeans(n_clusters=n_rules, m=self.fcm_m, random_state=rng).fit(data)
             centers = fcm.cluster_centers_[:, :d].T.copy()  # (d, R)
             um = fcm.membership_**self.fcm_m  # (n, R)
             spread = np.einsum("nr,nrd->rd", um, (Z[:, None, :] - centers.T[None]) ** 2)
@@ -254,7 +317,14 @@ class ANFISRegressor(RegressorMixin, BaseEstimator):
             return check_positive_int(self.n_mfs, "n_mfs") ** d
         return check_positive_int(self.n_rules, "n_rules")
 
+    def n_parameters(self, n_features: int) -> int:
+        """Free parameters for ``n_features`` inputs: consequents plus MF centres and widths."""
+        n_rules = self._n_rules_for(n_features)
+        n_mfs = check_positive_int(self.n_mfs, "n_mfs") if self.init == "grid" else n_rules
+        return n_rules * (n_features + 1) + 2 * n_features * n_mfs
+
     # ------------------------------------------------------------------ fit
+    @one_blas_thread
     def fit(self, X, y, X_check=None, y_check=None):
         """Train on ``X`` (n_samples, n_features), ``y`` (n_samples,).
 
@@ -267,8 +337,18 @@ class ANFISRegressor(RegressorMixin, BaseEstimator):
             if not 0 < n_check < X.shape[0]:
                 raise ValueError(f"validation_fraction={self.validation_fraction!r} leaves no data.")
             X, X_check, y, y_check = X[:-n_check], X[-n_check:], y[:-n_check], y[-n_check:]
-        n_params = self._n_rules_for(X.shape[1]) * (X.shape[1] + 1)
-        validate_xy(X, y, min_samples=n_params, what=f"ANFISRegressor ({n_params} consequent parameters)")
+        if self.init not in ("fcm", "grid"):
+            raise ValueError(f"init must be 'fcm' or 'grid', got {self.init!r}.")
+        hint = ""
+        if self.init == "grid":
+            n_rules = self._n_rules_for(X.shape[1])
+            hint = (
+                f" init='grid' makes n_mfs**n_features = {self.n_mfs}**{X.shape[1]} = {n_rules:,} rules: use "
+                "FCM initialisation (init='fcm', one rule per cluster) or a selected subset of the inputs."
+            )
+            if n_rules > _MAX_GRID_RULES:
+                raise ValueError(f"ANFISRegressor allows at most {_MAX_GRID_RULES:,} rules.{hint}")
+        require_parameters(X.shape[0], self.n_parameters(X.shape[1]), "ANFISRegressor", hint=hint)
         has_check = X_check is not None or y_check is not None
         if has_check:
             X_check, y_check = validate_xy(X_check, y_check, what="the ANFIS checking set")
@@ -282,63 +362,67 @@ class ANFISRegressor(RegressorMixin, BaseEstimator):
 
         self.x_mean_, self.x_scale_ = _standardise(X)
         Z = (X - self.x_mean_) / self.x_scale_
+        check = ((X_check - self.x_mean_) / self.x_scale_, y_check) if has_check else None
+        self._train(Z, y, check, epochs, *self._initial_premises(Z, y, check_random_state(self.random_state)))
+        self.n_features_in_ = X.shape[1]
+        return self
+
+    def _train(self, Z, y, check, epochs, centers, sigmas, rule_mfs):
+        """Hybrid training from the initial premises; sets the fitted premises, consequents and histories."""
         Z1 = _with_bias(Z)
-        centers, sigmas, rule_mfs = self._initial_premises(Z, y)
 
         def evaluate(centers, sigmas):
-            wbar = _normalised_firing(Z, centers, sigmas, rule_mfs)
-            theta = _least_squares(wbar, Z1, y, self.ridge)
-            F, f = _output(wbar, Z1, theta)
-            return wbar, theta, F, f, float(np.sqrt(np.mean((F - y) ** 2)))
+            return _solve_consequents(_normalised_firing(Z, centers, sigmas, rule_mfs), Z1, y, self.ridge)
 
-        if has_check:
-            Zc = (X_check - self.x_mean_) / self.x_scale_
+        if check is not None:
+            Zc, y_check = check
             Zc1 = _with_bias(Zc)
 
-        wbar, theta, F, f, rmse = evaluate(centers, sigmas)
-        train_hist, check_hist = [rmse], []
-        step, damping = float(self.step_size), 1e-3
+        ls = evaluate(centers, sigmas)
+        train_hist, check_hist = [np.sqrt(ls.sse / y.size)], []
+        step, damping = float(self.step_size), _LM_DAMPING0
         best = None
         epoch = 0
         while True:
             score = train_hist[-1]
-            if has_check:
+            if check is not None:
                 wc = _normalised_firing(Zc, centers, sigmas, rule_mfs)
-                check_hist.append(float(np.sqrt(np.mean((_output(wc, Zc1, theta)[0] - y_check) ** 2))))
+                check_hist.append(float(np.sqrt(np.mean((_output(wc, Zc1, ls.theta)[0] - y_check) ** 2))))
                 score = check_hist[-1]
-            if best is None or score <= best[0] or not has_check:
-                best = (score, epoch, centers, sigmas, theta)
+            if best is None or score <= best[0] or check is None:
+                best = (score, epoch, centers, sigmas, ls.theta)
             stalled = (
-                has_check
+                check is not None
                 and self.n_iter_no_change is not None
                 and epoch - best[1] >= self.n_iter_no_change
             )
             if epoch == epochs or train_hist[-1] <= self.error_goal or stalled:
                 break
-            J = _premise_jacobian(Z, wbar, f, F, centers, sigmas, rule_mfs)
+            J = _premise_jacobian(Z, ls.wbar, ls.f, ls.F, centers, sigmas, rule_mfs)
             if self.premise_update == "jang":
                 step = _adapt_step(step, train_hist, self.step_increase, self.step_decrease)
-                gradient = J.T @ (F - y)
+                gradient = J.T @ (ls.F - y)
                 norm = np.linalg.norm(gradient)
                 if norm == 0.0:
                     break
                 centers, sigmas = self._moved(centers, sigmas, -step * gradient / norm)
-                wbar, theta, F, f, rmse = evaluate(centers, sigmas)
+                ls = evaluate(centers, sigmas)
             else:
-                moved = self._levenberg_marquardt_step(J, F - y, centers, sigmas, damping, evaluate, rmse)
+                H, g = _projected_normal_equations(J, ls.F - y, ls)
+                # the first step is no longer than Jang's initial step κ₀ (step_size)
+                moved = self._levenberg_marquardt_step(
+                    H, g, ls.sse, centers, sigmas, damping, evaluate, float(self.step_size) if epoch == 0 else None
+                )
                 if moved is None:
                     break
-                centers, sigmas, (wbar, theta, F, f, rmse), damping = moved
-            train_hist.append(rmse)
+                centers, sigmas, ls, damping = moved
+            train_hist.append(np.sqrt(ls.sse / y.size))
             epoch += 1
-
         _, self.best_epoch_, self.mf_centers_, self.mf_sigmas_, self.consequents_ = best
         self.rule_mfs_ = rule_mfs
         self.training_rmse_ = np.asarray(train_hist)
         self.checking_rmse_ = np.asarray(check_hist)
         self.n_iter_ = epoch
-        self.n_features_in_ = X.shape[1]
-        return self
 
     @staticmethod
     def _moved(centers, sigmas, delta):
@@ -349,19 +433,41 @@ class ANFISRegressor(RegressorMixin, BaseEstimator):
             np.maximum(sigmas + delta[k:].reshape(sigmas.shape), _SIGMA_FLOOR),
         )
 
-    def _levenberg_marquardt_step(self, J, residual, centers, sigmas, damping, evaluate, rmse):
-        """One accepted LM step, or None when 30 damping increases (×4 each) give no decrease."""
-        H = J.T @ J
-        g = J.T @ residual
+    def _levenberg_marquardt_step(self, H, g, sse, centers, sigmas, damping, evaluate, max_step=None):
+        """One accepted LM step ``(centres, σ, least squares, damping)``, or None once converged.
+
+        ``H``, ``g`` are the Gauss–Newton matrix and gradient of the squared
+        error ``sse`` (see :func:`_projected_normal_equations`). A trial step
+        is kept when the actual decrease of the squared error is a fair share
+        (gain ratio ρ > 1e-3) of the decrease the Gauss–Newton model predicts;
+        the damping then follows Nielsen's rule, ``×max(1/3, 1 - (2ρ - 1)³)``,
+        and doubles its growth factor on every rejection. Training has
+        converged when the predicted decrease is below ``_LM_RTOL`` of the
+        squared error: from there on, accepting or rejecting a step would be
+        decided by rounding. With ``max_step``, the damping is first raised
+        ×10 until the step is no longer than that (z units).
+        """
         # Marquardt scaling with a floor, so MFs that barely fire still get damped
         scale = np.diag(H) + 1e-3 * max(np.trace(H) / H.shape[0], 1e-300)
-        for _ in range(30):
-            delta = np.linalg.solve(H + damping * np.diag(scale), -g)
+
+        def solve(damping):
+            return scipy.linalg.solve(H + damping * np.diag(scale), -g, assume_a="pos")
+
+        while max_step is not None and np.linalg.norm(solve(damping)) > max_step:
+            damping *= 10.0
+        growth = 2.0
+        for _ in range(_LM_MAX_REJECTIONS):
+            delta = solve(damping)
+            predicted = float(delta @ (damping * scale * delta - g))
+            if not predicted > _LM_RTOL * sse:
+                return None
             trial = self._moved(centers, sigmas, delta)
-            state = evaluate(*trial)
-            if state[-1] < rmse:
-                return trial[0], trial[1], state, max(damping / 3.0, 1e-12)
-            damping *= 4.0
+            ls = evaluate(*trial)
+            gain = (sse - ls.sse) / predicted
+            if gain > 1e-3:
+                return trial[0], trial[1], ls, max(damping * max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3), 1e-12)
+            damping *= growth
+            growth *= 2.0
         return None
 
     # -------------------------------------------------------------- predict

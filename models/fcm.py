@@ -20,6 +20,7 @@ from sklearn.base import BaseEstimator, ClusterMixin
 from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
+from ._threads import one_blas_thread
 from ._validation import check_n_features, check_positive_int, validate_x
 
 
@@ -102,6 +103,7 @@ class FuzzyCMeans(ClusterMixin, BaseEstimator):
         self.max_iter = max_iter
         self.random_state = random_state
 
+    @one_blas_thread
     def fit(self, X, y=None):
         """Cluster the rows of ``X`` (n_samples, n_features)."""
         X = validate_x(X, what="FuzzyCMeans")

@@ -164,8 +164,13 @@ class GMCRegressor(GreySeriesRegressor):
         self.random_state = random_state
 
     def _n_parameters(self, n_features):
-        # b₁, b₂..b_N, u, and r samples lost to the delay
-        return n_features + 2 + int(self.delay)
+        return n_features + 2  # b₁, b₂..b_N, u
+
+    def _samples_without_equation(self):
+        r = int(self.delay)
+        if r == 0:
+            return super()._samples_without_equation()
+        return 1 + r, f"the first and the {r} lost to the delay give no equation"
 
     def _fit_changes(self, X0, y0):
         r = int(self.delay)

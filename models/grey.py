@@ -29,7 +29,11 @@ from scipy.signal import lfilter
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.utils.validation import check_is_fitted
 
-from ._validation import check_n_features, validate_series, validate_x, validate_xy
+from ._threads import one_blas_thread
+from ._validation import check_n_features, require_parameters, validate_series, validate_x, validate_xy
+
+#: the first sample of a grey model gives no equation (its equations are k = 2..n)
+_FIRST_SAMPLE = "the first gives no equation"
 
 
 def ago(x, axis: int = 0) -> np.ndarray:
@@ -91,18 +95,25 @@ class GM11:
     @classmethod
     def fit(cls, series) -> "GM11":
         """Least-squares ``[a, b]`` from ``Y = [x⁰(2..n)]``, ``B = [-z¹(k), 1]``."""
-        x0 = validate_series(series, min_samples=3, what="GM(1,1) (2 parameters)")
+        x0 = validate_series(series, min_samples=1, what="GM(1,1)")
+        require_parameters(x0.size, 2, "GM(1,1)", lost=1, lost_reason=_FIRST_SAMPLE)
         z = background_values(ago(x0))
         a, b = grey_least_squares(np.column_stack([-z, np.ones_like(z)]), x0[1:])
-        if a == 0.0:
-            raise ValueError("GM(1,1) development coefficient is 0: the series has no trend.")
         return cls(float(a), float(b), float(x0[0]))
 
     def predict(self, n_samples: int) -> np.ndarray:
-        """Model values ``x̂⁰(1..n_samples)`` (fit range and beyond)."""
+        """Model values ``x̂⁰(1..n_samples)`` (fit range and beyond).
+
+        Written as ``x̂¹(k+1) = x⁰(1) e^{-ak} + b (1 - e^{-ak}) / a``, with
+        ``(1 - e^{-ak})/a`` from ``expm1``: the textbook form
+        ``(x⁰(1) - b/a) e^{-ak} + b/a`` cancels catastrophically when a ≈ 0
+        (a constant series fits a ≈ 1e-18), while this one tends smoothly to
+        its limit ``x⁰(1) + b k``, a constant forecast ``x̂⁰ = b``.
+        """
         a, b = self.development_coefficient, self.grey_input
         k = np.arange(n_samples, dtype=np.float64)
-        x1 = (self.initial_value - b / a) * np.exp(-a * k) + b / a
+        growth = k if a == 0.0 else -np.expm1(-a * k) / a
+        x1 = self.initial_value * np.exp(-a * k) + b * growth
         return iago(x1)
 
 
@@ -120,9 +131,8 @@ def _gm1n_theta(X0, y0, ridge):
 
 def _influence(theta_fn, n_extra, X, y, ridge, what):
     X, y = validate_xy(X, y, min_samples=3, what=what)
-    if ridge == 0.0:  # unregularised: one equation per parameter at least
-        n_params = X.shape[1] + n_extra
-        validate_xy(X, y, min_samples=n_params + 1, what=f"{what} ({n_params} parameters)")
+    if ridge == 0.0:  # unregularised: more equations than parameters
+        require_parameters(X.shape[0], X.shape[1] + n_extra, what, lost=1, lost_reason=_FIRST_SAMPLE)
     return theta_fn(zero_reference(X), zero_reference(y), ridge)
 
 
@@ -144,7 +154,8 @@ class GreySeriesRegressor(RegressorMixin, BaseEstimator):
     """Base of the grey time-series estimators: zero-referencing, validation, tags.
 
     Subclasses implement ``_fit_changes(X0, y0)`` and ``_predict_changes(X0)``
-    on zero-referenced arrays and set ``_n_parameters(n_features)``.
+    on zero-referenced arrays and set ``_n_parameters(n_features)``; the
+    first ``_samples_without_equation()`` samples give no equation.
     """
 
     def __sklearn_tags__(self):
@@ -157,12 +168,16 @@ class GreySeriesRegressor(RegressorMixin, BaseEstimator):
     def _n_parameters(self, n_features: int) -> int:
         raise NotImplementedError
 
+    def _samples_without_equation(self) -> tuple[int, str]:
+        """How many leading samples give no equation, and why (k = 2..n: the first)."""
+        return 1, _FIRST_SAMPLE
+
+    @one_blas_thread
     def fit(self, X, y):
         """Fit on time-ordered ``X`` (n_samples, n_features) and ``y`` (n_samples,)."""
         X, y = validate_xy(X, y, what=type(self).__name__)
-        n_params = self._n_parameters(X.shape[1])
-        # k = 2..n gives n - 1 equations for n_params unknowns
-        validate_xy(X, y, min_samples=n_params + 1, what=f"{type(self).__name__} ({n_params} parameters)")
+        lost, why = self._samples_without_equation()
+        require_parameters(X.shape[0], self._n_parameters(X.shape[1]), type(self).__name__, lost, why)
         self.y_reference_ = float(y[0])
         self.n_features_in_ = X.shape[1]
         self._fit_changes(zero_reference(X), zero_reference(y))

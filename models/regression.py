@@ -24,7 +24,8 @@ from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 from sklearn.utils.validation import check_is_fitted
 
-from ._validation import check_n_features, validate_x, validate_xy
+from ._threads import one_blas_thread
+from ._validation import check_n_features, require_parameters, require_samples, validate_x, validate_xy
 
 
 def make_ann_pipeline(hidden_layer_sizes=(10,), alpha=1e-4, max_iter=2000, random_state=None):
@@ -72,9 +73,11 @@ class MLRRegressor(_LinearPredictor):
     def __init__(self, standardize=False):
         self.standardize = standardize
 
+    @one_blas_thread
     def fit(self, X, y):
         """Ordinary least squares on ``X`` (n_samples, n_features)."""
-        X, y = validate_xy(X, y, min_samples=2, what="MLRRegressor")
+        X, y = validate_xy(X, y, what="MLRRegressor")
+        require_parameters(X.shape[0], X.shape[1] + 1, f"MLRRegressor ({X.shape[1]} coefficients + intercept)")
         mean, scale = np.zeros(X.shape[1]), np.ones(X.shape[1])
         if self.standardize:
             mean, scale = _scaling(StandardScaler().fit(X))
@@ -111,6 +114,7 @@ class PCRRegressor(_LinearPredictor):
         self.variance_threshold = variance_threshold
         self.n_components = n_components
 
+    @one_blas_thread
     def fit(self, X, y):
         """Standardise, project on the kept components, regress ``y`` on the scores."""
         X, y = validate_xy(X, y, min_samples=2, what="PCRRegressor")
@@ -127,6 +131,7 @@ class PCRRegressor(_LinearPredictor):
             k = int(self.n_components)
         if not 1 <= k <= pca.components_.shape[0]:
             raise ValueError(f"n_components must be in [1, {pca.components_.shape[0]}], got {k}.")
+        require_parameters(X.shape[0], k + 1, f"PCRRegressor ({k} component coefficients + intercept)")
         self.n_components_ = k
         self.components_ = pca.components_[:k].copy()
         lr = LinearRegression().fit(Z @ self.components_.T, y)
@@ -152,9 +157,18 @@ class ANNRegressor(RegressorMixin, BaseEstimator):
         self.max_iter = max_iter
         self.random_state = random_state
 
+    @one_blas_thread
     def fit(self, X, y):
         """Train the network on ``X`` (n_samples, n_features), ``y`` (n_samples,)."""
-        X, y = validate_xy(X, y, min_samples=20, what="ANNRegressor (10 % early-stopping split)")
+        X, y = validate_xy(X, y, what="ANNRegressor")
+        sizes = [X.shape[1], *self.hidden_layer_sizes, 1]
+        n_weights = sum((a + 1) * b for a, b in zip(sizes[:-1], sizes[1:]))
+        n_min = n_weights + 1  # fewest samples whose 90 % left after the early-stopping split exceed the weights
+        while n_min - int(np.ceil(0.1 * n_min)) <= n_weights:
+            n_min += 1
+        require_parameters(X.shape[0], n_weights, f"ANNRegressor ({'-'.join(map(str, sizes))} network)",
+                           lost=n_min - n_weights - 1, lost_reason="10 % of them are the early-stopping split")
+        require_samples(X.shape[0], 20, "ANNRegressor (10 % early-stopping split)")
         pipeline = make_ann_pipeline(
             tuple(self.hidden_layer_sizes), self.alpha, self.max_iter, self.random_state
         )

@@ -8,6 +8,7 @@ from twin.cli import main
 from twin.compensation import evaluate, load_dataset, score, train
 from twin.dataset import ChannelInfo, Dataset
 from twin.errors import TwinInputError
+from twin.model_names import MODEL_NAMES
 from twin.model_store import CompensationModel, fit_compensation_model, make_estimator, parse_params
 
 
@@ -97,6 +98,55 @@ def test_clear_errors_list_what_is_available(tmp_path):
         load_dataset("no_such_thing_42")
     assert parse_params(["n_rules=4", "init=grid", "step_size=0.02"]) == {"n_rules": 4, "init": "grid",
                                                                            "step_size": 0.02}
+
+
+def _wide_record(n_rows, n_inputs=16, seed=0):
+    """``n_inputs`` random-walk thermometers T00.. and a drift Z, ``n_rows`` rows one minute apart."""
+    rng = np.random.default_rng(seed)
+    T = 20 + rng.standard_normal((n_rows, n_inputs)).cumsum(axis=0) * 0.1
+    Z = (T - 20) @ rng.standard_normal(n_inputs)
+    channels = [ChannelInfo(f"T{j:02d}", "degC", "temperature") for j in range(n_inputs)]
+    return Dataset(np.arange(n_rows) * 60.0, np.column_stack([T, Z]),
+                   channels + [ChannelInfo("Z", "um", "displacement")], {"kind": "synthetic", "scenario": "wide"})
+
+
+WIDE_INPUTS = [f"T{j:02d}" for j in range(16)]
+
+
+@pytest.mark.parametrize("model", sorted(set(MODEL_NAMES) - {"pcr"}))
+def test_every_model_refuses_more_parameters_than_rows(model):
+    # 10 rows × 16 inputs: before, MLR "fitted" it with RMSE 1.5e-16 and 100 % improvement.
+    # (PCR regresses on the 4 components that explain 85 % of the variance: 5 parameters, a real fit.)
+    with pytest.raises(TwinInputError, match=r"cannot fit .* on 10 rows × 16 inputs: .*(parameters|rules)"):
+        fit_compensation_model([_wide_record(10)], WIDE_INPUTS, "Z", model)
+
+
+def test_bad_training_requests_are_refused(tmp_path, capsys):
+    with pytest.raises(TwinInputError, match=r"'mlr' on 10 rows × 16 inputs: .*17 parameters .* at least 18 samples"):
+        fit_compensation_model([_wide_record(10)], WIDE_INPUTS, "Z", "mlr")
+    with pytest.raises(TwinInputError, match=r"2\*\*16 = 65,536 rules: use FCM .*--model anfis-fcm"):
+        fit_compensation_model([_wide_record(400)], WIDE_INPUTS, "Z", "anfis-grid")
+    a = _record(0)
+    with pytest.raises(TwinInputError, match=r"input channel\(s\) \['T1'\] given more than once"):
+        fit_compensation_model([a], ["T1", "T2", "T1"], "Z", "mlr")
+    with pytest.raises(TwinInputError, match=r"reference_samples .* must be a whole number of rows, at least 1; got 0"):
+        fit_compensation_model([a], ["T1", "T2"], "Z", "mlr", reference_samples=0)
+    with pytest.raises(TwinInputError, match=r"rec0: reference_samples .* = 401 is more than the 400 rows"):
+        fit_compensation_model([a], ["T1", "T2"], "Z", "mlr", reference_samples=401)
+    # a model referenced on 50 rows cannot reference a 30-row record
+    cm = fit_compensation_model([a], ["T1", "T2"], "Z", "mlr", reference_samples=50)
+    with pytest.raises(TwinInputError, match=r"short: reference_samples .* = 50 is more than the 30 rows it has"):
+        evaluate(cm, [_record(1, n=30, label="short")])
+    # on the command line: one line naming the counts, exit code 2
+    _wide_record(10).write(tmp_path / "ten.csv")
+    common = ["train", str(tmp_path / "ten.csv"), "--target", "Z", "--model", "mlr", "--out", str(tmp_path / "m.json")]
+    assert main(common + ["--inputs", ",".join(WIDE_INPUTS)]) == 2
+    err = capsys.readouterr().err
+    assert "10 rows × 16 inputs" in err and "17 parameters" in err and "Traceback" not in err
+    assert main(common + ["--inputs", "T00,T01", "--reference-samples", "11"]) == 2
+    assert "reference_samples (--reference-samples) = 11 is more than the 10 rows" in capsys.readouterr().err
+    assert main(common + ["--inputs", "T00", "--inputs", "T00"]) == 2
+    assert "['T00'] given more than once" in capsys.readouterr().err
 
 
 def test_incompatible_model_files_are_refused(tmp_path):

@@ -281,6 +281,49 @@ def test_lumped_cooling_of_conductive_block_is_exponential():
     assert one_percent_tau > 30 * 1e-4            # the tolerance resolves a 1 % error in τ 30-fold
 
 
+# ------------------------------------------------------------------ 3b. time-step error estimate
+#: NAFEMS T3 (one-dimensional transient): a 0.1 m bar, k = 35 W/(m K), ρ = 7200 kg/m³, c = 440.5 J/(kg K),
+#: at 0 °C; x = 0 held at 0 °C, x = 0.1 m at 100 sin(πt/40) °C; the benchmark asks for T(0.08 m, 32 s) = 36.60 °C.
+NAFEMS_T3_REFERENCE_C = 36.60
+
+
+def nafems_t3(cells=40):
+    """The T3 bar (a 10 × 10 mm prism with adiabatic sides), its input schedule and the output at x = 0.08 m."""
+    mesh = box_mesh(np.linspace(0.0, 0.1, cells + 1), [0.0, 0.01], [0.0, 0.01])
+    mesh.add_facet_group("left", fea.Plane.axis("x", 0.0))
+    mesh.add_facet_group("right", fea.Plane.axis("x", 0.1))
+    problem = fea.HeatProblem(mesh, {0: fea.Material(35.0, 7200.0, 440.5, name="NAFEMS T3")})
+    problem.add_fixed_temperature("left", 0.0)
+    problem.add_fixed_temperature("right", "end")
+    system = problem.assemble()
+    schedule = fea.InputSchedule(system, {"end": lambda t: 100.0 * np.sin(np.pi * t / 40.0)})
+    return system, schedule, fea.build_output_operator([fea.PointTemperature("x80", (0.08, 0.005, 0.005))], system)
+
+
+def nafems_t3_step_error(theta, dt=0.5):
+    """T(0.08 m, 32 s) (°C), the step-doubling estimate of its time error and the true one (K), at 32 s and the
+    largest over 0–32 s; the truth is the same mesh with Crank–Nicolson steps 64 times shorter."""
+    system, schedule, outputs = nafems_t3()
+    times = np.arange(0.0, 32.0 + dt / 2, dt)
+    solver = fea.ThermalSolver(system, theta=theta)
+    run = solver.run(0.0, times, schedule, outputs)
+    estimate = solver.step_error(0.0, times, schedule, outputs, run)
+    truth = fea.ThermalSolver(system, theta=0.5).run(0.0, times, schedule, outputs, substeps=64)
+    true = (run.outputs - truth.outputs)[np.searchsorted(times, estimate.times_s), 0]
+    return dict(T_32=float(run.outputs[-1, 0]), truth_32=float(truth.outputs[-1, 0]),
+                estimated_32=float(estimate.error[-1, 0]), true_32=float(true[-1]),
+                estimated_max=float(np.abs(estimate.error[:, 0]).max()), true_max=float(np.abs(true).max()))
+
+
+@pytest.mark.parametrize("theta", [1.0, 0.5], ids=["backward-Euler", "Crank-Nicolson"])
+def test_step_doubling_estimates_the_time_error_of_nafems_t3(theta):
+    r = nafems_t3_step_error(theta)
+    assert r["truth_32"] == pytest.approx(NAFEMS_T3_REFERENCE_C, abs=0.1)      # the benchmark's answer, this mesh
+    assert abs(r["true_32"]) > 1e-3                                             # there is a time error to estimate
+    assert r["estimated_32"] == pytest.approx(r["true_32"], rel=0.1)
+    assert r["estimated_max"] == pytest.approx(r["true_max"], rel=0.1)
+
+
 # ------------------------------------------------------------------ 4. energy balance
 def _two_block_system(radiation_full=False):
     """Two blocks joined by a contact joint, loaded by every kind of load the solver has."""
@@ -312,28 +355,33 @@ def _two_block_system(radiation_full=False):
         "bearing": lambda t: 150.0 * (t < 2400.0),
         "sun": 300.0,
         "motor": fea.SampledSeries([0.0, 1000.0], [0.0, 400.0]),
-    })
+    }, breakpoints_s=[2400.0])                                   # when the bearing switches off
     return system, schedule
 
 
-def _energy_residual(system, schedule, theta, times):
-    """(stored-energy change, θ-weighted input energy) over a run whose steps are ``times``."""
-    result = fea.ThermalSolver(system, theta=theta).run(60.0, times, schedule, field_times_s=times)
-    fields = [result.fields[float(t)] for t in times]
-    u = schedule.sample(times)
-    power = np.array([sum(system.power_in(T, uk).values()) for T, uk in zip(fields, u)])
-    dt = np.diff(times)
-    supplied = float(np.sum(dt * (theta * power[1:] + (1 - theta) * power[:-1])))
-    gross = float(np.sum(dt * np.abs(power[1:])))
-    return system.stored_energy(fields[-1]) - system.stored_energy(fields[0]), supplied, gross
+#: Two step sizes (82 s, then 79 s): the bearing's switch-off (2400 s), the motor ramp's knee (1000 s)
+#: and the coolant's (1800 s) all fall inside steps.
+ENERGY_TIMES = np.concatenate([np.linspace(0.0, 1230.0, 16), np.linspace(1230.0, 3600.0, 31)[1:]])
+
+
+def _energy_run(theta, radiation_full=False, schedule_of=lambda schedule: schedule):
+    system, schedule = _two_block_system(radiation_full)
+    result = fea.ThermalSolver(system, theta=theta).run(60.0, ENERGY_TIMES, schedule_of(schedule),
+                                                        field_times_s=ENERGY_TIMES[[0, -1]], energy=True)
+    return system, result
 
 
 def energy_balance(theta, radiation_full=False):
-    """(stored-energy change J, |imbalance| relative to the gross energy through the loads) over 1 h."""
-    system, schedule = _two_block_system(radiation_full)
-    times = np.concatenate([np.linspace(0, 1200, 13), np.linspace(1200, 3600, 41)[1:]])   # two step sizes
-    stored, supplied, gross = _energy_residual(system, schedule, theta, times)
-    return stored, abs(stored - supplied) / gross
+    """(stored-energy change J, |change − Σ ledger loads| relative to the gross energy through the loads) over 1 h.
+
+    The change is taken from the first and last fields (``stored_energy``),
+    not from the ledger's own stored-energy row.
+    """
+    system, result = _energy_run(theta, radiation_full)
+    fields = [result.fields[float(t)] for t in ENERGY_TIMES[[0, -1]]]
+    stored = system.stored_energy(fields[1]) - system.stored_energy(fields[0])
+    ledger = result.energy
+    return stored, abs(stored - ledger.load_J[-1].sum()) / ledger.gross_J[-1]
 
 
 @pytest.mark.parametrize("theta", [1.0, 0.5], ids=["backward-Euler", "Crank-Nicolson"])
@@ -348,6 +396,73 @@ def test_energy_balance_with_full_radiation_holds_to_iteration_tolerance(theta):
     # The radiation iterations stop at a 1e-9 K change: ΣM·1e-9 K ≈ 1e-2 J against ~1e6 J.
     stored, imbalance = energy_balance(theta, radiation_full=True)
     assert imbalance < 1e-8
+
+
+class _PointSamples:
+    """The inputs of a schedule at points only (no step means): the scheme then takes its step ends."""
+
+    def __init__(self, schedule):
+        self.sample = schedule.sample
+
+
+@pytest.mark.parametrize("theta", [1.0, 0.5], ids=["backward-Euler", "Crank-Nicolson"])
+def test_loads_inject_exactly_their_integral_whatever_the_step_grid(theta):
+    """Heat sources switched or bent between step times inject ∫P dt exactly (analytic energies, J)."""
+    system, result = _energy_run(theta)
+    names = result.energy.names
+    energy = dict(zip(names, result.energy.load_J[-1]))
+    assert energy["flux:left"] == pytest.approx(150.0 * 2400.0, rel=1e-12)                 # switched off at 2400 s
+    assert energy["source:motor"] == pytest.approx(0.5 * 1000.0 * 400.0 + 2600.0 * 400.0, rel=1e-12)   # ramp, held
+    assert energy["flux:top"] == pytest.approx(300.0 * 0.2 * 0.1 * 3600.0, rel=1e-12)
+    assert result.energy.energy_of("bearing")[-1] == pytest.approx(150.0 * 2400.0, rel=1e-12)
+    # Driven by its step ends instead, the bearing would run on to the end of the step holding 2400 s.
+    _, ends = _energy_run(theta, schedule_of=_PointSamples)
+    lost = dict(zip(names, ends.energy.load_J[-1]))["flux:left"] - 150.0 * 2400.0
+    assert abs(lost) > 150.0 * 10.0
+
+
+def _bar_with_fixed_ends(length=0.5, cells=20):
+    """A 0.5 m steel bar (20 × 20 mm) with fixed-temperature ends and adiabatic sides."""
+    mesh = box_mesh(np.linspace(0.0, length, cells + 1), [0.0, 0.02], [0.0, 0.02])
+    mesh.add_facet_group("hot", fea.Plane.axis("x", 0.0))
+    mesh.add_facet_group("cold", fea.Plane.axis("x", length))
+    problem = fea.HeatProblem(mesh, {0: fea.STEEL})
+    problem.add_fixed_temperature("hot", "T_hot")
+    problem.add_fixed_temperature("cold", 20.0)
+    return problem.assemble()
+
+
+def test_reaction_heat_flow_of_fixed_temperatures_is_fourier_law():
+    """Steady conduction between fixed ends: each end passes q = k A ΔT / L (in at the hot end, out at the cold)."""
+    system = _bar_with_fixed_ends()
+    u = fea.InputSchedule(system, {"T_hot": 80.0})(0.0)
+    T = fea.ThermalSolver(system).steady_state(u)
+    flows = system.power_in(T, u)
+    fourier = fea.STEEL.conductivity * 0.02 * 0.02 * (80.0 - 20.0) / 0.5
+    assert flows["fixed:hot"] == pytest.approx(fourier, rel=1e-10)
+    assert flows["fixed:cold"] == pytest.approx(-fourier, rel=1e-10)
+
+
+@pytest.mark.parametrize("theta", [1.0, 0.5], ids=["backward-Euler", "Crank-Nicolson"])
+def test_energy_balance_includes_fixed_temperature_reactions(theta):
+    """A bar at 20 °C whose hot end is raised to 80 °C: the ends supply ρcV·30 K, then Fourier's flow."""
+    system = _bar_with_fixed_ends()
+    tau = 0.5 ** 2 * fea.STEEL.volumetric_heat_capacity / fea.STEEL.conductivity     # L²/a ≈ 2e4 s
+    times = np.linspace(0.0, 10 * tau, 401)
+    result = fea.ThermalSolver(system, theta=theta).run(20.0, times, fea.InputSchedule(system, {"T_hot": 80.0}),
+                                                        energy=True)
+    ledger = result.energy
+    reactions = dict(zip(ledger.names, ledger.load_J[-1]))
+    # Linear steady profile from 80 to 20 °C: the bar gains ρc V (50 − 20) K, less what the hot end's
+    # half cell (its nodes' share of the capacity, ρc V / 40) held at t = 0, fixed at 80 °C from the start.
+    rho_c_V = fea.STEEL.volumetric_heat_capacity * 0.5 * 0.02 * 0.02
+    gained = rho_c_V * 30.0 - rho_c_V / 40 * 60.0
+    assert reactions["fixed:hot"] + reactions["fixed:cold"] == pytest.approx(gained, rel=1e-3)
+    assert ledger.relative_error() < 1e-12
+    # At the end the flow has settled to Fourier's law: the last step's reaction energy / Δt.
+    rate = (ledger.load_J[-1] - ledger.load_J[-2]) / (times[-1] - times[-2])
+    fourier = fea.STEEL.conductivity * 0.02 * 0.02 * 60.0 / 0.5
+    assert rate[ledger.names.index("fixed:hot")] == pytest.approx(fourier, rel=1e-3)
 
 
 def test_power_in_reports_each_load():
@@ -393,6 +508,15 @@ def _radiating_cube(linearise_about=None):
     system = problem.assemble()
     capacity = material.volumetric_heat_capacity * side ** 3
     return system, capacity, 6 * side ** 2
+
+
+def test_power_in_of_full_radiation_is_stefan_boltzmann():
+    """A uniform 500 °C cube radiating to a 20 °C wall loses εσ(T⁴ − T_wall⁴) A (kelvin), not the linearisation."""
+    system, _, area = _radiating_cube()
+    u = fea.InputSchedule(system, {"wall": 20.0})(0.0)
+    flows = system.power_in(np.full(system.n_nodes, 500.0), u)
+    expected = -0.9 * STEFAN_BOLTZMANN * ((500.0 + KELVIN) ** 4 - (20.0 + KELVIN) ** 4) * area
+    assert flows["radiation:skin"] == pytest.approx(expected, rel=1e-12)
 
 
 def radiation_cooling_error(theta, dt):

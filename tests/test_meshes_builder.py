@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from meshes.builder import build_mesh, mesh_statistics
+from meshes.cachefiles import content_problem
 from meshes.definition import load_geometry
 from meshes.tomlspec import DefinitionError
 from twin.machine import build_machine
@@ -42,6 +43,7 @@ def test_second_build_reads_the_cache(mini, cache):
     assert info.from_cache and info.path.parent == cache
     assert np.array_equal(mesh.tets, mini.mesh.tets)
     assert sorted(p.name for p in cache.glob("*.vtu")) == [info.path.name]
+    assert info.path.name.startswith("mesh-h60mm-") and content_problem(info.path) is None   # no machine name
 
 
 def test_convection_group_covers_the_outside_and_joint_splits_nodes(mini):

@@ -53,7 +53,8 @@ def test_every_model_compensates_ch3_on_later_data(recording, name):
     uncompensated = rmse(y[n_train:], np.zeros(len(y) - n_train))  # ≈ 40 µm
     pred = chronological_prediction(MODELS[name], T, y, n_train)
     assert np.all(np.isfinite(pred))
-    assert rmse(y[n_train:], pred) < 0.5 * uncompensated
+    # removes at least 40 % of the ch3 RMSE on later data; measured 56 % (PCR) to 91 % (GM1N)
+    assert rmse(y[n_train:], pred) < 0.6 * uncompensated
 
 
 def test_gm0n_beats_plain_mlr_on_four_channels(recording):
@@ -63,7 +64,7 @@ def test_gm0n_beats_plain_mlr_on_four_channels(recording):
         y = Y[ch]
         mlr = rmse(y[n_train:], chronological_prediction(MLRRegressor(), T, y, n_train))
         gm0n = rmse(y[n_train:], chronological_prediction(GM0NRegressor(), T, y, n_train))
-        assert gm0n < 0.8 * mlr, ch
+        assert gm0n < 0.9 * mlr, ch  # measured 0.49-0.71 of MLR's RMSE
 
 
 def test_five_selected_sensors_keep_mlr_accuracy(recording):

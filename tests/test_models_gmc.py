@@ -108,7 +108,7 @@ def test_gmc_errors():
     X, y, _ = synthetic(n=20)
     with pytest.raises(ValueError, match="calibration must be"):
         GMCRegressor(calibration="ga").fit(X, y)
-    with pytest.raises(ValueError, match=r"GMCRegressor \(4 parameters\) needs at least 5"):
-        GMCRegressor().fit(X[:4], y[:4])
+    with pytest.raises(ValueError, match=r"GMCRegressor has 4 parameters to fit and needs at least 6 samples"):
+        GMCRegressor().fit(X[:5], y[:5])
     with pytest.raises(ValueError, match="w11 >= 0"):
         GNNMCIRegressor(pso_bounds=[[-1, 1]] * 5).fit(X, y)

@@ -43,6 +43,15 @@ def test_gm11_textbook_series_by_hand():
     assert np.allclose(model.predict(5), np.diff(x1, prepend=0.0), atol=1e-5)
 
 
+def test_gm11_constant_series_forecasts_the_constant():
+    # A constant series fits a ≈ -3.5e-18 (rounding): the textbook response
+    # (x⁰(1) - b/a) e^{-ak} + b/a cancelled to zeros. The limit a → 0 is x̂¹(k+1) = x⁰(1) + b k.
+    model = GM11.fit([3.0, 3.0, 3.0, 3.0])
+    assert abs(model.development_coefficient) < 1e-12
+    assert np.allclose(model.predict(8), 3.0, rtol=1e-12)
+    assert np.array_equal(GM11(0.0, 2.0, 5.0).predict(3), [5.0, 2.0, 2.0])  # exactly a = 0
+
+
 def test_gm11_exact_on_constructed_series():
     # choose a, b, x⁰(1); then x⁰(k) + a(X¹(k-1) + x⁰(k)/2) = b holds exactly
     a, b = 0.12, 5.0
@@ -101,11 +110,11 @@ def test_zero_reference_convention():
 def test_grey_errors():
     X = drivers(n=4)
     y = np.arange(4.0)
-    with pytest.raises(ValueError, match=r"GM1NRegressor \(4 parameters\) needs at least 5"):
+    with pytest.raises(ValueError, match=r"GM1NRegressor has 4 parameters to fit and needs at least 6 samples"):
         GM1NRegressor().fit(X, y)
-    with pytest.raises(ValueError, match="fewer samples than parameters"):
+    with pytest.raises(ValueError, match="GM.0,N. has 3 parameters to fit and needs at least 5 samples"):
         gm0n_influence(X[:3], y[:3])
-    with pytest.raises(ValueError, match="GM.1,1. .2 parameters. needs at least 3"):
-        GM11.fit([1.0, 2.0])
+    with pytest.raises(ValueError, match=r"GM\(1,1\) has 2 parameters to fit and needs at least 4 samples"):
+        GM11.fit([1.0, 2.0, 3.0])
     with pytest.raises(NotFittedError):
         GM0NRegressor().predict(X)

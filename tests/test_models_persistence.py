@@ -33,7 +33,7 @@ def data(n=80):
 
 FITTED = [
     ANFISRegressor(n_rules=3, epochs=5, random_state=0),
-    ANFISRegressor(init="grid", n_mfs=2, epochs=3, validation_fraction=0.2),
+    ANFISRegressor(init="grid", n_mfs=2, epochs=3, validation_fraction=0.2, random_state=0),
     AGOANFISRegressor(ANFISRegressor(n_rules=2, epochs=3, random_state=0)),
     ANNRegressor(hidden_layer_sizes=(6, 4), max_iter=100, random_state=0),
     GM0NRegressor(),

@@ -1,7 +1,5 @@
 """Sensor selection: hand-computed scores, closure equivalence, pipelines, scale."""
 
-import time
-
 import numpy as np
 import pytest
 from scipy.sparse.csgraph import minimum_spanning_tree
@@ -161,24 +159,22 @@ def many_sensors(n=2000, m=2000):
     return X, modes @ rng.standard_normal(8)
 
 
-def test_tree_methods_scale_to_2000_sensors():
+def test_tree_methods_handle_2000_sensors():
+    # timing: bench/bench_models.py (tests assert results, not seconds)
     X, y = many_sensors()
     for method in ("maximal-tree", "sensitivity+fuzzy-equivalence", "gra", "similitude", "correlation"):
-        start = time.perf_counter()
-        select_sensors(X, y, method=method, n_select=6)
-        assert time.perf_counter() - start < 5.0, method
-    start = time.perf_counter()
+        chosen = select_sensors(X, y, method=method, n_select=6).indices
+        assert len(set(chosen.tolist())) == 6 and chosen.max() < 2000, method
     T = transitive_closure(similarity_matrix(X))
-    assert T.shape == (2000, 2000) and time.perf_counter() - start < 5.0
+    assert T.shape == (2000, 2000) and np.allclose(T, T.T)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("method", ["gra+fcm", "gm-influence+fcm", "gm0n", "gm1n"])
-def test_fcm_and_grey_methods_scale_to_2000_sensors(method):
+def test_fcm_and_grey_methods_handle_2000_sensors(method):
     X, y = many_sensors()
-    start = time.perf_counter()
-    select_sensors(X, y, method=method, n_select=6, random_state=0)
-    assert time.perf_counter() - start < 20.0
+    chosen = select_sensors(X, y, method=method, n_select=6, random_state=0).indices
+    assert len(set(chosen.tolist())) == 6 and chosen.max() < 2000
 
 
 def test_every_method_is_listed():

@@ -21,7 +21,7 @@ from models import (
 REGRESSORS = [
     ANFISRegressor(n_rules=2, epochs=2, random_state=0),
     AGOANFISRegressor(ANFISRegressor(n_rules=2, epochs=2, random_state=0)),
-    ANNRegressor(max_iter=50, random_state=0),
+    ANNRegressor(hidden_layer_sizes=(3,), max_iter=50, random_state=0),
     GM0NRegressor(),
     GM1NRegressor(),
     GMCRegressor(),
@@ -76,24 +76,44 @@ def test_wrong_width_at_predict(estimator):
 
 
 @pytest.mark.parametrize(
-    ("estimator", "n_ok"),
-    [(GM0NRegressor(), 4), (GM1NRegressor(), 5), (GMCRegressor(), 6), (GMCRegressor(delay=2), 8),
-     (GNNMCIRegressor(n_particles=5, epochs=2, random_state=0), 7)],
-    ids=["GM0N", "GM1N", "GMC", "GMC-delay2", "GNNMCI"],
+    ("estimator", "n_parameters", "n_ok"),
+    [
+        (MLRRegressor(), 4, 5),  # 3 coefficients + intercept
+        (PCRRegressor(n_components=2), 3, 4),
+        (ANNRegressor(hidden_layer_sizes=(4,), max_iter=5, random_state=0), 21, 25),  # 3-4-1; 10 % split held out
+        (ANFISRegressor(n_rules=2, epochs=2, random_state=0), 20, 21),  # 2 × 4 consequents + 2 × 3 × (c, σ)
+        (AGOANFISRegressor(ANFISRegressor(n_rules=2, epochs=2, random_state=0)), 20, 21),
+        (GM0NRegressor(), 3, 5),  # grey: the first sample gives no equation
+        (GM1NRegressor(), 4, 6),
+        (GMCRegressor(), 5, 7),
+        (GMCRegressor(delay=2), 5, 9),
+        (GNNMCIRegressor(n_particles=5, epochs=2, random_state=0), 6, 8),
+    ],
+    ids=["MLR", "PCR", "ANN", "ANFIS", "AGO-ANFIS", "GM0N", "GM1N", "GMC", "GMC-delay2", "GNNMCI"],
 )
-def test_grey_models_need_more_samples_than_parameters(estimator, n_ok):
+def test_every_model_needs_more_equations_than_parameters(estimator, n_parameters, n_ok):
+    # with as many equations as unknowns the fit is exact: "RMSE 1e-16, 100 %" on any data
     X, y = data(d=3)
-    with pytest.raises(ValueError, match="fewer samples than parameters"):
+    with pytest.raises(ValueError, match=f"has {n_parameters} parameters to fit and needs at least {n_ok} samples"):
         estimator.fit(X[: n_ok - 1], y[: n_ok - 1])
-    estimator.fit(X[:n_ok], y[:n_ok])  # one equation per unknown is enough
+    estimator.fit(X[:n_ok], y[:n_ok])
+
+
+def test_mlr_on_as_many_inputs_as_rows_is_refused():
+    # 3 rows × 3 inputs, and 10 rows × 16 inputs: before, exact fits with training RMSE ~1e-16
+    rng = np.random.default_rng(0)
+    with pytest.raises(ValueError, match="4 parameters to fit and needs at least 5 samples, got 3 samples"):
+        MLRRegressor().fit(rng.random((3, 3)), rng.random(3))
+    with pytest.raises(ValueError, match="17 parameters to fit and needs at least 18 samples, got 10 samples"):
+        MLRRegressor().fit(rng.random((10, 16)), rng.random(10))
 
 
 def test_clusters_larger_than_samples():
     X, _ = data(n=4)
     with pytest.raises(ValueError, match="n_clusters=5 is larger than the number of samples"):
         FuzzyCMeans(n_clusters=5).fit(X)
-    # ANFIS-FCM needs (n_features + 1) samples per rule, so it refuses earlier
-    with pytest.raises(ValueError, match="fewer samples than parameters"):
+    # ANFIS-FCM has (n_features + 1) consequents and 2 n_features premises per rule, so it refuses earlier
+    with pytest.raises(ValueError, match="20 parameters to fit and needs at least 21 samples, got 4"):
         ANFISRegressor(n_rules=5, epochs=1).fit(X[:, :1], np.arange(4.0))
 
 

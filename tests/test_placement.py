@@ -122,6 +122,7 @@ def test_cli_place_writes_the_report(machine, tmp_path, capsys):
     assert code == 0, capsys.readouterr().err
     text = capsys.readouterr().out
     assert "## Z: held-out max |residual|" in text and "| K | gra+fcm |" in text
+    assert "## Chosen locations (best method, K = 1–3)" in text and "4–5" not in text   # the K studied
     for name in ("placement.md", "placement.json", "k_method_table.csv", "candidate_scores.csv",
                  "chosen_sensors.csv", "chosen_sensors.png", "k_curves.png"):
         assert (out / name).exists(), name

@@ -57,7 +57,8 @@ def test_scenario_loads_and_fits_its_machine(name):
 
 @pytest.mark.parametrize("name", SHIPPED)
 def test_segment_boundaries_lie_on_the_integration_grid(name):
-    """Left-limit evaluation injects a segment's exact energy only if its ends are step ends."""
+    """The solver integrates a segment exactly wherever it ends; the shipped ones still switch on step ends,
+    so that no step averages two speeds (a ripple shorter than the step that it cannot resolve)."""
     sc = load_scenario(name)
     dt = sc.sample_interval_s / math.ceil(sc.sample_interval_s / sc.time_step_s - 1e-9)
     for s in sc.segments:
@@ -289,6 +290,16 @@ def load_error(path, *fragments):
     ("[scenario]\nduration_min = 10\nsample_interval_s = 7.0\n", ["scenario.sample_interval_s", "7.0"]),
     ("[scenario]\nduraton_h = 2\n", ["scenario", "duraton_h"]),
     (BASE + "[noise]\ntemperature = \"PT100\"\n", ["noise.temperature", "PT100"]),
+    # ambients in kelvin, or below absolute zero
+    (BASE + "[ambient]\ntemperature_C = 293.15\n", ["ambient.temperature_C", "293.15", "kelvin"]),
+    (BASE + "[ambient]\ntemperature_C = -273.15\n", ["ambient.temperature_C", "-273.15", "absolute zero"]),
+    (BASE + "[ambient]\nkind = \"sinusoid\"\nmean_C = 295.0\namplitude_K = 2.5\n", ["ambient.mean_C", "kelvin"]),
+    (BASE + "[ambient]\nkind = \"piecewise\"\ntimes_h = [0, 1]\nvalues_C = [20, -300]\n",
+     ["ambient.values_C[1]", "-300", "absolute zero"]),
+    (BASE + "[initial]\nkind = \"steady\"\nambient_C = 293.0\n", ["initial.ambient_C", "293", "kelvin"]),
+    # a run that cannot fit in memory is refused before any array is made
+    ("[scenario]\nduration_h = 87600\nsample_interval_s = 1.0\n",
+     ["scenario.sample_interval_s", "315,360,001 samples", "GB of memory", "1.0"]),
 ])
 def test_bad_scenarios_give_one_clear_error(tmp_path, body, fragments):
     path = write(tmp_path, body)
@@ -349,6 +360,9 @@ def test_csv_ambient_with_a_non_monotonic_time_column(tmp_path):
 @pytest.mark.parametrize("rows, fragments", [
     ([(0, 20.0), (600, "warm")], ["air.csv", "row 3", "warm"]),
     ([(0, 20.0), (600, 20.0), (600, 21.0)], ["air.csv", "time_s", "600"]),
+    ([(0, 293.15), (600, 293.65)], ["air.csv", "'ambient_degC'", "row 2", "293.15", "kelvin", "20.00 °C"]),
+    ([(0, 20.0), (600, -274.0)], ["air.csv", "row 3", "-274", "absolute zero"]),
+    ([(0, 20.0), (600, 150.0)], ["air.csv", "row 3", "150", "not a plausible ambient"]),
 ])
 def test_csv_ambient_other_errors(tmp_path, rows, fragments):
     path = csv_scenario(tmp_path, rows)

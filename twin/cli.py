@@ -1,18 +1,29 @@
 """The ``twin`` command line: a thin layer over functions a notebook user can call directly.
 
 Each command lives in a ``twin/cli_<topic>.py`` module with a ``register(subparsers)``
-function; this module only assembles them and turns user errors into one line
-and a non-zero exit code.
+function; this module only assembles them and turns user errors, missing files
+and Ctrl-C into one line and a non-zero exit code.
+
+Start-up time: the ``cli*`` modules import only the standard library and
+light twin modules when the parser is built; each command imports the
+numerical libraries inside its handler, so ``--help`` and argument errors
+answer at once (tests/test_cli_startup.py, bench/cli_startup.py).
 """
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
+import shlex
+import signal
 import sys
 
-from .errors import USER_ERRORS
+from .errors import user_errors
+from .outdir import COMMAND
+from .progress import close_bars
 
 COMMAND_MODULES = ("twin.cli_run", "twin.cli_fmu", "twin.cli_models", "twin.cli_gap")
+INTERRUPTED = 130          # the shell's code for a process ended by SIGINT (128 + 2)
 
 
 def build_parser():
@@ -23,18 +34,91 @@ def build_parser():
     return parser
 
 
-def main(argv=None):
-    parser = build_parser()
-    args = parser.parse_args(argv)
+def _exit_now(signum, frame):
+    """Ctrl-C while nothing needs cleaning up (parsing, or a second Ctrl-C during clean-up): leave at once."""
+    sys.stdout.flush()
+    sys.stderr.write("twin: interrupted\n")
+    sys.stderr.flush()
+    os._exit(INTERRUPTED)
+
+
+def _interrupt_once(signum, frame):
+    """The first Ctrl-C of a command unwinds it (partial results are removed); a second one leaves at once."""
+    _on_sigint(_exit_now)
+    raise KeyboardInterrupt
+
+
+def _on_sigint(handler):
+    """Install a SIGINT handler; return the previous one (``None`` outside the main thread, where Python
+    cannot set handlers)."""
     try:
-        args.func(args)
-    except USER_ERRORS as exc:
-        print(f"twin {args.command}: error: {exc}", file=sys.stderr)
+        return signal.signal(signal.SIGINT, handler)
+    except ValueError:
+        return None
+
+
+def _command_name(args):
+    """``run``, or ``fmu validate`` for a command with subcommands."""
+    sub = getattr(args, f"{args.command}_command", None)
+    return args.command if sub is None else f"{args.command} {sub}"
+
+
+def _file_error(exc):
+    """An OSError about a named file (a missing input, a folder that cannot be read) as one line, else None."""
+    if exc.filename is None:
+        return None
+    reason = exc.strerror or type(exc).__name__
+    return f"{exc.filename}: {reason}"
+
+
+def _notices_to_stderr():
+    """Show the package's notices (what is built, how long it takes, bad cache files) as ``twin: …`` lines."""
+    import logging
+
+    class StderrHandler(logging.StreamHandler):
+        """Writes to whatever ``sys.stderr`` is when a message comes (tests replace it)."""
+
+        stream = property(lambda self: sys.stderr, lambda self, value: None)
+
+    logger = logging.getLogger("thermal_twin")
+    if not any(type(h).__name__ == "StderrHandler" for h in logger.handlers):
+        handler = StderrHandler()
+        handler.setFormatter(logging.Formatter("twin: %(message)s"))
+        logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+
+
+def main(argv=None):
+    previous = _on_sigint(_exit_now)
+    argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
+    recorded = COMMAND.set(shlex.join(["twin", *argv]))       # the command line result folders record
+    try:
+        args = build_parser().parse_args(argv)
+        _notices_to_stderr()
+        _on_sigint(_interrupt_once)
+        try:
+            try:
+                args.func(args)
+            finally:                       # the command has unwound: nothing left to clean up
+                _on_sigint(_exit_now)
+                close_bars()
+        except user_errors() as exc:
+            message = str(exc)
+        except KeyboardInterrupt:
+            print(f"twin {_command_name(args)}: interrupted; no result was written", file=sys.stderr)
+            return INTERRUPTED
+        except OSError as exc:
+            message = _file_error(exc)
+            if message is None:
+                raise
+        else:
+            return 0
+        print(f"twin {_command_name(args)}: error: {message}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"twin {args.command}: interrupted; no result was written", file=sys.stderr)
-        return 130
-    return 0
+    finally:
+        COMMAND.reset(recorded)
+        if previous is not None:
+            _on_sigint(previous)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -3,7 +3,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .cli_common import add_overwrite, existing_fmu
 from .errors import TwinInputError
+
+# Handlers import the library inside them, never up here: start-up time (`twin --help` must not load scipy).
+# So twin.rom's default order is copied here (tests/test_cli_startup.py keeps the two equal).
+DEFAULT_ORDER = 80
 
 
 def _orders(text):
@@ -24,9 +29,18 @@ def _rom(args):
     return machine, cached_rom(machine, args.order, args.method, rebuild=getattr(args, "rebuild", False))
 
 
+def _check_out(args, inputs=()):
+    """Check ``--out`` (a file) before any work."""
+    from .outdir import check_output_file
+
+    if args.out is not None:
+        check_output_file(args.out, args.overwrite, inputs)
+
+
 def cmd_fmu_export(args):
     from .fmu import export_fmu, validate
 
+    _check_out(args)
     machine, rom = _rom(args)
     outputs = args.outputs.split(",") if args.outputs else None
     fe = dict(machine=args.machine, mesh_size_m=args.mesh_size) if args.engine == "fe" else None
@@ -46,7 +60,7 @@ def cmd_fmu_export(args):
 def cmd_fmu_validate(args):
     from .fmu import validate
 
-    problems = validate(args.fmu)
+    problems = validate(existing_fmu(args.fmu))
     for p in problems:
         print(f"  problem: {p}")
     if problems:
@@ -61,13 +75,16 @@ def cmd_fmu_simulate(args):
     from .fmu import input_table, scenario_start, simulate, simulate_table
     from .scenario import load_scenario
 
-    machine, rom = _rom(args)
+    existing_fmu(args.fmu)
     scenario = load_scenario(args.scenario)
+    args.out = args.out or f"runs/fmu_{scenario.name}.csv"
+    _check_out(args, inputs=(args.fmu, scenario.source))
+    machine, rom = _rom(args)
     T0, steady = scenario_start(rom, scenario)
     table = input_table(rom, scenario)
     result = simulate(args.fmu, table, T_initial=T0, steady_start=steady)
     names = [n for n in result.dtype.names if n != "time"]
-    out = Path(args.out or f"runs/fmu_{scenario.name}.csv")
+    out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     np.savetxt(out, np.column_stack([result[n] for n in result.dtype.names]), delimiter=",",
                header=",".join(result.dtype.names), comments="", fmt="%.17g")
@@ -83,6 +100,7 @@ def cmd_fmu_simulate(args):
 
 
 def cmd_rom_build(args):
+    _check_out(args)
     machine, rom = _rom(args)
     i = rom.info
     where = f"read from {i['from_cache']}" if i.get("from_cache") else f"built in {i['build_seconds']:.1f} s"
@@ -97,6 +115,7 @@ def cmd_rom_report(args):
     from .machine import build_machine
     from .rom_report import error_report, format_markdown, format_summary
 
+    _check_out(args)
     machine = build_machine(args.machine, args.mesh_size)
     scenarios = args.scenarios.split(",") if args.scenarios else None
     report = error_report(machine, _orders(args.orders), args.methods.split(","), scenarios, progress=print)
@@ -112,8 +131,6 @@ def cmd_rom_report(args):
 
 def register(sub):
     """Add the ``fmu`` and ``rom`` commands."""
-    from .rom import DEFAULT_ORDER
-
     def common(p):
         p.add_argument("--machine", default="vmc_ram", help="machine name or TOML path (default vmc_ram)")
         p.add_argument("--mesh-size", type=float, help="target tetrahedron edge length, m")
@@ -129,6 +146,7 @@ def register(sub):
     export.add_argument("--engine", choices=("rom", "fe"), default="rom",
                         help="rom (default) or fe: the full FE model inside a Python FMU (slow)")
     export.add_argument("--out", default="twin.fmu", help="FMU file (default twin.fmu)")
+    add_overwrite(export, "file")
     export.add_argument("--outputs", help="comma-separated output names (default: all but camera spots)")
     export.add_argument("--initial-temperature", type=float, default=20.0, help="start value of T_initial, °C")
     export.add_argument("--step", type=float, default=10.0, help="default experiment step size, s")
@@ -146,6 +164,7 @@ def register(sub):
     run.add_argument("scenario")
     common(run)
     run.add_argument("--out", help="CSV of the FMU outputs (default runs/fmu_<scenario>.csv)")
+    add_overwrite(run, "file")
     run.set_defaults(func=cmd_fmu_simulate)
 
     rom = sub.add_parser("rom", help="build reduced-order models and report their error against the FE")
@@ -154,6 +173,7 @@ def register(sub):
     common(build)
     build.add_argument("--rebuild", action="store_true", help="build even if cached")
     build.add_argument("--out", help="also save it to this .npz")
+    add_overwrite(build, "file")
     build.set_defaults(func=cmd_rom_build)
 
     report = rsub.add_parser("report", help="error vs order against the full FE over scenarios (slow)")
@@ -163,4 +183,5 @@ def register(sub):
     report.add_argument("--methods", default="krylov,modal", help="comma-separated: krylov,modal")
     report.add_argument("--scenarios", help="comma-separated scenarios (default: all shipped)")
     report.add_argument("--out", help="write the Markdown table here")
+    add_overwrite(report, "file")
     report.set_defaults(func=cmd_rom_report)

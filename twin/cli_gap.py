@@ -1,18 +1,28 @@
-"""CLI commands ``twin gap diagnose`` and ``twin gap benchmark``: a thin layer over :mod:`twin.gap`."""
+"""CLI commands ``twin gap diagnose``, ``truth`` and ``benchmark``: a thin layer over :mod:`twin.gap`."""
 from __future__ import annotations
 
+from .cli_common import add_overwrite
 from .progress import progress_bar
+
+# Handlers import the library inside them, never up here: start-up time (`twin --help` must not load scipy).
+# So twin.gap.benchmark's truth-run defaults are copied here (tests/test_cli_startup.py keeps them equal).
+SCENARIO = "gap_blind_24h"
+TRUTH_MESH_SIZE_M = 0.035
 
 
 def cmd_diagnose(args):
     from .compensation import read_column_map, split_names
+    from .dataset import sidecar_path
     from .gap import diagnose, write_report
+    from .outdir import check_output_folder
 
+    given = (args.measured, sidecar_path(args.measured), args.column_map, args.scenario, args.machine)
+    check_output_folder(args.out, args.overwrite, inputs=given)
     d = diagnose(args.measured, machine=args.machine, scenario=args.scenario,
                  column_map=read_column_map(args.column_map), holdout_fraction=args.holdout,
                  effects=split_names(args.effects) or None, n_pairs=args.pairs, backend=args.backend,
-                 step_s=args.step, progress=progress_bar("fitting effects"))
-    out = write_report(d, args.out, render=not args.no_render)
+                 step_s=args.step, progress=progress_bar("fitting effects", unit="fit"))
+    out = write_report(d, args.out, render=not args.no_render, overwrite=args.overwrite)
     print(d.verdict)
     for r in d.ranking[:5]:
         named = "  ← named" if r is d.winner else ""
@@ -28,7 +38,8 @@ def cmd_benchmark(args):
 
     res = benchmark(args.cases, scheduler=args.scheduler, out_dir=args.out, scenario=args.scenario,
                     truth_mesh_size_m=None if args.truth_mesh_size <= 0 else args.truth_mesh_size,
-                    holdout_fraction=args.holdout, progress=progress_bar("blind cases"), n_workers=args.workers)
+                    holdout_fraction=args.holdout, progress=progress_bar("blind cases", unit="case"),
+                    n_workers=args.workers, overwrite=args.overwrite)
     print(res.markdown)
     print(f"results in {res.out_dir}/")
 
@@ -39,28 +50,29 @@ def cmd_truth(args):
 
     from .dataset import sidecar_path
     from .gap.benchmark import case_record, cases
+    from .outdir import check_output_file
 
     if "," in args.effect or args.effect in ("all", "singles", "pairs"):
         from .errors import TwinInputError
 
         raise TwinInputError(f"--effect takes one effect, one a+b pair or 'none', got {args.effect!r}")
-    case = cases(args.effect)[0]
     out = Path(args.out)
+    truth = out.with_name(out.stem + ".truth.json")
+    for path in (out, sidecar_path(out), truth):
+        check_output_file(path, args.overwrite)
+    case = cases(args.effect)[0]
     out.parent.mkdir(parents=True, exist_ok=True)
     data = case_record(case, args.scenario, args.machine,
                        None if args.truth_mesh_size <= 0 else args.truth_mesh_size)
     data.write(out)
     # the truth goes beside the CSV, not into its sidecar: the diagnosis must not see it
-    truth = out.with_name(out.stem + ".truth.json")
     sidecar_path(out).replace(truth)
     print(f"measured record {out} ({len(data)} rows, {len(data.channels)} channels); "
           f"hidden truth in {truth.name}: {json.dumps(data.metadata['effects'])}")
 
 
 def register(sub):
-    """Add the ``gap`` command with its ``diagnose`` and ``benchmark`` subcommands."""
-    from .gap.benchmark import SCENARIO, TRUTH_MESH_SIZE_M
-
+    """Add the ``gap`` command with its ``diagnose``, ``truth`` and ``benchmark`` subcommands."""
     gap = sub.add_parser("gap", help="sim-to-real gap diagnosis of the twin against measured data")
     gsub = gap.add_subparsers(dest="gap_command", required=True)
     d = gsub.add_parser("diagnose", help="where the twin misses, which effect explains it, how far it shrinks")
@@ -77,6 +89,7 @@ def register(sub):
     d.add_argument("--step", type=float, default=60.0, help="the twin's time step, s (default 60)")
     d.add_argument("--no-render", action="store_true", help="skip the 3-D renders")
     d.add_argument("--out", required=True, help="result folder (report.md, diagnosis.json, figures)")
+    add_overwrite(d)
     d.set_defaults(func=cmd_diagnose)
 
     t = gsub.add_parser("truth", help="a synthetic 'measured' CSV with an effect of the library switched on "
@@ -88,6 +101,7 @@ def register(sub):
     t.add_argument("--truth-mesh-size", type=float, default=TRUTH_MESH_SIZE_M,
                    help=f"truth mesh size, m (default {TRUTH_MESH_SIZE_M}; 0 = the nominal mesh)")
     t.add_argument("--out", required=True, help="CSV to write (the truth goes to <stem>.truth.json beside it)")
+    add_overwrite(t, "file")
     t.set_defaults(func=cmd_truth)
 
     b = gsub.add_parser("benchmark", help="blind check: effects switched on in a finer, noisy truth, then diagnosed")
@@ -100,4 +114,5 @@ def register(sub):
     b.add_argument("--scheduler", default="local", help="local (default), serial, or tcp://HOST:8786")
     b.add_argument("--workers", type=int, help="local Dask workers (default: one per core)")
     b.add_argument("--out", default="runs/gap_benchmark", help="result folder (default runs/gap_benchmark)")
+    add_overwrite(b)
     b.set_defaults(func=cmd_benchmark)

@@ -5,7 +5,10 @@ A thin layer over :mod:`twin.compensation`, :mod:`twin.studies` and
 """
 from __future__ import annotations
 
+from .cli_common import add_overwrite
 from .progress import progress_bar
+
+# Handlers import the library inside them, never up here: start-up time (`twin --help` must not load scipy).
 
 
 def _datasets_help():
@@ -19,7 +22,7 @@ def cmd_train(args):
 
     cm = train(args.datasets, args.inputs, args.target, model=args.model, params=parse_params(args.param),
                out=args.out, zero_reference=not args.no_zero_reference, reference_samples=args.reference_samples,
-               column_map=_column_map(args), nan_policy=args.nan_policy)
+               column_map=_column_map(args), nan_policy=args.nan_policy, overwrite=args.overwrite)
     print(f"trained {cm.describe()}")
     print(f"on {', '.join(t['label'] for t in cm.training)}"
           f"{' (zero-referenced per dataset)' if cm.preprocessing['zero_reference'] else ''}")
@@ -33,7 +36,7 @@ def cmd_evaluate(args):
     from .compensation import evaluate
 
     ev = evaluate(args.model, args.datasets, out_dir=args.out, column_map=_column_map(args),
-                  nan_policy=args.nan_policy, plots=not args.no_plots)
+                  nan_policy=args.nan_policy, plots=not args.no_plots, overwrite=args.overwrite)
     print(ev.table(), end="")
     if ev.out_dir is not None:
         print(f"table and plots in {ev.out_dir}/")
@@ -50,7 +53,7 @@ def cmd_study(args):
     from .compensation import split_names
 
     common = dict(machine=args.machine, mesh_size_m=args.mesh_size, scheduler=args.scheduler,
-                  progress=progress_bar("simulating"))
+                  progress=progress_bar("simulating", unit="scenario"), overwrite=args.overwrite)
     inputs = split_names(args.inputs) or None
     axes = tuple(split_names(args.axes))
     if args.study == "cross-condition":
@@ -79,7 +82,8 @@ def cmd_place(args):
                           test=split_names(args.test) or DEFAULT_TEST, methods=split_names(args.methods) or METHODS,
                           k_max=args.k_max, axes=tuple(split_names(args.axes)), record_interval_s=args.record_interval,
                           scheduler=args.scheduler, use_cache=not args.no_cache, out_dir=args.out,
-                          progress=progress_bar("simulating"), response_horizon_s=args.response_horizon * 3600.0)
+                          progress=progress_bar("simulating", unit="simulation"),
+                          response_horizon_s=args.response_horizon * 3600.0, overwrite=args.overwrite)
     print(res.summary)
     print(f"report, tables, candidate scores and render in {res.out_dir}/")
 
@@ -99,7 +103,7 @@ def _add_cluster_options(p):
 
 def register(sub):
     """Add ``train``, ``evaluate``, ``study`` and ``place``."""
-    from .model_store import MODEL_NAMES
+    from .model_names import MODEL_NAMES
 
     t = sub.add_parser("train", help="train a compensation model on datasets and save it (JSON, no pickle)")
     t.add_argument("datasets", nargs="+", help=_datasets_help())
@@ -108,6 +112,7 @@ def register(sub):
     t.add_argument("--model", default="anfis", help=f"model: {', '.join(sorted(MODEL_NAMES))} (default anfis = ANFIS-FCM)")
     t.add_argument("--param", action="append", metavar="NAME=VALUE", help="model hyperparameter (repeatable)")
     t.add_argument("--out", required=True, help="model file to write (.json)")
+    add_overwrite(t, "file")
     t.add_argument("--no-zero-reference", action="store_true",
                    help="use raw values instead of the change since each dataset's start")
     t.add_argument("--reference-samples", type=int, default=1,
@@ -120,6 +125,7 @@ def register(sub):
     e.add_argument("datasets", nargs="+", help=_datasets_help())
     e.add_argument("--out", help="folder for the table and plots (default: print the table only)")
     e.add_argument("--no-plots", action="store_true")
+    add_overwrite(e)
     _add_data_options(e)
     e.set_defaults(func=cmd_evaluate)
 
@@ -131,6 +137,7 @@ def register(sub):
     s.add_argument("--axes", default="Z,Y", help="drift axes (default Z,Y)")
     s.add_argument("--physics", default="fe", choices=("fe", "rom"), help="hybrid: physics backend")
     s.add_argument("--out", help="result folder (default runs/study_<name>)")
+    add_overwrite(s)
     _add_cluster_options(s)
     s.set_defaults(func=cmd_study)
 
@@ -148,5 +155,6 @@ def register(sub):
                    help="greedy-physics: length of the elementary step responses, h (default 48)")
     p.add_argument("--no-cache", action="store_true", help="simulate again even if records are cached")
     p.add_argument("--out", default="runs/placement", help="result folder (default runs/placement)")
+    add_overwrite(p)
     _add_cluster_options(p)
     p.set_defaults(func=cmd_place)

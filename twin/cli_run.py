@@ -1,15 +1,18 @@
 """CLI commands ``twin run`` and ``twin mesh``."""
 from __future__ import annotations
 
+from .cli_common import add_overwrite
 from .progress import progress_bar
+
+# Handlers import the library inside them, never up here: start-up time (`twin --help` must not load scipy).
 
 
 def cmd_run(args):
     from .workflows import run_scenario
 
     out = run_scenario(args.scenario, machine=args.machine, mesh_size_m=args.mesh_size, out_dir=args.out,
-                       fields=args.fields, progress=progress_bar("simulating"),
-                       camera=True if args.camera else None)
+                       fields=args.fields, progress=progress_bar("simulating", unit="step"),
+                       camera=True if args.camera else None, overwrite=args.overwrite, views=not args.no_views)
     from .summary import format_summary
 
     print(format_summary(out.summary))
@@ -19,7 +22,8 @@ def cmd_run(args):
 def cmd_mesh(args):
     from .workflows import mesh_machine
 
-    stats, out_dir = mesh_machine(args.machine, args.mesh_size, args.out, rebuild=args.rebuild, ship=args.ship)
+    stats, out_dir = mesh_machine(args.machine, args.mesh_size, args.out, rebuild=args.rebuild, ship=args.ship,
+                                  overwrite=args.overwrite)
     print(f"machine {args.machine}: {stats['nodes']} nodes, {stats['tetrahedra']} tetrahedra, "
           f"{stats['thermal_nodes']} thermal nodes (joints split)")
     print(f"volume {stats['volume_m3']:.4f} m³; edge length mean {stats['edge_length_m']['mean'] * 1e3:.1f} mm; "
@@ -39,20 +43,19 @@ def cmd_mesh(args):
 
 
 def cmd_report(args):
-    import json
-
+    from .compensation import read_column_map
     from .summary import format_summary
     from .workflows import report_dataset
 
-    column_map = json.loads(open(args.column_map).read()) if args.column_map else None
+    column_map = read_column_map(args.column_map)
     summary, out_dir = report_dataset(args.dataset, args.out, column_map, args.nan_policy,
-                                      iso_test=args.iso)
+                                      iso_test=args.iso, overwrite=args.overwrite)
     print(format_summary(summary))
     print(f"report in {out_dir}/")
 
 
 def register(sub):
-    """Add the ``run`` and ``mesh`` commands."""
+    """Add the ``run``, ``mesh`` and ``report`` commands."""
     run = sub.add_parser("run", help="simulate a scenario and write dataset, plots and summary")
     run.add_argument("scenario", help="scenario name or path to its TOML file")
     run.add_argument("--machine", help="machine name or TOML path (default: the scenario's)")
@@ -60,6 +63,9 @@ def register(sub):
     run.add_argument("--out", help="result folder (default runs/<scenario>)")
     run.add_argument("--fields", action="store_true", help="also write VTK temperature fields")
     run.add_argument("--camera", action="store_true", help="record the thermal-camera spots in the dataset")
+    run.add_argument("--no-views", action="store_true",
+                     help="skip the 3-D temperature and deformed-shape views (and their elastic solves)")
+    add_overwrite(run)
     run.set_defaults(func=cmd_run)
 
     mesh = sub.add_parser("mesh", help="build and cache a machine's mesh; print statistics; render it")
@@ -69,14 +75,16 @@ def register(sub):
     mesh.add_argument("--rebuild", action="store_true", help="mesh again even if cached")
     mesh.add_argument("--ship", action="store_true",
                       help="copy the mesh and output operator into meshes/cache (for committing)")
+    add_overwrite(mesh)
     mesh.set_defaults(func=cmd_mesh)
 
     report = sub.add_parser("report", help="plots and summary of an existing (twin or measured) dataset")
     report.add_argument("dataset", help="CSV file (with or without a JSON sidecar)")
     report.add_argument("--out", help="folder (default runs/report_<name>)")
-    report.add_argument("--column-map", help="JSON file mapping CSV columns to <name>_<unit>")
+    report.add_argument("--column-map", help="JSON file or inline JSON mapping CSV columns to <name>_<unit>")
     report.add_argument("--nan-policy", default="error", choices=["error", "interpolate", "drop"])
     report.add_argument("--iso", choices=["spindle", "etve"], help="also report the ISO 230-3 quantities")
+    add_overwrite(report)
     report.set_defaults(func=cmd_report)
 
 

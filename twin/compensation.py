@@ -70,6 +70,14 @@ def load_dataset(spec, column_map=None, nan_policy="error", machine=None, noise=
     return ds
 
 
+def _input_files(specs):
+    """The files among dataset/model specs (paths, not objects or scenario names), with their sidecars."""
+    from .dataset import sidecar_path
+
+    paths = [Path(s) for s in specs if isinstance(s, (str, Path)) and Path(s).is_file()]
+    return paths + [sidecar_path(p) for p in paths]
+
+
 def read_column_map(value):
     """A column map from a JSON file path or inline JSON (``{"t1": "T01_degC"}``), or None."""
     if value is None:
@@ -138,12 +146,19 @@ class Evaluation:
 
 
 def train(datasets, inputs, target, model="anfis", params=None, out=None, zero_reference=True,
-          reference_samples=1, column_map=None, nan_policy="error", machine=None):
+          reference_samples=1, column_map=None, nan_policy="error", machine=None, overwrite=False):
     """Fit a compensation model on datasets (paths, scenario names or :class:`Dataset`) and save it to ``out``.
+
+    ``out`` is checked before the work (:func:`twin.outdir.check_output_file`): an existing
+    file is replaced only with ``overwrite``, and never a dataset of the training.
 
     Returns the :class:`CompensationModel`; its training metrics are in
     ``model.metadata["training_metrics"]``.
     """
+    if out is not None:
+        from .outdir import check_output_file
+
+        check_output_file(out, overwrite, inputs=_input_files(datasets))
     loaded = [load_dataset(d, column_map, nan_policy, machine) for d in datasets]
     cm = fit_compensation_model(loaded, split_names(inputs), target, model, params, zero_reference,
                                 reference_samples)
@@ -154,7 +169,8 @@ def train(datasets, inputs, target, model="anfis", params=None, out=None, zero_r
     return cm
 
 
-def evaluate(model, datasets, out_dir=None, column_map=None, nan_policy="error", machine=None, plots=True):
+def evaluate(model, datasets, out_dir=None, column_map=None, nan_policy="error", machine=None, plots=True,
+             overwrite=False):
     """Score a model (a :class:`CompensationModel` or a saved model path) on datasets.
 
     Writes (when ``out_dir`` is given) ``evaluation.md``, ``evaluation.csv``,
@@ -162,6 +178,9 @@ def evaluate(model, datasets, out_dir=None, column_map=None, nan_policy="error",
     change and the residual).  A dataset whose channels do not match the
     model's raises a :class:`TwinInputError` naming them.
     """
+    from .outdir import check_output_folder
+
+    check_output_folder(out_dir, overwrite, inputs=_input_files([model, *datasets]))
     cm = model if isinstance(model, CompensationModel) else CompensationModel.load(model)
     loaded = [load_dataset(d, column_map, nan_policy, machine) for d in datasets]
     for ds in loaded:
@@ -182,7 +201,7 @@ def evaluate(model, datasets, out_dir=None, column_map=None, nan_policy="error",
     if out_dir is not None:
         from .outdir import atomic_directory
 
-        with atomic_directory(out_dir) as tmp:
+        with atomic_directory(out_dir, overwrite) as tmp:
             _write_evaluation(cm, result, tmp, plots)
         result.out_dir = out_dir
     return result

@@ -4,8 +4,28 @@
 assembles the thermal system once, and precomputes every sensor as a linear
 output ``y = C T + D u + c``: surface thermometers and camera spots by
 barycentric rows, tool-centre-point drift and strain lines by adjoint
-influence rows (cached on disk, keyed by the mesh and the definition), and air
-thermometers as a feedthrough of the ambient inputs.
+influence rows, and air thermometers as a feedthrough of the ambient inputs.
+
+The output operator is cached on disk (``outputs-<key>.npz`` in
+``meshes/cache`` or the user cache, with a SHA-256 sidecar checked before it is
+read; see :mod:`meshes.cachefiles`).  The key (:func:`operator_cache_key`)
+holds exactly what the operator is computed from:
+
+- the mesh content (points, tetrahedra, region ids and names);
+- the joint *pairs*: they split the thermal nodes on the joint facets, which
+  numbers the operator's columns (conductance values do not enter);
+- each part's elastic properties (Young's modulus, Poisson ratio, expansion
+  coefficient), the elastic degree, the supports and the stress-free
+  reference temperature;
+- the output specifications (names, kinds and positions of thermometers,
+  camera spots, TCP probes and strain lines) and the point snap distance;
+- :data:`OUTPUT_CACHE_VERSION`.
+
+Not in the key: the machine's name, conductivities, densities, heat
+capacities, convection, heat sources and joint conductances; none of them
+enters the operator, so renaming a machine or changing its powers,
+convection or joint conductances reuses it.  Building it takes minutes on
+the full machine; progress goes to the ``thermal_twin`` logger.
 
 Inputs u (one column of the thermal system each):
 - ``ambient:<zone>``   ambient temperature of a convection zone, °C
@@ -14,6 +34,7 @@ Inputs u (one column of the thermal system each):
 """
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import time
@@ -24,7 +45,8 @@ import numpy as np
 import scipy.sparse as sp
 
 import fea
-from meshes.builder import build_mesh, find_cached, user_cache_dir
+from meshes.builder import build_mesh, duration_text
+from meshes.cachefiles import find_cached, log, user_cache_dir, write_checked
 from meshes.tomlspec import DefinitionError
 
 from .machine_definition import MachineDefinition, load_machine
@@ -145,8 +167,13 @@ def _facet_groups(definition, mesh):
     return groups, float(area[~claimed].sum())
 
 
+def materials_by_region(definition, mesh):
+    """Material of each mesh region (region id → :class:`fea.Material`), from its part."""
+    return {rid: definition.part_material(name) for rid, name in mesh.region_names.items()}
+
+
 def _thermal_system(definition, mesh, groups):
-    materials = {rid: definition.part_material(name) for rid, name in mesh.region_names.items()}
+    materials = materials_by_region(definition, mesh)
     problem = fea.HeatProblem(mesh, materials)
     for name, rule in groups.items():
         problem.add_convection(name, rule.coefficient, ambient=ambient_input(rule.zone),
@@ -193,22 +220,23 @@ def _output_specs(definition):
     return specs, channels
 
 
-def _operator_cache_key(definition, mesh_digest):
-    """Hash of what the output operator depends on: mesh, materials, joints, supports, sensors, degree.
-
-    Source powers and convection do not enter the operator, so calibrating
-    them reuses the cached adjoint rows.
-    """
+def operator_cache_key(definition, mesh, specs):
+    """SHA-256 (16 hex) of what the output operator is computed from (see the module docstring)."""
     d = definition
+    elastic = [[name, *_elastic_properties(d.part_material(name))] for _, name in sorted(mesh.region_names.items())]
     payload = {
-        "mesh": mesh_digest, "version": OUTPUT_CACHE_VERSION, "degree": d.elastic_degree,
-        "materials": {k: repr(v) for k, v in sorted(d.materials.items())},
-        "part_materials": [(p.name, p.material) for p in d.geometry.parts],
-        "joints": d.joints, "supports": d.support_points, "sensors": [repr(s) for s in d.sensors],
-        "camera": repr(d.camera), "tcp": [d.tool_point, d.workpiece_point, d.tilt_probe_offset],
-        "reference_temperature": d.reference_temperature_C, "snap": d.snap_distance_m,
+        "version": OUTPUT_CACHE_VERSION, "mesh": mesh_content_digest(mesh), "elastic": elastic,
+        "degree": d.elastic_degree, "supports": d.support_points, "reference_temperature": d.reference_temperature_C,
+        "joint_pairs": sorted({tuple(sorted((a, b))) for a, b, _ in d.joints}), "snap": d.snap_distance_m,
+        "outputs": [[type(s).__name__, dataclasses.astuple(s)] for s in specs],
     }
-    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:16]
+    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=float).encode()).hexdigest()[:16]
+
+
+def _elastic_properties(material):
+    """E, ν, α as floats; ``None`` for a missing one (the elastic problem then says which)."""
+    values = (getattr(material, a) for a in ("youngs_modulus", "poisson_ratio", "expansion"))
+    return [None if v is None else float(v) for v in values]
 
 
 def mesh_content_digest(mesh):
@@ -216,34 +244,70 @@ def mesh_content_digest(mesh):
     h = hashlib.sha256()
     for array in (mesh.points, mesh.tets, mesh.regions):
         h.update(np.ascontiguousarray(array).tobytes())
+    h.update(json.dumps(sorted(mesh.region_names.items())).encode())
     return h.hexdigest()
 
 
-def _build_outputs(definition, mesh, thermal, materials, mesh_digest):
+#: Output-operator build time ≈ seconds per (elastic dof × adjoint solve), the assembly and AMG
+#: set-up counted as ``OPERATOR_SETUP_SOLVES`` solves.  vmc_ram at 45 mm (P2, 257,097 dofs, 7
+#: solves) took about 6 min on a quiet 2-core VM and 16 min with the cores shared (load 6).
+OPERATOR_S_PER_DOF_SOLVE = 1.6e-4
+OPERATOR_SETUP_SOLVES = 2
+
+
+def _build_outputs(definition, mesh, thermal, materials):
+    """The output operator (from the checked cache, or built and cached), the channels and the cache file."""
     specs, channels = _output_specs(definition)
-    name = f"outputs-{definition.name}-{_operator_cache_key(definition, mesh_digest)}.npz"
-    cache = find_cached(name) or user_cache_dir() / name
-    if cache.exists():
-        data = np.load(cache)
-        matrix = sp.csr_matrix((data["data"], data["indices"], data["indptr"]), shape=tuple(data["shape"]))
-        if list(data["names"]) == [s.name for s in specs] and matrix.shape[1] == thermal.n_nodes:
-            return fea.OutputOperator([s.name for s in specs], [str(u) for u in data["units"]], matrix,
-                                      data["offset"]), channels, cache
+    name = f"outputs-{operator_cache_key(definition, mesh, specs)}.npz"
+    cache = find_cached(name)
+    if cache is not None:
+        with np.load(cache, allow_pickle=False) as data:
+            matrix = sp.csr_matrix((data["data"], data["indices"], data["indptr"]), shape=tuple(data["shape"]))
+            operator = fea.OutputOperator([str(n) for n in data["names"]], [str(u) for u in data["units"]],
+                                          matrix, data["offset"])
+        return operator, channels, cache
+    operator = _compute_outputs(definition, mesh, thermal, materials, specs)
+    m = operator.matrix
+    cache = write_checked(user_cache_dir() / name, lambda tmp: np.savez(
+        tmp, data=m.data, indices=m.indices, indptr=m.indptr, shape=np.array(m.shape),
+        names=np.array(operator.names), units=np.array(operator.units), offset=operator.offset))
+    return operator, channels, cache
+
+
+def elastic_problem(definition, mesh, materials=None):
+    """The machine's thermo-elastic problem: its parts' materials (default :func:`materials_by_region`),
+    elastic degree, stress-free reference temperature and 3-2-1 mount on the support points (5 mm tolerance)."""
+    materials = materials or materials_by_region(definition, mesh)
     if definition.elastic_degree not in (1, 2):
         raise DefinitionError(f"{definition.source}: machine.elastic_degree must be 1 or 2, "
                               f"got {definition.elastic_degree}")
     elastic = fea.ElasticProblem(mesh, materials, degree=definition.elastic_degree,
                                  reference_temperature=definition.reference_temperature_C)
-    p1, p2, p3 = definition.support_points
-    elastic.add_kinematic_mount(p1, p2, p3, tolerance=5e-3)
-    operator = fea.build_output_operator(specs, thermal, elastic, snap_distance=definition.snap_distance_m)
-    cache = user_cache_dir() / name
-    m = operator.matrix
-    tmp = cache.with_name(cache.stem + ".partial.npz")
-    np.savez(tmp, data=m.data, indices=m.indices, indptr=m.indptr, shape=np.array(m.shape),
-             names=np.array(operator.names), units=np.array(operator.units), offset=operator.offset)
-    tmp.replace(cache)
-    return operator, channels, cache
+    elastic.add_kinematic_mount(*definition.support_points, tolerance=5e-3)
+    return elastic
+
+
+def _compute_outputs(definition, mesh, thermal, materials, specs):
+    """Thermometer rows at once, then one adjoint elastic solve per drift or strain output, reporting progress."""
+    snap = definition.snap_distance_m
+    temps = [s for s in specs if isinstance(s, fea.PointTemperature)]
+    blocks = [fea.build_output_operator(temps, thermal, snap_distance=snap)]
+    mech = [s for s in specs if not isinstance(s, fea.PointTemperature)]
+    if mech:
+        elastic = elastic_problem(definition, mesh, materials)
+        estimate = OPERATOR_S_PER_DOF_SOLVE * elastic.n_dofs * (len(mech) + OPERATOR_SETUP_SOLVES)
+        log.info("building the output operator of %s: %d elastic solves (P%d, %s dofs), roughly %s on a "
+                 "2-core machine", definition.name, len(mech), definition.elastic_degree,
+                 f"{elastic.n_dofs:,}", duration_text(estimate))
+        start = time.perf_counter()
+        for k, spec in enumerate(mech, 1):      # one at a time: the factorisation is kept, progress is shown
+            blocks.append(fea.build_output_operator([spec], thermal, elastic, snap_distance=snap))
+            if estimate > 60:
+                log.info("output operator of %s: %d/%d elastic solves done (%s)", definition.name, k, len(mech),
+                         duration_text(time.perf_counter() - start))
+    whole = fea.OutputOperator([n for b in blocks for n in b.names], [u for b in blocks for u in b.units],
+                               sp.vstack([b.matrix for b in blocks]), np.concatenate([b.offset for b in blocks]))
+    return whole.subset([s.name for s in specs])
 
 
 def _air_feedthrough(definition, thermal):
@@ -270,8 +334,7 @@ def build_machine(machine="vmc_ram", mesh_size_m=None, definition=None):
     groups, _ = _facet_groups(definition, mesh)
     thermal, materials = _thermal_system(definition, mesh, groups)
     start = time.perf_counter()
-    outputs, channels, operator_path = _build_outputs(definition, mesh, thermal, materials,
-                                                      mesh_content_digest(mesh))
+    outputs, channels, operator_path = _build_outputs(definition, mesh, thermal, materials)
     feedthrough, air = _air_feedthrough(definition, thermal)
     channels += [Channel(s.name, "air", "degC", 1.0, s.label, s.position) for s in air]
     return Machine(definition, mesh, thermal, outputs, feedthrough, channels, info.seconds,

@@ -12,7 +12,7 @@ import numpy as np
 
 from fea import Material
 from meshes.definition import load_geometry, machine_path
-from meshes.tomlspec import DefinitionError, read_toml
+from meshes.tomlspec import DefinitionError, Table, read_toml
 
 DRIVERS = {"spindle", "feed_x", "feed_y", "feed_z", "feed_xy", "feed_xyz", "constant"}
 SENSOR_KINDS = {"temperature", "air", "strain"}
@@ -198,6 +198,7 @@ def load_machine(machine):
                                          t.number("coefficient", minimum=0.0, strict_minimum=True),
                                          t.string("zone", "room"), t.vector("facing", 3, None),
                                          t.boolean("inside", False)))
+    _check_unique(path, "convection", [r.name for r in convection])
     zones = sorted({r.zone for r in convection})
     zone_lags_s = {}
     for t in root.tables("zones"):
@@ -215,9 +216,7 @@ def load_machine(machine):
                                   t.number("coefficient_W", minimum=0.0), t.number("reference", 1.0,
                                                                                     minimum=0.0, strict_minimum=True),
                                   t.number("exponent", 1.0, minimum=0.0)))
-    names = [s.name for s in sources]
-    if len(set(names)) != len(names):
-        raise DefinitionError(f"{path}: sources: duplicate names {sorted({n for n in names if names.count(n) > 1})}")
+    _check_unique(path, "sources", [s.name for s in sources])
 
     sensors = []
     for t in root.tables("sensors"):
@@ -233,9 +232,7 @@ def load_machine(machine):
             sensor = Sensor(t.string("name"), kind, t.string("label", ""), position=t.vector("position", 3),
                             zone=zone)
         sensors.append(sensor)
-    snames = [s.name for s in sensors]
-    if len(set(snames)) != len(snames):
-        raise DefinitionError(f"{path}: sensors: duplicate names {sorted({n for n in snames if snames.count(n) > 1})}")
+    _check_unique(path, "sensors", [s.name for s in sensors])
 
     camera = None
     if "camera" in root:
@@ -256,7 +253,11 @@ def load_machine(machine):
     points = supports.raw("points")
     if not (isinstance(points, list) and len(points) == 3):
         raise supports.error("points", "must list three [x, y, z] points for the 3-2-1 mount", points)
-    support_points = [tuple(float(v) for v in p) for p in points]
+    support_points = [Table({f"points[{i}]": p}, supports.file, "supports").vector(f"points[{i}]", 3)
+                      for i, p in enumerate(points)]
+    elastic_degree = info.integer("elastic_degree", 1, minimum=1)
+    if elastic_degree not in (1, 2):
+        raise info.error("elastic_degree", "must be 1 or 2 (P1 or P2 displacements)", elastic_degree)
 
     return MachineDefinition(
         name=geometry.name,
@@ -276,12 +277,18 @@ def load_machine(machine):
         max_spindle_rpm=info.number("max_spindle_rpm", minimum=0.0, strict_minimum=True),
         max_feed_mm_min=info.number("max_feed_mm_min", 30000.0, minimum=0.0, strict_minimum=True),
         reference_temperature_C=info.number("reference_temperature_C", 20.0),
-        elastic_degree=info.integer("elastic_degree", 1, minimum=1),
+        elastic_degree=elastic_degree,
         snap_distance_m=info.number("snap_distance_m", 0.003, minimum=0.0),
         ambient_reference_height_m=info.number("ambient_reference_height_m", 1.0),
         zones=zones,
         zone_lags_s=zone_lags_s,
     )
+
+
+def _check_unique(path, table, names):
+    dupes = sorted({n for n in names if names.count(n) > 1})
+    if dupes:
+        raise DefinitionError(f"{path}: {table}: duplicate names {dupes}")
 
 
 def room_zone(zones):

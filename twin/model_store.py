@@ -35,24 +35,11 @@ import numpy as np
 
 from .dataset import json_default, project_version
 from .errors import TwinInputError
+from .model_names import MODEL_NAMES
 
 FORMAT = "thermal-twin-compensation-model"
 FORMAT_VERSION = 1
 
-#: Model names → (class name in ``models``, default hyperparameters).
-MODEL_NAMES = {
-    "mlr": ("MLRRegressor", {}),
-    "pcr": ("PCRRegressor", {}),
-    "ann": ("ANNRegressor", {"random_state": 0}),
-    "anfis": ("ANFISRegressor", {"init": "fcm", "n_rules": 3, "epochs": 50, "random_state": 0}),
-    "anfis-fcm": ("ANFISRegressor", {"init": "fcm", "n_rules": 3, "epochs": 50, "random_state": 0}),
-    "anfis-grid": ("ANFISRegressor", {"init": "grid", "n_mfs": 2, "epochs": 50, "random_state": 0}),
-    "gm0n": ("GM0NRegressor", {}),
-    "gm1n": ("GM1NRegressor", {}),
-    "gmc": ("GMCRegressor", {"random_state": 0}),
-    "gnnmci": ("GNNMCIRegressor", {"random_state": 0}),
-    "ago-anfis": ("AGOANFISRegressor", {}),
-}
 #: Grey time-series models: coefficients per sample, trained on one contiguous, evenly sampled record.
 TIME_SERIES_MODELS = {"GM0NRegressor", "GM1NRegressor", "GMCRegressor", "GNNMCIRegressor", "AGOANFISRegressor"}
 
@@ -125,12 +112,23 @@ def check_channels(dataset, names, units=None, role="input"):
             raise TwinInputError(f"{dataset_label(dataset)}: channel units do not match: {text}")
 
 
-def reference_rows(values, preprocessing):
+def check_reference_samples(count, n_rows, label):
+    """Raise unless ``count`` (rows averaged for the zero reference) is a whole number in 1 .. ``n_rows``."""
+    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
+        raise TwinInputError(f"reference_samples (--reference-samples) must be a whole number of rows, at least 1; "
+                             f"got {count}")
+    if count > n_rows:
+        raise TwinInputError(f"{label}: reference_samples (--reference-samples) = {int(count)} is more than the "
+                             f"{n_rows} rows it has")
+
+
+def reference_rows(values, preprocessing, label="dataset"):
     """Subtract each column's reference (mean of the first ``reference_samples`` rows) when zero-referencing."""
     values = np.asarray(values, float)
     if not preprocessing.get("zero_reference", True):
         return values
-    k = max(1, int(preprocessing.get("reference_samples", 1)))
+    k = preprocessing.get("reference_samples", 1)
+    check_reference_samples(k, len(values), label)
     return values - values[:k].mean(axis=0)
 
 
@@ -165,12 +163,12 @@ class CompensationModel:
 
     def features(self, dataset):
         check_channels(dataset, self.inputs, self.input_units, "input")
-        return reference_rows(dataset.matrix(self.inputs), self.preprocessing)
+        return reference_rows(dataset.matrix(self.inputs), self.preprocessing, dataset_label(dataset))
 
     def target_values(self, dataset):
         """The measured target as the model sees it (zero-referenced unless that is switched off)."""
         check_channels(dataset, [self.target], [self.target_unit], "target")
-        return reference_rows(dataset[self.target][:, None], self.preprocessing)[:, 0]
+        return reference_rows(dataset[self.target][:, None], self.preprocessing, dataset_label(dataset))[:, 0]
 
     def predict(self, dataset):
         """Predicted target (its change since the record's start when zero-referenced), one per row."""
@@ -262,8 +260,14 @@ def fit_compensation_model(datasets, inputs, target, model="anfis", params=None,
     inputs = list(inputs)
     if not inputs:
         raise TwinInputError("no input channel given")
+    repeated = sorted({n for n in inputs if inputs.count(n) > 1})
+    if repeated:
+        raise TwinInputError(f"input channel(s) {repeated} given more than once; each input must be a different "
+                             "channel")
     if target in inputs:
         raise TwinInputError(f"the target {target!r} is also an input")
+    for ds in datasets:
+        check_reference_samples(reference_samples, len(ds), dataset_label(ds))
     estimator = make_estimator(model, params)
     first = datasets[0]
     check_channels(first, inputs, role="input")
@@ -289,7 +293,10 @@ def fit_compensation_model(datasets, inputs, target, model="anfis", params=None,
     try:
         estimator.fit(X, y)
     except ValueError as exc:
-        raise TwinInputError(f"cannot fit {model!r}: {exc}") from None
+        hint = " (in `twin train`, --model anfis-fcm is the FCM-initialised ANFIS)" \
+            if getattr(estimator, "init", None) == "grid" else ""
+        raise TwinInputError(f"cannot fit {model!r} on {X.shape[0]} rows × {X.shape[1]} inputs: {exc}{hint}") \
+            from None
     cm.sampling_interval_s = dt
     cm.training = [{"label": dataset_label(ds), "rows": len(ds), "source": ds.metadata.get("source"),
                     "scenario": ds.metadata.get("scenario"), "kind": ds.metadata.get("kind"),

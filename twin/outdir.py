@@ -1,35 +1,249 @@
-"""Result folders that appear complete or not at all.
+"""Output folders and files of the twin: checked before the work, written atomically, never clobbering.
 
-Work is written into a hidden ``.<name>.partial-<pid>`` sibling folder, which
-is renamed onto the requested path only when everything is in it; an
-interrupted run leaves only the hidden partial folder behind.
+Every folder the twin writes holds a marker, ``.thermal-twin-output.json``,
+listing the files the twin wrote there, the command and the project version.
+The rules:
+
+- an output that is a file where a folder is wanted (or a folder where a file
+  is wanted), that is or holds an input of the command, or that cannot be
+  created or written is refused at once, before any long work
+  (:func:`check_output_folder`, :func:`check_output_file`);
+- a non-empty folder without the marker is refused unless ``overwrite`` is
+  given; even then the twin only adds its files beside the others. Only the
+  files listed in the old marker are ever replaced or removed;
+- results are written into a hidden staging folder inside the output folder
+  and moved in when everything is there; the marker is written last, as the
+  commit point. While files move, a journal (``.thermal-twin-output.partial.json``)
+  lists every file the twin may own, so an interrupted commit leaves a folder
+  the next run recognises as its own, but none that claims to be complete.
+
+This module imports only the standard library: the command line checks
+outputs before it loads the numerical libraries.
 """
 from __future__ import annotations
 
+import contextvars
+import json
 import os
+import shlex
 import shutil
+import sys
+import tempfile
 from contextlib import contextmanager
-from pathlib import Path
+from datetime import datetime, timezone
+from pathlib import Path, PurePosixPath
+
+from .errors import TwinInputError
+
+MARKER = ".thermal-twin-output.json"
+JOURNAL = ".thermal-twin-output.partial.json"
+STAGING_PREFIX = ".thermal-twin-partial-"
+MARKER_FORMAT = "thermal-twin-output"
+#: The command a marker records when the caller names none; ``twin.cli.main`` sets it to ``twin <arguments>``.
+COMMAND = contextvars.ContextVar("thermal_twin_command", default=None)
+
+
+def _is_bookkeeping(name):
+    return name in (MARKER, JOURNAL) or name.startswith(STAGING_PREFIX)
+
+
+def _check_inputs(out, inputs):
+    """Refuse an output that is, or is a folder holding, one of ``inputs`` (paths, or names that are no file)."""
+    for given in inputs:
+        path = Path(str(given)).expanduser().resolve() if given is not None else None
+        if path is None or not path.exists():
+            continue
+        if path == out:
+            raise TwinInputError(f"{out}: the output would replace an input of this command; choose another "
+                                 "output")
+        if out in path.parents:
+            raise TwinInputError(f"{out}: the output folder holds an input of this command ({path}); choose "
+                                 "another folder")
+
+
+def _require_writable(path, folder):
+    """Check that ``folder`` (``path`` or its parent) can be created and written: a probe in its nearest
+    existing ancestor."""
+    existing = folder
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise TwinInputError(f"{path}: cannot be created: {existing} is a file, not a folder")
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".thermal-twin-probe-", dir=existing))
+    except OSError as exc:
+        raise TwinInputError(f"{path}: cannot write in {existing} ({exc.strerror})") from None
+
+
+def check_output_folder(path, overwrite=False, inputs=()):
+    """Check an output folder before the work; return it resolved (``None`` for no folder).
+
+    Raises :class:`TwinInputError` (one line naming the path) if ``path`` is
+    a file, is or holds one of ``inputs``, cannot be created or written, or is
+    a non-empty folder that is not a twin output and ``overwrite`` is false.
+    """
+    if path is None:
+        return None
+    out = Path(path).expanduser().resolve()
+    if out.exists() and not out.is_dir():
+        raise TwinInputError(f"{out}: is a file; the output must be a folder")
+    _check_inputs(out, inputs)
+    _require_writable(out, out)
+    if out.exists() and not overwrite and _owned_files(out) is None:
+        if any(not _is_bookkeeping(entry.name) for entry in out.iterdir()):
+            raise TwinInputError(f"{out}: folder is not empty and is not a twin output (no {MARKER}); choose "
+                                 "another folder, or pass --overwrite (overwrite=True) to write beside its "
+                                 "files, which are kept")
+    return out
+
+
+def check_output_file(path, overwrite=False, inputs=()):
+    """Check an output file before the work; return it resolved.
+
+    Raises :class:`TwinInputError` if ``path`` is a folder, is one of
+    ``inputs``, cannot be created, or exists and ``overwrite`` is false.
+    """
+    out = Path(path).expanduser().resolve()
+    if out.is_dir():
+        raise TwinInputError(f"{out}: is a folder; the output must be a file")
+    _check_inputs(out, inputs)
+    if out.exists() and not overwrite:
+        raise TwinInputError(f"{out}: exists; pass --overwrite (overwrite=True) to replace it")
+    _require_writable(out, out.parent)
+    return out
+
+
+def _safe_relative(name):
+    """A listed file name as a relative path inside the folder, or ``None`` if it would leave it."""
+    rel = PurePosixPath(str(name))
+    if rel.is_absolute() or not rel.parts or ".." in rel.parts or _is_bookkeeping(rel.parts[0]):
+        return None
+    return rel.as_posix()
+
+
+def _owned_files(folder):
+    """Files the twin wrote in ``folder`` (its marker and an unfinished commit's journal); ``None`` if neither."""
+    owned = None
+    for name in (MARKER, JOURNAL):
+        try:
+            doc = json.loads((folder / name).read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            continue
+        if isinstance(doc, dict) and doc.get("format") == MARKER_FORMAT and isinstance(doc.get("files"), list):
+            owned = (owned or set()) | {r for r in map(_safe_relative, doc["files"]) if r is not None}
+    return owned
+
+
+def _write_json(path, document):
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(document, indent=1) + "\n", encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def _staged_files(staging):
+    return sorted(p.relative_to(staging).as_posix() for p in staging.rglob("*") if not p.is_dir())
+
+
+def _blocked(out, rel, owned):
+    """Whether moving ``rel`` into ``out`` would replace something the twin did not write."""
+    parts = PurePosixPath(rel).parts
+    for i in range(1, len(parts)):
+        parent = out.joinpath(*parts[:i])
+        if (parent.is_symlink() or parent.exists()) and not parent.is_dir():
+            return "/".join(parts[:i]) not in owned
+    target = out / rel
+    if target.is_dir() and not target.is_symlink():
+        return True
+    return (target.exists() or target.is_symlink()) and rel not in owned
+
+
+def _remove_file(out, rel):
+    target = out / rel
+    if out not in target.parent.resolve().parents and target.parent.resolve() != out:
+        return                                 # a linked folder leads outside: not the twin's to touch
+    if target.is_symlink() or target.is_file():
+        target.unlink()
+    for parent in target.parents:              # folders the twin's files leave empty
+        if parent == out:
+            break
+        try:
+            parent.rmdir()
+        except OSError:
+            break
+
+
+def _project_version():
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("thermal-twin")
+    except PackageNotFoundError:  # pragma: no cover - running from a bare source tree
+        return "unknown"
+
+
+def _commit(staging, out, command):
+    files = _staged_files(staging)
+    owned = _owned_files(out) or set()
+    blocked = [rel for rel in files if _blocked(out, rel, owned)]
+    if blocked:
+        more = f" (and {len(blocked) - 1} more)" if len(blocked) > 1 else ""
+        raise TwinInputError(f"{out}: the twin would replace {blocked[0]}{more}, which it did not write; move "
+                             "it away or choose another folder")
+    head = {"format": MARKER_FORMAT, "version": 1, "project_version": _project_version(),
+            "command": command or COMMAND.get() or shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]])}
+    _write_json(out / JOURNAL, {**head, "files": sorted(owned | set(files))})
+    (out / MARKER).unlink(missing_ok=True)
+    for rel in sorted(owned - set(files)):
+        _remove_file(out, rel)
+    for rel in files:
+        target = out / rel
+        target.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(staging / rel, target)
+    written = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    _write_json(out / MARKER, {**head, "written_utc": written, "files": files})   # the commit point
+    (out / JOURNAL).unlink()
+
+
+def _remove_stale_staging(out):
+    """Staging folders that runs killed outright (no clean-up) left behind."""
+    for entry in out.glob(f"{STAGING_PREFIX}*"):
+        pid = entry.name[len(STAGING_PREFIX):]
+        if pid.isdigit() and int(pid) != os.getpid() and not _alive(int(pid)):
+            shutil.rmtree(entry, ignore_errors=True)
+
+
+def _alive(pid):
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 @contextmanager
-def atomic_directory(path):
-    """Yield a temporary folder; on success it replaces ``path`` (an older result there is removed)."""
-    path = Path(path).resolve()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
-    if tmp.exists():
-        shutil.rmtree(tmp)
-    tmp.mkdir()
+def atomic_directory(path, overwrite=False, inputs=(), command=None):
+    """Yield a staging folder; on success its files are committed into the output folder ``path``.
+
+    ``path`` is checked as :func:`check_output_folder` does. On success the
+    files the twin wrote there before (its marker lists them) are replaced by
+    the new ones and the marker is rewritten last; other files are never
+    touched. On an exception (or Ctrl-C) the staging folder is removed and
+    the output folder is left as it was. ``command`` is recorded in the
+    marker (default: this process's command line).
+    """
+    out = check_output_folder(path, overwrite, inputs)
+    created = not out.exists()
+    out.mkdir(parents=True, exist_ok=True)
+    _remove_stale_staging(out)
+    staging = out / f"{STAGING_PREFIX}{os.getpid()}"
+    shutil.rmtree(staging, ignore_errors=True)
+    staging.mkdir()
     try:
-        yield tmp
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    if path.exists():
-        old = path.with_name(f".{path.name}.old-{os.getpid()}")
-        path.rename(old)
-        tmp.rename(path)
-        shutil.rmtree(old, ignore_errors=True)
-    else:
-        tmp.rename(path)
+        yield staging
+        _commit(staging, out, command)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+        if created and not any(out.iterdir()):
+            out.rmdir()

@@ -75,6 +75,8 @@ DEFAULT_TRAIN = ("heat_cool_9000", "iso230_3_spindle_spectrum", "thesis_test_4",
                  "etve_5K")
 DEFAULT_TEST = ("cutting_hard", "step_speed", "etve_summer", "thesis_test_3")
 DEFAULT_AXES = ("Z", "Y")
+#: The sensor counts among which each axis's best set is reported: the thesis goal of 4–5 sensors.
+REPORT_K = (4, 5)
 RECORD_CACHE_VERSION = 1
 #: Elementary step responses of ``greedy-physics``: each heat source at its reference power, each ambient
 #: zone +2 K (a day/night half-swing), the vertical ambient gradient +1 K/m; from rest at 20 °C, 48 h.
@@ -404,7 +406,7 @@ def record_cache_key(task):
 
 
 def _cache_dir():
-    from meshes.builder import user_cache_dir
+    from meshes.cachefiles import user_cache_dir
 
     d = user_cache_dir() / "placement-records"
     d.mkdir(parents=True, exist_ok=True)
@@ -419,14 +421,17 @@ def _load_record(path):
 
 
 def _save_record(path, rec):
-    tmp = path.with_name(path.stem + ".partial.npz")
-    np.savez(tmp, scenario=rec.scenario, time_s=rec.time_s, temperatures=rec.temperatures,
-             axes=np.array(list(rec.drift)), seconds=rec.seconds, **{f"drift_{a}": v for a, v in rec.drift.items()})
-    tmp.replace(path)
+    from meshes.cachefiles import write_checked
+
+    write_checked(path, lambda tmp: np.savez(
+        tmp, scenario=rec.scenario, time_s=rec.time_s, temperatures=rec.temperatures, axes=np.array(list(rec.drift)),
+        seconds=rec.seconds, **{f"drift_{a}": v for a, v in rec.drift.items()}))
 
 
 def run_records(tasks, scheduler="local", use_cache=True, progress=None):
     """Records of :class:`RecordTask` s, from the disk cache where possible, the rest through the sweep."""
+    from meshes.cachefiles import checked
+
     from .sweep import run_tasks
 
     keys = [record_cache_key(t) for t in tasks] if use_cache else [None] * len(tasks)
@@ -434,12 +439,9 @@ def run_records(tasks, scheduler="local", use_cache=True, progress=None):
     todo = []
     for i, key in enumerate(keys):
         path = _cache_dir() / f"{key}.npz" if key else None
-        if path is not None and path.exists():
-            try:
-                out[i] = _load_record(path)
-                continue
-            except (OSError, KeyError, ValueError):
-                pass
+        if path is not None and path.exists() and checked(path) is not None:    # a corrupt record is redone
+            out[i] = _load_record(path)
+            continue
         todo.append(i)
     results = run_tasks([tasks[i] for i in todo], scheduler=scheduler, progress=progress)
     for i, rec in zip(todo, results):
@@ -514,15 +516,19 @@ def placement_study(machine="vmc_ram", mesh_size_m=None, parts=DEFAULT_PARTS, n_
                     train=DEFAULT_TRAIN, test=DEFAULT_TEST, methods=METHODS, k_max=8, axes=DEFAULT_AXES,
                     record_interval_s=60.0, max_selection_rows=2000, scheduler="local", use_cache=True,
                     noise=True, report_k=5, anfis_check=True, write_datasets=True, out_dir=None, progress=None,
-                    log=print, response_horizon_s=RESPONSE_HORIZON_S):
+                    log=print, response_horizon_s=RESPONSE_HORIZON_S, overwrite=False):
     """Run the placement study; write its report to ``out_dir`` (see the module docstring).
 
     With ``write_datasets`` the report folder gets ``datasets/<scenario>.csv``: every
     record as a dataset with the best sets' sensors as thermometers, for ``twin train``.
     Returns a :class:`PlacementResult`.  Missing scenarios are skipped with a
     note; at least two training scenarios and one held-out scenario are needed.
+    ``out_dir`` is checked before the work (``overwrite``: see :func:`twin.outdir.check_output_folder`).
     """
+    from .outdir import atomic_directory, check_output_folder
     from .scenario import Scenario, available_scenarios
+
+    check_output_folder(out_dir, overwrite, inputs=(machine,))
 
     t_start = time.perf_counter()
     methods = list(methods)
@@ -621,7 +627,7 @@ def placement_study(machine="vmc_ram", mesh_size_m=None, parts=DEFAULT_PARTS, n_
     # offered by models; MLR on thousands of collinear inputs is meaningless, so it is left out.
     best = {}
     for axis in axes:
-        rows = [r for r in table if r["axis"] == axis and r["K"] in (4, 5)] or [r for r in table if r["axis"] == axis]
+        rows = [r for r in table if r["axis"] == axis and r["K"] in best_k_pool(k_max)]
         b = min(rows, key=lambda r: r["max_residual"])
         best[axis] = (b["method"], b["K"], [cands.names.index(n) for n in b["sensors"]])
     anfis = []
@@ -656,12 +662,15 @@ def placement_study(machine="vmc_ram", mesh_size_m=None, parts=DEFAULT_PARTS, n_
     result.config["scenario_objects"] = list(train) + list(test)
     result.summary = placement_summary(result)
     if out_dir is not None:
-        from .outdir import atomic_directory
-
-        with atomic_directory(out_dir) as tmp:
+        with atomic_directory(out_dir, overwrite) as tmp:
             write_placement_report(result, m, tmp)
         result.out_dir = Path(out_dir)
     return result
+
+
+def best_k_pool(k_max):
+    """The K among which each axis's best set is chosen: those of :data:`REPORT_K` studied, else every K studied."""
+    return [k for k in REPORT_K if k <= k_max] or list(range(1, k_max + 1))
 
 
 def _cell(rows, method, k, axis):
@@ -760,7 +769,8 @@ def placement_summary(result):
                 lines.append(f"| {a['axis']} | {a['method']} | {a['K']} | {a['max_residual']:.2f} | "
                              f"{a['rmse']:.2f} | {a['reduction_percent']:.1f} |")
         lines.append("")
-    lines += ["## Chosen locations (best method, K = 4–5)", "",
+    pool = best_k_pool(cfg["k_max"])
+    lines += [f"## Chosen locations (best method, K = {pool[0]}{'' if len(pool) == 1 else f'–{pool[-1]}'})", "",
               "| axis | # | sensor | kind | part | x (m) | y (m) | z (m) |", "|---|---|---|---|---|---|---|---|"]
     c = result.candidates
     for axis, (method, k, idx) in result.best.items():
@@ -835,8 +845,7 @@ def write_placement_report(result, machine, folder):
     pts = np.array([[r["x_m"], r["y_m"], r["z_m"]] for r in chosen])
     labels = [f"{r['axis']}{r['rank']}" for r in chosen]
     render_machine(machine, folder / "chosen_sensors.png", points=pts, point_labels=labels,
-                   point_values=[("XYZ".index(r["axis"]) if r["axis"] in "XYZ" else 3) for r in chosen],
-                   point_label="axis (0 X, 1 Y, 2 Z)",
+                   point_categories=[f"{r['axis']} drift: {r['method']}, K = {r['K']}" for r in chosen],
                    title="chosen sensors: " + ", ".join(f"{a}: {m} K={k}" for a, (m, k, _) in result.best.items()))
     _plot_k_curves(result, folder / "k_curves.png")
     if getattr(result, "records", None):

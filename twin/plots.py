@@ -27,39 +27,121 @@ def save_figure(fig, path):
     return path
 
 
-def plot_temperatures(dataset, path, max_lines=12):
-    """Surface temperatures (the ``max_lines`` that rise most) and air sensors, °C, over time in h."""
-    fig, ax = plt.subplots(figsize=(9, 5))
+#: At most this many lines share one panel, so each has its own colour (the tab10 cycle has ten).
+PANEL_LINES = 8
+
+
+def _stem(label):
+    """The group a sensor label names: ``carrier strip 1 (B1)`` → ``carrier strip 1``."""
+    return label.split(" (")[0].strip()
+
+
+def _chunks(names, size):
+    """``names`` in the fewest runs of at most ``size``, as even in length as possible."""
+    n = -(-len(names) // size)
+    return [list(part) for part in np.array_split(np.array(names, dtype=object), n)] if names else []
+
+
+def temperature_panels(dataset, max_lines=PANEL_LINES):
+    """Panels of the temperature figure as ``(title, [channel names])``; every thermometer is in exactly one.
+
+    Surface thermometers whose labels share a stem (``carrier strip 1 (B1)``,
+    ``(B2)`` …) get panels of their own; the others share "other
+    thermometers" panels; air thermometers come last.  No panel holds more
+    than ``max_lines`` lines.
+    """
     surface = dataset.names_of_kind("temperature")
-    rise = {n: np.ptp(dataset[n]) for n in surface}
-    shown = sorted(surface, key=rise.get, reverse=True)[:max_lines]
-    for name in shown:
-        ax.plot(_hours(dataset), dataset[name], lw=1.2, label=f"{name}")
-    for name in dataset.names_of_kind("air"):
-        ax.plot(_hours(dataset), dataset[name], lw=1.0, ls="--", label=f"{name} (air)")
-    ax.set_xlabel("time (h)")
-    ax.set_ylabel(f"temperature ({UNITS['degC']})")
-    ax.set_title(f"Temperatures — {dataset.metadata.get('scenario', '')}")
+    stems = {}
+    for name in surface:
+        stems.setdefault(_stem(dataset.info(name).label) or name, []).append(name)
+    panels, others = [], []
+    for stem, names in stems.items():
+        if len(names) > 1:
+            panels += [(stem, chunk) for chunk in _chunks(names, max_lines)]
+        else:
+            others += names
+    panels += [("other thermometers", chunk) for chunk in _chunks(others, max_lines)]
+    panels += [("air thermometers", chunk) for chunk in _chunks(dataset.names_of_kind("air"), max_lines)]
+    return panels
+
+
+def _legend_label(dataset, name, panel_title):
+    label = dataset.info(name).label
+    if label.startswith(panel_title + " ("):      # the panel title already says the stem
+        label = label[len(panel_title) + 1:]
+    return f"{name} {label}".strip()
+
+
+def temperature_figure(dataset, max_lines=PANEL_LINES):
+    """Every surface and air thermometer (°C) over time (h), grouped in panels with a legend each (None without)."""
+    panels = temperature_panels(dataset, max_lines)
+    if not panels:
+        return None
+    fig, axes = plt.subplots(len(panels), 1, figsize=(10, 1.0 + 2.3 * len(panels)), sharex=True, squeeze=False)
+    hours = _hours(dataset)
+    for ax, (title, names) in zip(axes[:, 0], panels):
+        for k, name in enumerate(names):
+            ax.plot(hours, dataset[name], lw=1.1, color=f"C{k}", label=_legend_label(dataset, name, title))
+        ax.set_title(title, fontsize=9, loc="left")
+        ax.set_ylabel(f"temperature ({UNITS['degC']})", fontsize=8)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+    axes[-1, 0].set_xlabel("time (h)")
+    fig.suptitle(f"Temperatures — {dataset.metadata.get('scenario', '')}")
+    return fig
+
+
+def plot_temperatures(dataset, path, max_lines=PANEL_LINES):
+    """:func:`temperature_figure` saved as PNG at ``path`` (None, and no file, without thermometers)."""
+    fig = temperature_figure(dataset, max_lines)
+    return None if fig is None else save_figure(fig, path)
+
+
+def _ambient_channels(dataset):
+    """The room ambient (and other zones' ambients where they differ from it), else the air thermometers."""
+    ambients = dataset.names_of_kind("ambient")
+    if not ambients:
+        return dataset.names_of_kind("air")
+    room = "ambient_room" if "ambient_room" in ambients else ambients[0]
+    return [room] + [n for n in ambients if n != room and not np.allclose(dataset[n], dataset[room])]
+
+
+def drift_figure(dataset):
+    """TCP drift (µm) with the ambient temperature (°C) on a second axis, and the spindle speed (rpm) below."""
+    speed = "spindle" in dataset and np.ptp(dataset["spindle"]) > 0
+    fig, axes = plt.subplots(2 if speed else 1, 1, figsize=(9, 6.5 if speed else 5), sharex=True, squeeze=False,
+                             gridspec_kw={"height_ratios": [3, 1] if speed else [1]})
+    ax = axes[0, 0]
+    hours = _hours(dataset)
+    for name in dataset.names_of_kind("displacement"):
+        ax.plot(hours, dataset[name], lw=1.4, label=f"{name} ({UNITS['um']})")
+    ax.set_ylabel(f"TCP drift, tool relative to table ({UNITS['um']})")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, ncol=2, loc="best")
-    return save_figure(fig, path)
+    handles, labels = ax.get_legend_handles_labels()
+    ambient = _ambient_channels(dataset)
+    if ambient:
+        room_ax = ax.twinx()
+        for k, name in enumerate(ambient):
+            room_ax.plot(hours, dataset[name], lw=1.0, ls="--", color="0.35" if k == 0 else f"C{k + 5}",
+                         label=f"{name} ({UNITS['degC']})")
+        room_ax.set_ylabel(f"ambient temperature ({UNITS['degC']})", color="0.35")
+        ax.set_zorder(room_ax.get_zorder() + 1)      # the drift and its legend in front of the ambient
+        ax.patch.set_visible(False)
+        more_handles, more_labels = room_ax.get_legend_handles_labels()
+        handles, labels = handles + more_handles, labels + more_labels
+    ax.legend(handles, labels, loc="upper left", fontsize=8)
+    ax.set_title(f"TCP drift — {dataset.metadata.get('scenario', '')}")
+    if speed:
+        axes[1, 0].fill_between(hours, dataset["spindle"], step="pre", alpha=0.3, color="grey")
+        axes[1, 0].set_ylabel("spindle speed (rpm)")
+        axes[1, 0].grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("time (h)")
+    return fig
 
 
 def plot_drift(dataset, path):
-    """Tool-centre-point drift X, Y, Z (and the upper Y probe) in µm, with spindle speed behind."""
-    fig, ax = plt.subplots(figsize=(9, 5))
-    for name in dataset.names_of_kind("displacement"):
-        ax.plot(_hours(dataset), dataset[name], lw=1.4, label=f"{name} ({UNITS['um']})")
-    ax.set_xlabel("time (h)")
-    ax.set_ylabel(f"TCP drift, tool relative to table ({UNITS['um']})")
-    ax.grid(alpha=0.3)
-    if "spindle" in dataset and np.ptp(dataset["spindle"]) > 0:
-        twin_ax = ax.twinx()
-        twin_ax.fill_between(_hours(dataset), dataset["spindle"], step="pre", alpha=0.12, color="grey")
-        twin_ax.set_ylabel("spindle speed (rpm)", color="grey")
-    ax.legend(loc="upper left", fontsize=8)
-    ax.set_title(f"TCP drift — {dataset.metadata.get('scenario', '')}")
-    return save_figure(fig, path)
+    """:func:`drift_figure` saved as PNG at ``path``."""
+    return save_figure(drift_figure(dataset), path)
 
 
 def plot_strains(dataset, path):

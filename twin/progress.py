@@ -1,15 +1,24 @@
 """A tqdm progress bar behind the ``progress(done, total)`` callbacks of long work."""
 from __future__ import annotations
 
+import weakref
 
-def progress_bar(description):
+_open_bars = weakref.WeakSet()
+
+
+def progress_bar(description, unit):
+    """A ``progress(done, total)`` callback drawing a bar that counts ``unit`` (``"step"``, ``"scenario"``, …).
+
+    The unit is required: the rate shown (e.g. ``scenario/s``) is only right if it names what is counted.
+    """
     from tqdm import tqdm
 
     bar = {"tqdm": None}
 
     def update(done, total):
         if bar["tqdm"] is None:
-            bar["tqdm"] = tqdm(total=total, desc=description, unit="sample", leave=False, mininterval=0.5)
+            bar["tqdm"] = tqdm(total=total, desc=description, unit=unit, leave=False, mininterval=0.5)
+            _open_bars.add(bar["tqdm"])
         bar["tqdm"].n = done
         bar["tqdm"].refresh() if done == total else bar["tqdm"].update(0)
         if done == total:
@@ -18,3 +27,8 @@ def progress_bar(description):
     return update
 
 
+def close_bars():
+    """Close (and so clear) the bars that work stopped by an error or Ctrl-C left open, so that the
+    message that follows starts on a line of its own."""
+    for bar in list(_open_bars):
+        bar.close()

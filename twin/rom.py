@@ -38,7 +38,9 @@ mesh at run time (:meth:`ReducedModel.inputs_from_conditions`).
 A ROM saves to a versioned ``.npz`` (no pickle) and is cached under the
 user cache folder keyed by a digest of the machine's matrices
 (:func:`machine_digest`), so a change of mesh, materials, sources or output
-operator (e.g. P1 → P2 elasticity) builds a new one.
+operator (e.g. P1 → P2 elasticity) builds a new one, and a renamed copy of a
+machine reuses it.  The cached file's SHA-256 is checked before it is read
+(:mod:`meshes.cachefiles`); a corrupt one is reported and built again.
 """
 from __future__ import annotations
 
@@ -361,12 +363,19 @@ class ReducedModel:
             U = np.vstack([U[:1], U[:-1]])
         return self.outputs(Z, U)
 
-    def states(self, times_s, inputs, z0, scheme="zoh", theta=1.0):
-        """Final state and the states (k, r) at ``times_s`` (see :meth:`simulate`)."""
+    def states(self, times_s, inputs, z0, scheme="zoh", theta=1.0, means=None):
+        """Final state and the states (k, r) at ``times_s`` (see :meth:`simulate`).
+
+        ``means`` (k − 1, m), when given, are the inputs driving each step
+        instead of ``inputs``: their mean over the step (held over it by
+        ``zoh``, or as the θ-method's ū), so each step gets exactly ∫ u dt.
+        """
         t = np.asarray(times_s, float)
-        U = np.asarray(inputs, float).reshape(len(t), self.n_inputs)
         if scheme not in ("zoh", "theta"):
             raise ROMError(f"unknown scheme {scheme!r}; use 'zoh' or 'theta'")
+        U = np.asarray(inputs if means is None else means, float).reshape(-1, self.n_inputs)
+        if len(U) != len(t) - (means is not None):
+            raise ROMError(f"{len(U)} rows of ROM inputs for {len(t)} times")
         if not np.all(np.isfinite(U)):
             raise ROMError("ROM inputs contain NaN or infinite values")
         if np.any(np.diff(t) <= 0):
@@ -378,7 +387,9 @@ class ReducedModel:
             return Z[0], Z
         dt = np.diff(t)
         uniform = np.allclose(dt, dt[0], rtol=1e-12, atol=0.0)
-        if scheme == "zoh":
+        if means is not None:
+            forcing = W
+        elif scheme == "zoh":
             forcing = W[:-1]
         else:
             forcing = theta * W[1:] + (1.0 - theta) * W[:-1]
@@ -564,27 +575,26 @@ def reduce_with_basis(machine, V, method="krylov", kinds=DEFAULT_KINDS, keep_bas
 
 
 def rom_cache_path(machine, order, method="krylov", points=None, kinds=DEFAULT_KINDS):
-    from meshes.builder import user_cache_dir
+    from meshes.cachefiles import user_cache_dir
 
     key = hashlib.sha256(json.dumps([machine_digest(machine), int(order), method,
                                      None if points is None else [float(p) for p in points],
                                      sorted(kinds)]).encode()).hexdigest()[:16]
-    return user_cache_dir() / f"rom-{machine.name}-{method}-r{int(order)}-{key}.npz"
+    return user_cache_dir() / f"rom-{method}-r{int(order)}-{key}.npz"
 
 
 def cached_rom(machine, order=DEFAULT_ORDER, method="krylov", points=None, kinds=DEFAULT_KINDS, rebuild=False):
     """:func:`build_rom`, or the ROM saved earlier for the same machine matrices and settings."""
+    from meshes.cachefiles import checked, write_checked
+
     path = rom_cache_path(machine, order, method, points, kinds)
-    if path.exists() and not rebuild:
-        try:
-            rom = ReducedModel.load(path)
-            if rom.digest == machine_digest(machine):
-                rom.info["from_cache"] = str(path)
-                return rom
-        except ROMError:
-            pass
+    if path.exists() and not rebuild and checked(path) is not None:
+        rom = ReducedModel.load(path)
+        rom.machine = machine.name          # not in the key: a renamed copy of a machine reuses the ROM
+        rom.info["from_cache"] = str(path)
+        return rom
     rom = build_rom(machine, order, method, points, kinds)
-    rom.save(path)
+    write_checked(path, rom.save)
     rom.info["from_cache"] = None
     return rom
 
@@ -642,35 +652,53 @@ def _project_version():
     return project_version()
 
 
-def simulate_rom(rom, scenario, scheme="zoh", theta=None, sample_times=None):
+def scenario_step_means(rom, scenario, step_times):
+    """Mean ROM inputs over each step (len − 1, m): the FE run's mechanism (:class:`twin.simulate.ScenarioInputs`)."""
+    from fea.inputs import interval_means
+
+    def inputs_at(t):
+        c = scenario_conditions(scenario, rom.zones, t, rom.zone_lags_s)
+        return rom.inputs_from_conditions(c.spindle_rpm, c.feed_mm_min, c.ambient_C, c.gradient_K_per_m)
+
+    return interval_means(inputs_at, step_times, scenario.breakpoints_s(rom.zone_lags_s))
+
+
+def simulate_rom(rom, scenario, scheme="zoh", theta=None, sample_times=None, inputs="mean"):
     """Run a scenario (name, path or Scenario) on a ROM; return a :class:`~twin.dataset.Dataset`.
 
     Channels as in :func:`twin.simulate.simulate` (conditions, then the ROM's
-    outputs, no noise).  ``scheme="zoh"``: exact for conditions held over each
-    step at their left-limit value (:func:`held_conditions`); ``"theta"``:
-    the FE's θ-method on its step grid (like-for-like with the full model).
+    outputs, no noise).  ``scheme="zoh"``: exact for the inputs held over
+    each step; ``"theta"``: the FE's θ-method on its step grid (like-for-like
+    with the full model).  ``inputs="mean"`` drives each step by the mean of
+    the inputs over it, as the FE run does, so every segment injects its
+    energy whatever the grid; ``inputs="held"`` holds the conditions at the
+    step's end instead (left limits, :func:`held_conditions`): what an FMU
+    master feeds from :func:`twin.fmu.input_table`, equal to the mean for
+    duty cycles on the step grid and a constant ambient.
     """
     from .dataset import ChannelInfo, Dataset
     from .scenario import Scenario, load_scenario
     from .simulate import condition_channels
 
+    if inputs not in ("mean", "held"):
+        raise ROMError(f"unknown inputs {inputs!r}; use 'mean' or 'held'")
     scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     start = time.perf_counter()
     times = scenario.times() if sample_times is None else np.asarray(sample_times, float)
     steps, at_output = step_grid(times, scenario.time_step_s)
     z0 = initial_state(rom, scenario)
-    # One evaluation of the scenario on the step grid serves every use (the ambient lags are costly).
-    cond = scenario_conditions(scenario, rom.zones, steps, rom.zone_lags_s)
-    U = rom.inputs_from_conditions(cond.spindle_rpm, cond.feed_mm_min, cond.ambient_C, cond.gradient_K_per_m)
-    if scheme == "zoh":
-        # held over [tᵢ, tᵢ₊₁): the value at tᵢ₊₁ (held_conditions), i.e. the next row
-        _, Z = rom.states(steps, np.vstack([U[1:], U[-1:]]), z0, "zoh")
+    theta = scenario.theta if theta is None else theta
+    if inputs == "mean":
+        _, Z = rom.states(steps, None, z0, scheme, theta, means=scenario_step_means(rom, scenario, steps))
     else:
-        _, Z = rom.states(steps, U, z0, "theta", scenario.theta if theta is None else theta)
-    out = ScenarioConditions(times, cond.spindle_rpm[at_output],
-                             {a: v[at_output] for a, v in cond.feed_mm_min.items()},
-                             {z: v[at_output] for z, v in cond.ambient_C.items()}, cond.gradient_K_per_m[at_output])
-    U_out = U[at_output]
+        cond = scenario_conditions(scenario, rom.zones, steps, rom.zone_lags_s)
+        U = rom.inputs_from_conditions(cond.spindle_rpm, cond.feed_mm_min, cond.ambient_C, cond.gradient_K_per_m)
+        if scheme == "zoh":      # held over [tᵢ, tᵢ₊₁): the value at tᵢ₊₁ (held_conditions), i.e. the next row
+            _, Z = rom.states(steps, np.vstack([U[1:], U[-1:]]), z0, "zoh")
+        else:
+            _, Z = rom.states(steps, U, z0, "theta", theta)
+    out = scenario_conditions(scenario, rom.zones, times, rom.zone_lags_s)
+    U_out = rom.inputs_from_conditions(out.spindle_rpm, out.feed_mm_min, out.ambient_C, out.gradient_K_per_m)
     Y = rom.outputs(Z[at_output], U_out)
     channels, columns = condition_channels(out, rom.zones, [(src["name"], src["name"]) for src in rom.sources],
                                            rom.input_names, U_out)
@@ -679,7 +707,7 @@ def simulate_rom(rom, scenario, scheme="zoh", theta=None, sample_times=None):
         columns.append(Y[:, j])
     metadata = {"kind": "synthetic", "machine": rom.machine, "scenario": scenario.name,
                 "scenario_file": scenario.source, "noise": "none", "effects": [],
-                "model": f"ROM {rom.method} r={rom.order} ({scheme})", "rom_digest": rom.digest,
+                "model": f"ROM {rom.method} r={rom.order} ({scheme}, {inputs} inputs)", "rom_digest": rom.digest,
                 "time_step_s": scenario.time_step_s, "wall_seconds": time.perf_counter() - start,
                 "project_version": _project_version()}
     return Dataset(times, np.column_stack(columns), channels, metadata)

@@ -5,21 +5,31 @@ A scenario turns into operating conditions on any time grid: spindle speed
 (°C) and the vertical ambient gradient (K/m).  See ``docs/scenarios.md``
 for the format; every shipped scenario is an example.
 
-Piecewise-constant duty cycles are evaluated as left limits at a step end:
-the step ending exactly when the spindle stops still carries the running
-power, so a segment that fills whole time steps injects exactly its energy.
+Point values of piecewise-constant duty cycles are left limits (the sample
+at the moment the spindle stops still shows it running).  The solver does
+not use point values: it integrates the inputs over each time step
+(:meth:`Scenario.breakpoints_s` tells it where they jump), so every segment
+injects exactly its energy whether or not its ends fall on the step grid.
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from meshes.tomlspec import DefinitionError, Table, read_toml, resolve_definition
+from meshes.tomlspec import DefinitionError, Table, plain_value, read_toml, resolve_definition
 
 SCENARIOS_DIR = Path(__file__).resolve().parent.parent / "scenarios"
 HOUR = 3600.0
+#: Ambient temperatures (°C) accepted as plausible for a machine-tool room (the FMU's input range too).
+AMBIENT_RANGE_C = (-50.0, 100.0)
+ABSOLUTE_ZERO_C = -273.15
+#: Bytes per sample and per integration step of a run (time axis, recorded channels and conditions,
+#: dataset and CSV copies; step inputs and their quadrature), used to refuse a scenario up front.
+BYTES_PER_SAMPLE = 8 * 64 * 4
+BYTES_PER_STEP = 8 * 16 * 6
 TOP_KEYS = {"scenario", "initial", "ambient", "segments", "events", "noise", "outputs", "iso230_3"}
 
 
@@ -117,6 +127,23 @@ class Scenario:
         n = int(round(self.duration_s / self.sample_interval_s))
         return np.arange(n + 1) * self.sample_interval_s
 
+    def breakpoints_s(self, lags_s=None):
+        """Times (s) where the conditions jump or kink between samples, for exact step means.
+
+        Segment ends (speeds and feeds jump), the knots of a piecewise or CSV
+        ambient, the start and end of a door's fall, and the grid on which a
+        lagged zone's air is computed (``lags_s``: zone → lag in s).
+        """
+        cuts = [[s.start_s for s in self.segments], [s.end_s for s in self.segments]]
+        if self.ambient.kind in ("piecewise", "csv"):
+            cuts.append(self.ambient.params["times_s"])
+        cuts += [[ev.start_s, ev.start_s + ev.duration_s] for ev in self.events]
+        for tau in set((lags_s or {}).values()):
+            if tau > 0:
+                step = lag_step_s(tau)
+                cuts.append(np.arange(0.0, self.duration_s + step, step))
+        return np.unique(np.concatenate([np.asarray(c, float).ravel() for c in cuts]))
+
     def operating(self, t):
         """Spindle speed (rpm) and feeds (dict axis → mm/min) at times ``t`` (left limits; 0 after the cycle)."""
         t = np.atleast_1d(np.asarray(t, float))
@@ -182,7 +209,7 @@ def first_order_lag(signal, t, tau_s):
     """
     t = np.asarray(t, float)
     end = max(float(t.max()), 0.0)
-    dt = min(tau_s / 20.0, 60.0)
+    dt = lag_step_s(tau_s)
     grid = np.arange(0.0, end + dt, dt)
     x = signal(grid)
     a = np.exp(-dt / tau_s)
@@ -192,6 +219,33 @@ def first_order_lag(signal, t, tau_s):
     for k in range(len(slope)):
         y[k + 1] = x[k + 1] - slope[k] * tau_s + (y[k] - x[k] + slope[k] * tau_s) * a
     return np.interp(t, grid, y)
+
+
+def lag_step_s(tau_s):
+    """The grid step (s) on which :func:`first_order_lag` integrates a lag of ``tau_s``."""
+    return min(tau_s / 20.0, 60.0)
+
+
+def check_ambient_C(values, where, hint=""):
+    """Raise unless every temperature (°C) in ``values`` is a plausible room ambient (:data:`AMBIENT_RANGE_C`).
+
+    ``where`` names the file and field; ``hint`` says where in it (e.g. a row).
+    """
+    values = np.atleast_1d(np.asarray(values, float))
+    low, high = AMBIENT_RANGE_C
+    bad = np.flatnonzero((values < low) | (values > high))
+    if not len(bad):
+        return
+    value = float(values[bad[0]])
+    at = hint(int(bad[0])) if callable(hint) else hint
+    if value <= ABSOLUTE_ZERO_C:
+        why = f"is at or below absolute zero ({ABSOLUTE_ZERO_C} °C)"
+    elif 200.0 <= value <= 400.0:
+        why = (f"is not a plausible ambient in °C ({low:g} to {high:g} °C); it looks like kelvin: "
+               f"give °C (K − 273.15, here {value - 273.15:.2f} °C)")
+    else:
+        why = f"is not a plausible ambient in °C ({low:g} to {high:g} °C)"
+    raise DefinitionError(f"{where}{at}: {value:g} {why}")
 
 
 def scenario_path(scenario):
@@ -242,14 +296,19 @@ def _ambient(root: Table, base_dir: Path):
     common = {"kind", "vertical_gradient_K_per_m", "hvac_amplitude_K", "hvac_period_min"}
     params = {"hvac_amplitude_K": a.number("hvac_amplitude_K", 0.0, minimum=0.0),
               "hvac_period_min": a.number("hvac_period_min", 30.0, minimum=0.0, strict_minimum=True)}
+    swing = params["hvac_amplitude_K"]
     if kind == "constant":
         a.check_keys(common | {"temperature_C"})
         params["temperature_C"] = a.number("temperature_C", 20.0)
+        check_ambient_C(params["temperature_C"] + np.array([-swing, swing]), a.where("temperature_C"),
+                        " (with the HVAC ripple)" if swing else "")
     elif kind == "sinusoid":
         a.check_keys(common | {"mean_C", "amplitude_K", "period_h", "peak_clock_h", "start_clock_h"})
         params.update(mean_C=a.number("mean_C", 20.0), amplitude_K=a.number("amplitude_K", minimum=0.0),
                       period_h=a.number("period_h", 24.0, minimum=0.0, strict_minimum=True),
                       peak_clock_h=a.number("peak_clock_h", 17.0), start_clock_h=a.number("start_clock_h", 0.0))
+        reach = params["amplitude_K"] + swing
+        check_ambient_C(params["mean_C"] + np.array([-reach, reach]), a.where("mean_C"), " ± amplitude")
     elif kind == "piecewise":
         a.check_keys(common | {"times_h", "values_C"})
         times = np.asarray(a.vector("times_h")) * HOUR
@@ -258,6 +317,7 @@ def _ambient(root: Table, base_dir: Path):
             raise a.error("values_C", f"must have one value per time ({len(times)})", list(values))
         if np.any(np.diff(times) <= 0):
             raise a.error("times_h", "must increase strictly", list(times / HOUR))
+        check_ambient_C(values, a.where("values_C"), lambda i: f"[{i}]")
         params.update(times_s=times, values_C=values)
     else:
         a.check_keys(common | {"file", "time_column", "value_column"})
@@ -288,13 +348,36 @@ def _ambient_csv(a: Table, base_dir: Path):
     if not (np.isfinite(t).all() and np.isfinite(v).all()):
         row = int(np.flatnonzero(~(np.isfinite(t) & np.isfinite(v)))[0])
         raise DefinitionError(f"{a.where('file')} {path}: row {row + 2}: {time_col}/{value_col} is empty or not "
-                              f"a number, got {frame[time_col].iloc[row]!r}, {frame[value_col].iloc[row]!r}")
+                              f"a number, got {plain_value(frame[time_col].iloc[row])!r}, "
+                              f"{plain_value(frame[value_col].iloc[row])!r}")
     steps = np.diff(t)
     if np.any(steps <= 0):
         k = int(np.flatnonzero(steps <= 0)[0])
         raise DefinitionError(f"{a.where('file')} {path}: column {time_col!r} must increase strictly: "
                               f"row {k + 3} has {t[k + 1]:g} after {t[k]:g}")
+    check_ambient_C(v, f"{a.where('file')} {path}", lambda i: f": column {value_col!r}, row {i + 2}")
     return {"times_s": t, "values_C": v}
+
+
+def _memory_limit_bytes():
+    """Half the physical memory (8 GB when the system does not say)."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2
+    except (AttributeError, ValueError, OSError):
+        return 8 * 2**30
+
+
+def _check_size(head: Table, duration, sample, step):
+    """Refuse, before any array is made, a scenario whose run would not fit in memory."""
+    samples = int(round(duration / sample)) + 1
+    steps = int(np.ceil(duration / step - 1e-9))
+    need = samples * BYTES_PER_SAMPLE + steps * BYTES_PER_STEP
+    limit = _memory_limit_bytes()
+    if need > limit:
+        raise head.error("sample_interval_s", f"gives {samples:,} samples and {steps:,} integration steps over "
+                         f"{duration / HOUR / 24:,.1f} days; a run would need about {need / 2**30:,.0f} GB of "
+                         f"memory, more than the {limit / 2**30:,.0f} GB it may use here: sample less often "
+                         f"(and raise time_step_s) or split the scenario", sample)
 
 
 def load_scenario(scenario):
@@ -319,6 +402,7 @@ def load_scenario(scenario):
         raise head.error("sample_interval_s", f"must divide the duration ({duration:g} s) into whole samples",
                          sample)
     step = head.number("time_step_s", min(sample, 60.0), minimum=0.0, strict_minimum=True)
+    _check_size(head, duration, sample, min(step, sample))
     scheme = head.string("scheme", "backward_euler", choices={"backward_euler", "crank_nicolson"})
 
     events = []
@@ -344,6 +428,9 @@ def load_scenario(scenario):
         init.check_keys({"kind", "spindle_rpm", "ambient_C"})
         initial["spindle_rpm"] = init.number("spindle_rpm", None, minimum=0.0)
         initial["ambient_C"] = init.number("ambient_C", None)
+    for key in ("temperature_C", "ambient_C"):
+        if initial.get(key) is not None:
+            check_ambient_C(initial[key], init.where(key))
 
     noise = root.table("noise")
     noise.check_keys({"temperature", "displacement", "strain", "camera"})

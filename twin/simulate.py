@@ -1,23 +1,26 @@
 """Running a scenario on a machine twin: the transient FE run sampled by the virtual sensors.
 
-One thermal solve per time step and one output-operator product per sample;
-no elastic solve and no stored field unless fields are asked for.  The
-result is a :class:`~twin.dataset.Dataset` in edge units (°C, µm, µε) with the
-operating conditions (spindle speed, feeds, zone ambients, source powers)
-alongside the sensors, and an energy-balance check of the run.
+One thermal solve per time step and one output-operator product per sample,
+for the recorded outputs only; no elastic solve and no stored field unless
+fields are asked for.  The result is a :class:`~twin.dataset.Dataset` in edge
+units (°C, µm, µε) with the operating conditions (spindle speed, feeds, zone
+ambients, source powers) alongside the sensors, an energy balance of the run
+checked against the energy the scenario asks for, and (on request) a
+time-step error estimate.
 """
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse as sp
 
 import fea
+from fea.inputs import interval_means
 
 from .dataset import ChannelInfo, Dataset, project_version
-from .machine import Machine, build_machine
+from .machine import Machine, build_machine, power_input
 from .machine_definition import room_zone
 from .noise import apply_noise
 from .scenario import Scenario, load_scenario
@@ -35,15 +38,23 @@ class Conditions:
     inputs: np.ndarray
 
 
-class ScenarioInputs:
-    """The input schedule of a scenario on a machine (``sample(times) -> (n, n_inputs)``).
+#: Largest energy-balance error (relative to the energy throughput) a run passes with.
+ENERGY_TOLERANCE = 1e-6
 
-    ``modify`` is an optional hook ``modify(conditions) -> inputs`` used to
-    perturb the physics (e.g. the gap diagnosis's candidate effects).
+
+class ScenarioInputs:
+    """The input schedule of a scenario on a machine: ``sample(times)`` and ``means(step_times)`` → (n, n_inputs).
+
+    ``means`` integrates the inputs over each step, split at the scenario's
+    breakpoints, so a segment that ends inside a step injects its energy for
+    the part of the step it runs.  ``modify`` is an optional hook
+    ``modify(conditions) -> inputs`` used to perturb the physics; it must act
+    pointwise in time (it is evaluated at the quadrature points).
     """
 
     def __init__(self, machine: Machine, scenario: Scenario, modify=None):
         self.machine, self.scenario, self.modify = machine, scenario, modify
+        self.breakpoints_s = scenario.breakpoints_s(machine.definition.zone_lags_s)
 
     def conditions(self, times_s):
         t = np.atleast_1d(np.asarray(times_s, float))
@@ -59,6 +70,10 @@ class ScenarioInputs:
     def sample(self, times_s):
         return self.conditions(times_s).inputs
 
+    def means(self, step_times_s):
+        """Mean inputs over each step between ``step_times_s`` (see :func:`fea.inputs.interval_means`)."""
+        return interval_means(self.sample, step_times_s, self.breakpoints_s)
+
 
 @dataclass
 class SimulationResult:
@@ -70,13 +85,60 @@ class SimulationResult:
     energy_balance_relative_error: float | None = None
 
 
-def energy_rows(machine):
-    """Rows over T giving stored energy (J) and Σ r_T·T (W), and r_u (W per input) for the power in."""
-    system = machine.thermal
-    stored = system.mass @ np.ones(system.n_nodes)
-    r_T = sum((rt for rt, _ in system.heat_flows.values()), np.zeros(system.n_nodes))
-    r_u = sum((ru for _, ru in system.heat_flows.values()), np.zeros(system.n_inputs))
-    return sp.csr_matrix(np.vstack([stored, r_T])), r_u
+def requested_source_energy_J(scenario, definition):
+    """Energy (J) each heat source of ``definition`` must inject over ``scenario``, by source name.
+
+    Segment by segment: the source's power model at the segment's speed and
+    feeds times the segment's length, plus the idle machine after the last
+    segment.  It uses no time grid, so it is an independent check on what
+    the solver injected.
+    """
+    segments = scenario.segments
+    idle_s = scenario.duration_s - (segments[-1].end_s if segments else 0.0)
+    length = np.array([sg.end_s - sg.start_s for sg in segments] + [idle_s])
+    rpm = np.array([sg.spindle_rpm for sg in segments] + [0.0])
+    feeds = {a: np.array([sg.feed_mm_min[i] for sg in segments] + [0.0]) for i, a in enumerate("xyz")}
+    return {src.name: float(np.sum(src.power_W(rpm, feeds) * length)) for src in definition.sources}
+
+
+def energy_balance(ledger, machine, scenario, modified=False):
+    """The run's energy balance as a dict (see the keys below); ``ok`` is False when heat was lost or created.
+
+    ``stored_vs_loads``: max |ΔE_stored − Σ energy through the loads| over the
+    run; ``sources_vs_scenario``: max over the heat sources of |energy
+    injected − energy the scenario asks for| (None when ``modified``: the
+    inputs were changed on purpose); both relative to ``throughput_J``, the
+    gross energy through all loads (at least 1 µK of the whole machine).
+    """
+    scale = ledger.scale_J()
+    injected = {src.name: float(ledger.energy_of(power_input(src.name))[-1]) for src in machine.definition.sources}
+    requested = None if modified else requested_source_energy_J(scenario, machine.definition)
+    stored_error = ledger.relative_error()
+    source_error = None if requested is None else \
+        max([abs(injected[n] - requested[n]) / scale for n in injected], default=0.0)
+    worst = max(stored_error, source_error or 0.0)
+    return {"relative_error": worst, "stored_vs_loads": stored_error, "sources_vs_scenario": source_error,
+            "throughput_J": scale, "sources_injected_J": sum(injected.values()),
+            "sources_requested_J": None if requested is None else sum(requested.values()),
+            "tolerance": ENERGY_TOLERANCE, "ok": bool(worst <= ENERGY_TOLERANCE)}
+
+
+def recorded_channels(machine, scenario):
+    """Indices of the machine's channels a run of ``scenario`` records (camera spots only when asked)."""
+    return [j for j, c in enumerate(machine.channels) if c.kind != "camera" or scenario.record_camera]
+
+
+def step_error_summary(estimate, channels):
+    """Largest estimated time-step error per channel kind, in edge units (K, µm, µε), and the method."""
+    out = {"method": estimate.method}
+    for kind, key in (("temperature", "temperature_K"), ("camera", "temperature_K"),
+                      ("displacement", "displacement_um"), ("strain", "strain_ue")):
+        cols = [j for j, c in enumerate(channels) if c.kind == kind]
+        if cols:
+            scale = np.array([channels[j].scale for j in cols])
+            value = float(np.abs(estimate.error[:, cols] * scale).max())
+            out[key] = max(out.get(key, 0.0), value)
+    return out
 
 
 def initial_temperature(machine, scenario, schedule):
@@ -97,7 +159,7 @@ def initial_temperature(machine, scenario, schedule):
 
 
 def simulate(scenario, machine=None, mesh_size_m=None, fields=False, progress=None, modify=None,
-             noise=True, seed=None):
+             noise=True, seed=None, step_error=False):
     """Run ``scenario`` (name, path or :class:`Scenario`) and return a :class:`SimulationResult`.
 
     Parameters
@@ -110,6 +172,8 @@ def simulate(scenario, machine=None, mesh_size_m=None, fields=False, progress=No
     modify : optional input hook, see :class:`ScenarioInputs`
     noise : apply the scenario's sensor-noise models
     seed : overrides the scenario's seed
+    step_error : also estimate the time-step error of the recorded channels by step doubling
+        (about half a run more); the largest per kind goes into the metadata (``time_step_error``)
     """
     scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     machine = machine or build_machine(scenario.machine, mesh_size_m)
@@ -121,37 +185,36 @@ def simulate(scenario, machine=None, mesh_size_m=None, fields=False, progress=No
         field_times = sorted(set(scenario.field_times_s) | set(scenario.camera_image_times_s))
     else:
         field_times = list(fields) if fields else list(scenario.camera_image_times_s)
-    energy, r_u = energy_rows(machine)
     fe = machine.outputs
-    extended = fea.OutputOperator(fe.names + ["__stored_energy", "__boundary_loss"], fe.units + ["J", "W"],
-                                  sp.vstack([fe.matrix, energy]).tocsr(), np.r_[fe.offset, 0.0, 0.0])
+    keep = recorded_channels(machine, scenario)
+    keep_fe = [j for j in keep if j < fe.n_outputs]
+    keep_air = [j - fe.n_outputs for j in keep if j >= fe.n_outputs]
+    operator = fe.subset([fe.names[j] for j in keep_fe])
     T0 = initial_temperature(machine, scenario, schedule)
     solver = fea.ThermalSolver(machine.thermal, theta=scenario.theta)
-    run = solver.run(T0, times, schedule, extended, field_times_s=field_times,
-                     max_step_s=scenario.time_step_s, progress=progress)
+    run = solver.run(T0, times, schedule, operator, field_times_s=field_times,
+                     max_step_s=scenario.time_step_s, progress=progress, energy=True)
     cond = schedule.conditions(times)
-    fe_values = run.outputs[:, : fe.n_outputs]
-    stored, loss = run.outputs[:, -2], run.outputs[:, -1]
-    sensors = machine.channel_values(fe_values, cond.inputs)
+    channels = [machine.channels[j] for j in keep]
+    scale = np.array([c.scale for c in channels])
+    sensors = np.hstack([run.outputs, cond.inputs @ machine.feedthrough[keep_air].T]) * scale
 
-    balance = None
-    if scenario.time_step_s == scenario.sample_interval_s:
-        power = cond.inputs @ r_u - loss
-        dt = np.diff(times)
-        th = scenario.theta
-        expected = dt * (th * power[1:] + (1 - th) * power[:-1])
-        change = np.diff(stored)
-        scale = max(np.abs(change).max(), np.abs(expected).max(), 1e-300)
-        balance = float(np.abs(change - expected).max() / scale)
+    balance = energy_balance(run.energy, machine, scenario, modified=modify is not None)
+    if not balance["ok"]:
+        warnings.warn(f"scenario {scenario.name!r}: the energy balance fails ({balance['relative_error']:.1e} of "
+                      f"the energy throughput, tolerance {ENERGY_TOLERANCE:.0e}): heat was lost or created",
+                      RuntimeWarning, stacklevel=2)
+    step_errors = None
+    if step_error:
+        estimate = solver.step_error(T0, times, schedule, operator, run, scenario.time_step_s)
+        step_errors = step_error_summary(estimate, channels[:len(keep_fe)])
 
-    channels, columns = machine_condition_channels(machine, cond)
-    kinds = [c.kind for c in machine.channels]
-    keep = [j for j, c in enumerate(machine.channels) if c.kind != "camera" or scenario.record_camera]
+    columns_info, columns = machine_condition_channels(machine, cond)
     if noise:
-        sensors = apply_noise(sensors, kinds, scenario.noise, scenario.seed if seed is None else seed)
-    for j in keep:
-        c = machine.channels[j]
-        channels.append(ChannelInfo(c.name, c.unit, c.kind, c.label, c.position))
+        sensors = apply_noise(sensors, [c.kind for c in channels], scenario.noise,
+                              scenario.seed if seed is None else seed)
+    for j, c in enumerate(channels):
+        columns_info.append(ChannelInfo(c.name, c.unit, c.kind, c.label, c.position))
         columns.append(sensors[:, j])
     metadata = {
         "kind": "synthetic",
@@ -164,11 +227,14 @@ def simulate(scenario, machine=None, mesh_size_m=None, fields=False, progress=No
         "mesh": {"nodes": machine.mesh.n_nodes, "tetrahedra": machine.mesh.n_tets, "file": str(machine.mesh_path)},
         "time_step_s": scenario.time_step_s,
         "scheme": "backward Euler" if scenario.theta == 1.0 else "Crank-Nicolson",
-        "energy_balance_relative_error": balance,
+        "energy_balance_relative_error": balance["relative_error"],
+        "energy_balance": balance,
+        "time_step_error": step_errors,
         "project_version": project_version(),
     }
-    dataset = Dataset(times, np.column_stack(columns), channels, metadata)
-    return SimulationResult(dataset, machine, scenario, run.fields, time.perf_counter() - start, balance)
+    dataset = Dataset(times, np.column_stack(columns), columns_info, metadata)
+    return SimulationResult(dataset, machine, scenario, run.fields, time.perf_counter() - start,
+                            balance["relative_error"])
 
 
 def condition_channels(cond, zones, sources, input_names, inputs):

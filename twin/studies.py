@@ -28,6 +28,7 @@ from .compensation import format_table, physics_prediction, score
 from .dataset import json_default
 from .errors import TwinInputError
 from .model_store import dataset_label, fit_compensation_model
+from .outdir import atomic_directory, check_output_folder
 from .placement import MachineSpec, _zero_ref
 
 #: Scenario families of the cross-condition study: the first available scenario of each is used.
@@ -129,14 +130,16 @@ class StudyResult:
 
 def cross_condition_study(families=None, axes=("Z", "Y"), model="mlr", inputs=None, k=4,
                           select_method="gm-influence+fcm", machine="vmc_ram", mesh_size_m=None,
-                          scheduler="local", out_dir=None, params=None, progress=None, log=print):
+                          scheduler="local", out_dir=None, params=None, progress=None, log=print, overwrite=False):
     """Train on one scenario family, test on the others; the transfer matrix per axis.
 
     ``inputs``: fixed input channels, or None to choose ``k`` of the installed
     thermometers on each training family with ``select_method`` (as a user
     would on their one training condition).  Cells are the held-out max
     |residual|, RMSE and improvement %; the diagonal is the training fit.
+    ``out_dir`` is checked before the work (``overwrite``: see :func:`twin.outdir.check_output_folder`).
     """
+    check_output_folder(out_dir, overwrite, inputs=(machine,))
     families = dict(families or FAMILIES)
     chosen = {}
     for fam, names in families.items():
@@ -187,7 +190,8 @@ def cross_condition_study(families=None, axes=("Z", "Y"), model="mlr", inputs=No
     result = StudyResult("cross-condition", None, {"transfer": rows}, "\n".join(md) + "\n",
                          {"families": chosen, "matrices": {a: m.tolist() for a, m in matrices.items()}})
     if out_dir is not None:
-        _write(result, out_dir, lambda tmp: _heatmaps(matrices, fams, axes, tmp / "transfer_matrix.png", model))
+        _write(result, out_dir, overwrite,
+               lambda tmp: _heatmaps(matrices, fams, axes, tmp / "transfer_matrix.png", model))
     return result
 
 
@@ -216,12 +220,10 @@ def _heatmaps(matrices, labels, axes, path, model):
     plt.close(fig)
 
 
-def _write(result, out_dir, extra=None):
+def _write(result, out_dir, overwrite, extra=None):
     import pandas as pd
 
-    from .outdir import atomic_directory
-
-    with atomic_directory(out_dir) as tmp:
+    with atomic_directory(out_dir, overwrite) as tmp:
         (tmp / f"{result.name}.md").write_text(result.markdown, encoding="utf-8")
         for name, rows in result.tables.items():
             pd.DataFrame(rows).to_csv(tmp / f"{name}.csv", index=False)
@@ -235,8 +237,9 @@ def _write(result, out_dir, extra=None):
 # ----------------------------------------------------------------------------- thesis protocol
 def thesis_protocol_study(axes=("Z", "Y"), models=("anfis", "mlr"), inputs=None, k=4,
                           select_method="gm-influence+fcm", machine="vmc_ram", mesh_size_m=None,
-                          scheduler="local", out_dir=None, progress=None, log=print):
+                          scheduler="local", out_dir=None, progress=None, log=print, overwrite=False):
     """Train on Test IV, test on Tests I, II, III, V, VI (thesis §5): a table per axis and model."""
+    check_output_folder(out_dir, overwrite, inputs=(machine,))
     tests = _available(THESIS_TEST)
     if not _available([THESIS_TRAIN]) or not tests:
         raise TwinInputError(f"the thesis protocol needs {THESIS_TRAIN} and some of {list(THESIS_TEST)}")
@@ -274,14 +277,14 @@ def thesis_protocol_study(axes=("Z", "Y"), models=("anfis", "mlr"), inputs=None,
             for (axis, model, label), (t, y, p) in plots.items():
                 plot_measured_vs_predicted(t, y, p, "um", f"{axis} on {label} ({model}, trained on Test IV)",
                                            tmp / f"{label}_{axis}_{model}.png")
-        _write(result, out_dir, figs)
+        _write(result, out_dir, overwrite, figs)
     return result
 
 
 # ----------------------------------------------------------------------------- hybrid
 def hybrid_study(train=HYBRID_TRAIN, test=HYBRID_TEST, axes=("Z", "Y"), model="anfis", inputs=None, k=4,
                  select_method="gm-influence+fcm", gap=None, machine="vmc_ram", mesh_size_m=None,
-                 physics_backend="fe", scheduler="local", out_dir=None, progress=None, log=print):
+                 physics_backend="fe", scheduler="local", out_dir=None, progress=None, log=print, overwrite=False):
     """Pure physics vs pure data-driven vs hybrid (physics + learned residual) on held-out records.
 
     "Measured" records: the twin with ``gap`` (default :data:`DEFAULT_GAP`:
@@ -292,6 +295,7 @@ def hybrid_study(train=HYBRID_TRAIN, test=HYBRID_TEST, axes=("Z", "Y"), model="a
     Hybrid: the same ``model`` and inputs fitted to the physics residual
     (measured − physics change); prediction = physics + learned residual.
     """
+    check_output_folder(out_dir, overwrite, inputs=(machine,))
     from .sweep import run_tasks
 
     gap = dict(DEFAULT_GAP if gap is None else gap)
@@ -362,8 +366,9 @@ def hybrid_study(train=HYBRID_TRAIN, test=HYBRID_TEST, axes=("Z", "Y"), model="a
     result = StudyResult("hybrid", None, {"hybrid": rows, "hybrid_pooled": pooled}, "\n".join(md) + "\n",
                          {"gap": gap, "train": train, "test": test, "inputs": used, "simulation_s": sim_s})
     if out_dir is not None:
-        _write(result, out_dir, lambda tmp: _hybrid_plots(curves, te_labels=[dataset_label(measured[i]) for i in te],
-                                                          axes=axes, path=tmp / "hybrid_heldout.png"))
+        _write(result, out_dir, overwrite,
+               lambda tmp: _hybrid_plots(curves, te_labels=[dataset_label(measured[i]) for i in te], axes=axes,
+                                         path=tmp / "hybrid_heldout.png"))
     return result
 
 

@@ -27,8 +27,14 @@ def run_summary(dataset, wall_seconds, probe_spacing_m=0.1, iso_test=None):
         hottest = max(surface, key=lambda n: dataset[n].max())
         out["hottest_sensor"] = {"name": hottest, "max_C": float(dataset[hottest].max()),
                                  "rise_K": rise[hottest]}
-    if dataset.metadata.get("energy_balance_relative_error") is not None:
-        out["energy_balance_relative_error"] = dataset.metadata["energy_balance_relative_error"]
+    meta = dataset.metadata
+    if meta.get("scheme"):
+        out["time_integration"] = {"scheme": meta["scheme"], "time_step_s": meta.get("time_step_s"),
+                                   "step_error": meta.get("time_step_error")}
+    if meta.get("energy_balance_relative_error") is not None:
+        out["energy_balance_relative_error"] = meta["energy_balance_relative_error"]
+    if meta.get("energy_balance"):
+        out["energy_balance"] = meta["energy_balance"]
     axes = [a for a in drift if a in ("X", "Y", "Z")]       # the ISO quantities are of the X/Y/Z drifts
     if iso_test == "etve":
         ambient = [n for n in dataset.names if n.startswith("ambient_") and dataset.info(n).unit == "degC"]
@@ -55,7 +61,11 @@ def format_summary(summary):
     if "hottest_sensor" in summary:
         h = summary["hottest_sensor"]
         lines.append(f"- hottest sensor: {h['name']} at {h['max_C']:.2f} °C (rise {h['rise_K']:.2f} K)")
-    if "energy_balance_relative_error" in summary:
+    if "time_integration" in summary:
+        lines.append(_time_integration_line(summary["time_integration"]))
+    if "energy_balance" in summary:
+        lines.append(_energy_line(summary["energy_balance"]))
+    elif "energy_balance_relative_error" in summary:
         lines.append(f"- energy balance (stored vs in − out), max relative error: "
                      f"{summary['energy_balance_relative_error']:.1e}")
     lines += ["", "| channel | peak drift (µm) | at (h) | range (µm) |", "|---|---|---|---|"]
@@ -72,3 +82,30 @@ def format_summary(summary):
                   *[f"- maximum |drift| {a}: {v:.2f} µm" for a, v in s["max_abs_drift_um"].items()],
                   f"- maximum |tilt| in YZ: {s['max_abs_tilt_yz_urad']:.1f} µrad (µm/m)"]
     return "\n".join(lines) + "\n"
+
+
+def _time_integration_line(info):
+    """The scheme and step, and the estimated time-step error when the run estimated it."""
+    order = {"backward Euler": "first order", "Crank-Nicolson": "second order"}.get(info["scheme"], "")
+    step = f", {info['time_step_s']:g} s steps" if info.get("time_step_s") else ""
+    line = f"- time integration: {info['scheme']}{f' ({order})' if order else ''}{step}"
+    error = info.get("step_error")
+    if error:
+        parts = [f"{error[key]:.2g} {unit}" for key, unit in (("temperature_K", "K"), ("displacement_um", "µm"),
+                                                             ("strain_ue", "µε")) if key in error]
+        line += f"; estimated time-step error (step doubling) up to {', '.join(parts)}"
+    return line
+
+
+def _energy_line(balance):
+    """The energy balance, against the loads and against what the scenario asks of the heat sources."""
+    line = (f"- energy balance: error {balance['stored_vs_loads']:.1e} of the {balance['throughput_J']:.3g} J "
+            f"through the loads")
+    if balance.get("sources_vs_scenario") is not None:
+        line += (f"; heat sources injected {balance['sources_injected_J']:.4g} J of the "
+                 f"{balance['sources_requested_J']:.4g} J the scenario asks for "
+                 f"(error {balance['sources_vs_scenario']:.1e})")
+    if not balance["ok"]:
+        line += (f" — **FAILED** (tolerance {balance['tolerance']:.0e}): heat was lost or created, "
+                 "the results are not to be trusted")
+    return line

@@ -10,14 +10,16 @@ from pathlib import Path
 import numpy as np
 
 import fea
-from meshes.builder import SHIPPED_CACHE, build_mesh, mesh_statistics
+from meshes.builder import build_mesh, mesh_statistics
+from meshes.cachefiles import SHIPPED_CACHE, sidecar
 from meshes.definition import load_geometry
 
 from . import plots
 from .machine import build_machine, convection_summary
 from .machine_definition import load_machine
-from .outdir import atomic_directory
-from .render import render_machine, render_thermal_image
+from .outdir import atomic_directory, check_output_folder
+from .deformation import DisplacementJob
+from .render import render_deformed_views, render_machine, render_temperature_views, render_thermal_image
 from .scenario import load_scenario
 from .simulate import simulate
 from .summary import format_summary, run_summary
@@ -31,7 +33,7 @@ class RunOutput:
 
 
 def run_scenario(scenario, machine=None, mesh_size_m=None, out_dir=None, fields=False, progress=None,
-                 camera=None):
+                 camera=None, overwrite=False, views=True):
     """Simulate a scenario and write the dataset, plots, summary (and fields/images) to ``out_dir``.
 
     Parameters
@@ -39,10 +41,14 @@ def run_scenario(scenario, machine=None, mesh_size_m=None, out_dir=None, fields=
     scenario : scenario name or path
     machine : machine name or path overriding the scenario's
     mesh_size_m : mesh size override, m
-    out_dir : result folder (default ``runs/<scenario>``); written atomically
+    out_dir : result folder (default ``runs/<scenario>``); checked before the simulation, written
+        atomically (see :mod:`twin.outdir`)
     fields : also write VTK temperature fields at the scenario's ``fields_at_h`` times
     progress : callable ``progress(done, total)``
     camera : record the camera spots in the dataset (default: as the scenario says)
+    overwrite : write into a non-empty folder that is not a twin output (its files are kept)
+    views : at the scenario's ``camera_images_at_h`` times, also render 3-D views of the temperature
+        field and of the deformed shape (one elastic solve per time, set up in a worker during the run)
     """
     sc = load_scenario(scenario)
     if machine is not None:
@@ -51,47 +57,67 @@ def run_scenario(scenario, machine=None, mesh_size_m=None, out_dir=None, fields=
         sc.record_camera = bool(camera)
     definition = load_machine(sc.machine)
     sc.check_machine(definition)      # fail on bad speeds before any meshing
-    model = build_machine(sc.machine, mesh_size_m, definition=definition)
-    result = simulate(sc, model, fields=bool(fields), progress=progress)
     out_dir = Path(out_dir or Path("runs") / sc.name)
+    check_output_folder(out_dir, overwrite, inputs=(sc.source, definition.source))
+    model = build_machine(sc.machine, mesh_size_m, definition=definition)
+    deformation = DisplacementJob(model) if views and sc.camera_image_times_s else None
+    try:
+        result = simulate(sc, model, fields=bool(fields), progress=progress, step_error=True)
+        view_fields = {t: result.fields[t] for t in sc.camera_image_times_s if t in result.fields}
+        if deformation is not None:
+            deformation.submit(view_fields)
+        summary = _write_run(sc, model, result, out_dir, overwrite, fields, view_fields, deformation)
+    finally:
+        if deformation is not None:
+            deformation.cancel()        # only stops a worker still running (after an error)
+    return RunOutput(out_dir, summary, out_dir / f"{sc.name}.csv")
+
+
+def _write_run(sc, model, result, out_dir, overwrite, fields, view_fields, deformation):
+    """Write the result folder of :func:`run_scenario`; returns the run summary."""
     summary = run_summary(result.dataset, result.wall_seconds,
                           float(np.linalg.norm(model.definition.tilt_probe_offset)), sc.iso_test)
-    with atomic_directory(out_dir) as tmp:
+    with atomic_directory(out_dir, overwrite) as tmp:
         data_path = tmp / f"{sc.name}.csv"
         result.dataset.write(data_path)
         plots.plot_temperatures(result.dataset, tmp / "temperatures.png")
         plots.plot_drift(result.dataset, tmp / "drift.png")
         plots.plot_strains(result.dataset, tmp / "strains.png")
-        for t in sc.camera_image_times_s:
-            if t in result.fields and model.definition.camera is not None:
-                render_thermal_image(model, result.fields[t], tmp / f"thermal_{t / 3600:.2f}h.png",
+        if model.definition.camera is not None:
+            for t, T in view_fields.items():
+                render_thermal_image(model, T, tmp / f"thermal_{t / 3600:.2f}h.png",
                                      title=f"{sc.name}  t = {t / 3600:.2f} h")
         if fields and result.fields:
             frames = {t: {"temperature_degC": model.thermal.nodal_field(T)} for t, T in result.fields.items()}
             fea.write_time_series(tmp / "fields.pvd", model.mesh, frames)
         (tmp / "summary.json").write_text(json.dumps(summary, indent=1))
         (tmp / "summary.md").write_text(format_summary(summary))
-    return RunOutput(out_dir, summary, out_dir / f"{sc.name}.csv")
+        if deformation is not None:          # the worker solves the elastic fields meanwhile
+            render_temperature_views(model, view_fields, tmp, sc.name)
+            render_deformed_views(model, deformation.result(), tmp, sc.name)
+    return summary
 
 
-def report_dataset(path, out_dir=None, column_map=None, nan_policy="error", probe_spacing_m=0.1, iso_test=None):
+def report_dataset(path, out_dir=None, column_map=None, nan_policy="error", probe_spacing_m=0.1, iso_test=None,
+                   overwrite=False):
     """Plots and a readable summary of an existing dataset (a twin run or measured data).
 
     Measured CSVs without a sidecar go through the validated import
     (``column_map``, ``nan_policy``); the import report (gaps, NaNs) is
-    written beside the summary.
+    written beside the summary. ``overwrite`` as in :func:`run_scenario`.
     """
     from .dataset import Dataset, sidecar_path
 
     path = Path(path)
+    out_dir = Path(out_dir or Path("runs") / f"report_{path.stem}")
+    check_output_folder(out_dir, overwrite, inputs=(path, sidecar_path(path)))
     if column_map or not sidecar_path(path).exists():
         dataset = Dataset.from_measured_csv(path, column_map=column_map, nan_policy=nan_policy)
     else:
         dataset = Dataset.read(path)
     dataset.metadata.setdefault("scenario", path.stem)
     summary = run_summary(dataset, 0.0, probe_spacing_m, iso_test)
-    out_dir = Path(out_dir or Path("runs") / f"report_{path.stem}")
-    with atomic_directory(out_dir) as tmp:
+    with atomic_directory(out_dir, overwrite) as tmp:
         if dataset.names_of_kind("temperature", "air"):
             plots.plot_temperatures(dataset, tmp / "temperatures.png")
         if dataset.names_of_kind("displacement"):
@@ -104,14 +130,17 @@ def report_dataset(path, out_dir=None, column_map=None, nan_policy="error", prob
     return summary, out_dir
 
 
-def mesh_machine(machine="vmc_ram", mesh_size_m=None, out_dir=None, rebuild=False, ship=False):
+def mesh_machine(machine="vmc_ram", mesh_size_m=None, out_dir=None, rebuild=False, ship=False, overwrite=False):
     """Build (or load) and describe a machine's mesh; write statistics and an off-screen render.
 
     ``ship`` copies the mesh and the machine's output operator into the
     package's shipped cache (``meshes/cache``), for committing with the
     definition so a fresh clone needs neither meshing nor elastic solves.
+    ``overwrite`` as in :func:`run_scenario`.
     """
     geometry = load_geometry(machine)
+    out_dir = Path(out_dir or Path("runs") / f"mesh_{geometry.name}")
+    check_output_folder(out_dir, overwrite, inputs=(geometry.source,))
     start = time.perf_counter()
     mesh, info = build_mesh(geometry, mesh_size_m, rebuild=rebuild)
     stats = mesh_statistics(mesh)
@@ -127,10 +156,10 @@ def mesh_machine(machine="vmc_ram", mesh_size_m=None, out_dir=None, rebuild=Fals
         SHIPPED_CACHE.mkdir(exist_ok=True)
         for path in (model.mesh_path, model.operator_path):
             if path.parent != SHIPPED_CACHE:
+                shutil.copy2(sidecar(path), SHIPPED_CACHE / sidecar(path).name)
                 shutil.copy2(path, SHIPPED_CACHE / path.name)
         stats["shipped"] = [model.mesh_path.name, model.operator_path.name]
-    out_dir = Path(out_dir or Path("runs") / f"mesh_{geometry.name}")
-    with atomic_directory(out_dir) as tmp:
+    with atomic_directory(out_dir, overwrite) as tmp:
         (tmp / "mesh_statistics.json").write_text(json.dumps(stats, indent=1))
         render_machine(model, tmp / f"{geometry.name}.png", title=f"{geometry.name}: {mesh.n_tets} tetrahedra")
     return stats, out_dir

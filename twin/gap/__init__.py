@@ -13,8 +13,8 @@ from .effects import default_library, library_by_name
 __all__ = ["Diagnosis", "benchmark", "default_library", "diagnose", "library_by_name", "write_report"]
 
 
-def write_report(diagnosis, out_dir, render=True):
+def write_report(diagnosis, out_dir, render=True, overwrite=False):
     """Write the diagnosis report (see :func:`twin.gap.report.write_report`)."""
     from .report import write_report as _write
 
-    return _write(diagnosis, out_dir, render=render)
+    return _write(diagnosis, out_dir, render=render, overwrite=overwrite)

@@ -214,9 +214,16 @@ class BenchmarkResult:
 
 
 def benchmark(which="all", scheduler="local", out_dir=None, scenario=SCENARIO, truth_mesh_size_m=TRUTH_MESH_SIZE_M,
-              nominal_mesh_size_m=None, holdout_fraction=0.3, progress=None, n_workers=None, engine_options=()):
-    """Run the blind benchmark (see the module docstring); write ``out_dir`` (Markdown, JSON, PNG) if given."""
+              nominal_mesh_size_m=None, holdout_fraction=0.3, progress=None, n_workers=None, engine_options=(),
+              overwrite=False):
+    """Run the blind benchmark (see the module docstring); write ``out_dir`` (Markdown, JSON, PNG) if given.
+
+    ``out_dir`` is checked before the work (``overwrite``: see :func:`twin.outdir.check_output_folder`).
+    """
+    from ..outdir import atomic_directory, check_output_folder
     from ..sweep import describe_scheduler, run_tasks
+
+    check_output_folder(out_dir, overwrite, inputs=(scenario,))
 
     t0 = time.perf_counter()
     todo = cases(which)
@@ -232,10 +239,9 @@ def benchmark(which="all", scheduler="local", out_dir=None, scenario=SCENARIO, t
     path = None
     if out_dir is not None:
         from ..dataset import json_default
-        from ..outdir import atomic_directory
 
         path = Path(out_dir)
-        with atomic_directory(path) as tmp:
+        with atomic_directory(path, overwrite) as tmp:
             (tmp / "benchmark.md").write_text(md)
             (tmp / "benchmark.json").write_text(json.dumps({"settings": settings, "metrics": metrics,
                                                             "wall_seconds": wall, "results": results},

@@ -41,10 +41,13 @@ def _save(fig, path):
     return save_figure(fig, path).name
 
 
-def write_report(d, out_dir, render=True):
-    """Write ``report.md``, ``diagnosis.json`` and the figures of a :class:`~twin.gap.diagnose.Diagnosis`."""
+def write_report(d, out_dir, render=True, overwrite=False):
+    """Write ``report.md``, ``diagnosis.json`` and the figures of a :class:`~twin.gap.diagnose.Diagnosis`.
+
+    ``out_dir`` is written as :func:`twin.outdir.atomic_directory` does (``overwrite`` likewise).
+    """
     out_dir = Path(out_dir)
-    with atomic_directory(out_dir) as tmp:
+    with atomic_directory(out_dir, overwrite) as tmp:
         figures = {"residuals": plot_residuals(d, tmp / "residuals.png"),
                    "ranking": plot_ranking(d, tmp / "ranking.png"),
                    "breakdown": plot_breakdown(d, tmp / "phases_bands.png")}

@@ -1,0 +1,33 @@
+"""Progress bars count what the work counts: time steps, scenarios, fits, cases."""
+import inspect
+
+import pytest
+
+from twin.progress import progress_bar
+
+
+@pytest.mark.parametrize("unit", ["step", "scenario"])
+def test_the_bar_shows_its_unit(unit, capsys):
+    update = progress_bar("simulating", unit=unit)
+    update(1, 4)
+    update(4, 4)
+    err = capsys.readouterr().err
+    assert f"{unit}/s" in err and "sample/s" not in err
+
+
+def test_the_unit_must_be_chosen():
+    with pytest.raises(TypeError):
+        progress_bar("simulating")
+
+
+def test_commands_name_what_they_count():
+    from twin import cli_gap, cli_models, cli_run
+
+    units = {name: inspect.getsource(getattr(module, name)) for module, name in
+             ((cli_run, "cmd_run"), (cli_models, "cmd_study"), (cli_models, "cmd_place"),
+              (cli_gap, "cmd_diagnose"), (cli_gap, "cmd_benchmark"))}
+    assert 'unit="step"' in units["cmd_run"]
+    assert 'unit="scenario"' in units["cmd_study"]
+    assert 'unit="simulation"' in units["cmd_place"]
+    assert 'unit="fit"' in units["cmd_diagnose"]
+    assert 'unit="case"' in units["cmd_benchmark"]
