@@ -153,12 +153,7 @@ def test_krylov_breakdown_is_a_clear_error():
         krylov_basis(system, 5, [0.0, 0.5])
 
 
-def test_rom_runs_the_160h_etve_quickly(rom):
-    import time
-
-    scenario = load_scenario("etve_160h")
-    start = time.perf_counter()
-    ds = simulate_rom(rom, scenario)
-    seconds = time.perf_counter() - start
+def test_rom_runs_the_160h_etve(rom):
+    # its speed is measured in bench/bench_rom_fmu.py, not asserted here
+    ds = simulate_rom(rom, load_scenario("etve_160h"))
     assert len(ds) == 9601 and np.all(np.isfinite(ds.values))
-    assert seconds < 2.0          # ~20 ms alone; generous for a loaded CI machine
