@@ -21,6 +21,7 @@ from .grey import (
     gm1n_influence,
     iago,
 )
+from .kalman import FilterResult, KalmanFilter, discretize
 from .metrics import improvement_percent, max_abs_residual, nse, pearson_r, rmse
 from .persistence import load_model, save_model
 from .pso import PSOResult, particle_swarm_minimize
@@ -36,7 +37,9 @@ __all__ = [
     "GM11",
     "GM1NRegressor",
     "GMCRegressor",
+    "FilterResult",
     "GNNMCIRegressor",
+    "KalmanFilter",
     "MLRRegressor",
     "PCRRegressor",
     "PSOResult",
@@ -45,6 +48,7 @@ __all__ = [
     "background_values",
     "chronological_prediction",
     "convolution_response",
+    "discretize",
     "gm0n_influence",
     "gm1n_influence",
     "iago",
