@@ -24,10 +24,10 @@ def main():
     scenario = args[0] if args else "etve_160h"
     fields = "--fields" in sys.argv
     start = time.perf_counter()
-    from twin.machine import build_machine
-    from twin.scenario import load_scenario
-    from twin.simulate import simulate
-    from twin.workflows import run_scenario
+    from twin.core.machine import build_machine
+    from twin.core.scenario import load_scenario
+    from twin.core.simulate import simulate
+    from twin.run.workflows import run_scenario
 
     imports = time.perf_counter() - start
     sc = load_scenario(scenario)

@@ -27,9 +27,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
 def main(argv=None):
-    from twin.gap import diagnose, write_report
     from twin.gap.benchmark import SCENARIO, TRUTH_HIDDEN, TRUTH_MESH_SIZE_M, TRUTH_VALUES, _machine
+    from twin.gap.diagnose import diagnose
     from twin.gap.effects import default_library
+    from twin.gap.report import write_report
     from twin.gap.truth import truth_dataset
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -25,7 +25,7 @@ def main(argv=None):
     parser.add_argument("--json", help="write the timings as JSON here")
     args = parser.parse_args(argv)
 
-    from twin.placement import placement_study
+    from twin.placement.study import placement_study
 
     load_before = os.getloadavg()
     start = time.perf_counter()

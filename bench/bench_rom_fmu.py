@@ -20,13 +20,13 @@ import numpy as np
 
 
 def main(argv=None):
-    from twin.fmu import export_fmu, input_table, scenario_start, simulate, table_inputs
+    from twin.core.machine import build_machine
+    from twin.core.scenario import load_scenario
+    from twin.core.simulate import simulate as simulate_fe
+    from twin.fmu.export import export_fmu, input_table, scenario_start, simulate, table_inputs
     from twin.fmu.session import FMUSession
-    from twin.machine import build_machine
-    from twin.rom import DEFAULT_ORDER, build_rom, simulate_rom
-    from twin.rom_report import max_errors
-    from twin.scenario import load_scenario
-    from twin.simulate import simulate as simulate_fe
+    from twin.rom.reduction import DEFAULT_ORDER, build_rom, simulate_rom
+    from twin.rom.report import max_errors
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--scenario", default="etve_160h")

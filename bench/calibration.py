@@ -5,8 +5,8 @@
 import sys
 import time
 
-from twin.calibration import calibration_table, format_table
-from twin.machine import build_machine
+from twin.core.machine import build_machine
+from twin.run.calibration import calibration_table, format_table
 
 
 def main():

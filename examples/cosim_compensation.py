@@ -29,9 +29,9 @@ import numpy as np
 
 
 def build_fmu(kind, out_dir, machine_name="vmc_ram", order=None):
-    from twin.fmu import export_fmu
-    from twin.machine import build_machine
-    from twin.rom import DEFAULT_ORDER, cached_rom
+    from twin.core.machine import build_machine
+    from twin.fmu.export import export_fmu
+    from twin.rom.reduction import DEFAULT_ORDER, cached_rom
 
     rom = cached_rom(build_machine(machine_name), order or DEFAULT_ORDER)
     return rom, export_fmu(rom, Path(out_dir) / f"twin_{kind}.fmu", kind=kind,
@@ -41,9 +41,9 @@ def build_fmu(kind, out_dir, machine_name="vmc_ram", order=None):
 def run(scenario_name="heat_cool_9000", kind="native", out_dir="runs/cosim", step_s=30.0, delay_s=60.0,
         update_s=60.0, sensor_lag_s=300.0, duration_h=None, fmu=None, door_drop_K=6.0):
     """Run the compensation loop; return a dict of time series (µm, h) and the PNG path."""
+    from twin.core.scenario import DoorOpening, load_scenario
     from twin.fmu.session import FMUSession
-    from twin.rom import scenario_conditions
-    from twin.scenario import DoorOpening, load_scenario
+    from twin.rom.reduction import scenario_conditions
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

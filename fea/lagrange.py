@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .mesh import LOCAL_FACES
+
 #: Local edges of a tetrahedron; P2 edge node k sits on EDGES[k].
 EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
 
@@ -87,8 +89,6 @@ class LagrangeSpace:
 
     def facet_nodes(self, tet, local):
         """All nodes on boundary facets (vertices, and edge midpoints for P2)."""
-        from .mesh import LOCAL_FACES
-
         tet, local = np.asarray(tet), np.asarray(local)
         vertices = LOCAL_FACES[local]                           # (k, 3) local vertices
         nodes = [self.element_nodes[tet[:, None], vertices]]

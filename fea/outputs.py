@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from . import background
 from .errors import FEAInputError
 
 
@@ -218,10 +219,8 @@ def build_output_operator(specs, thermal_system, elastic=None, snap_distance=0.0
             return sp.csr_matrix(G), -t_ref * G.sum(axis=1)
 
         if concurrent:
-            from .background import start
-
             elastic._check_supports()       # raise bad supports here, not later from the worker
-            job = start(_influence_with_stats, elastic, L, thermal_system)
+            job = background.start(_influence_with_stats, elastic, L, thermal_system)
             deferred = (np.array(mech), job, finish)
             for i in mech:
                 rows[i] = sp.csr_matrix((1, n))

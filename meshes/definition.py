@@ -11,6 +11,7 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .builder import BUILDER_VERSION
 from .shapes import Box, Cylinder, HollowBox, StlPart
 from .tomlspec import DefinitionError, Table, read_toml, resolve_definition
 
@@ -59,8 +60,6 @@ class MachineGeometry:
         mesh of the geometry, and the shipped meshes must stay found after an
         upgrade (``twin mesh --rebuild`` meshes again on purpose).
         """
-        from .builder import BUILDER_VERSION
-
         payload = {
             "parts": [[p.name, type(p.shape).__name__, _shape_state(p.shape)] for p in self.parts],
             "size": round(float(mesh_size_m), 9),

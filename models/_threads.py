@@ -6,7 +6,7 @@ many rows) into per-thread partial sums, so ``OPENBLAS_NUM_THREADS=1`` and
 that difference to the end. Every ``fit`` in :mod:`models` runs inside
 :func:`single_blas_thread`. The matrices are small (tens of columns), so one
 thread costs little; it is the process-wide pool, so fits must not run in
-parallel threads of one process (use processes, as ``twin.sweep`` does).
+parallel threads of one process (use processes, as ``twin.infra.sweep`` does).
 """
 
 from __future__ import annotations

@@ -24,7 +24,7 @@ def fl_thermal_csv():
 @pytest.fixture(scope="module")
 def machine():
     """The twin of the default machine, ``vmc_ram`` (from the mesh and matrix caches)."""
-    from twin.machine import build_machine
+    from twin.core.machine import build_machine
 
     return build_machine("vmc_ram")
 
@@ -32,7 +32,7 @@ def machine():
 @pytest.fixture(scope="module")
 def rom(machine):
     """The reduced-order model of :func:`machine` at the default order (from the ROM cache)."""
-    from twin.rom import DEFAULT_ORDER, cached_rom
+    from twin.rom.reduction import DEFAULT_ORDER, cached_rom
 
     return cached_rom(machine, DEFAULT_ORDER)
 

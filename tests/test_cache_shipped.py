@@ -8,13 +8,12 @@ import shutil
 
 import numpy as np
 import pytest
-
 from cache_spoils import NPZ_SPOILS, VTU_SPOILS, assert_refused, spoil
 
 from meshes import builder, cachefiles
 from meshes.cachefiles import SHIPPED_CACHE, content_problem, sidecar
-from twin import machine as twin_machine
-from twin.machine import build_machine
+from twin.core import machine as twin_machine
+from twin.core.machine import build_machine
 
 
 @pytest.fixture

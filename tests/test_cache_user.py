@@ -13,13 +13,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from cache_spoils import NPZ_SPOILS, spoil
 
 from meshes import builder
 from meshes.cachefiles import content_problem
-from twin import machine as twin_machine
-from twin.machine import build_machine
+from twin.core import machine as twin_machine
+from twin.core.machine import build_machine
 
 DATA = Path(__file__).parent / "data"
 MINI = DATA / "mini_machine.toml"
@@ -125,7 +124,7 @@ def test_spoiled_user_operator_is_reported_and_rebuilt(cache, caplog, no_meshing
 
 @pytest.mark.parametrize("how", ["truncated", "values doubled"])
 def test_spoiled_rom_is_reported_and_rebuilt_and_a_renamed_machine_reuses_it(cache, caplog, tmp_path, no_meshing, how):
-    from twin.rom import cached_rom
+    from twin.rom.reduction import cached_rom
 
     model = build_machine(MINI)
     rom = cached_rom(model, 12)
@@ -141,7 +140,7 @@ def test_spoiled_rom_is_reported_and_rebuilt_and_a_renamed_machine_reuses_it(cac
 
 
 def test_spoiled_placement_record_is_simulated_again(cache, caplog, no_meshing):
-    from twin.placement import CandidateSpec, MachineSpec, RecordTask, run_records
+    from twin.placement.study import CandidateSpec, MachineSpec, RecordTask, run_records
 
     task = RecordTask(MachineSpec(str(MINI)), CandidateSpec(parts=("column",), n_surface=8, camera=False),
                       str(DATA / "mini_scenario.toml"), axes=("Z",))

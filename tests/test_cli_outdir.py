@@ -4,10 +4,10 @@ import os
 
 import pytest
 
-from twin import outdir
 from twin.cli import main
 from twin.errors import TwinInputError
-from twin.outdir import JOURNAL, MARKER, atomic_directory
+from twin.infra import outdir
+from twin.infra.outdir import JOURNAL, MARKER, atomic_directory
 
 REPORT_FILES = {"summary.json", "summary.md", "temperatures.png", "drift.png", "import_report.json"}
 
@@ -169,7 +169,7 @@ def test_an_interrupted_commit_claims_no_completeness_and_is_recognised_next_tim
 
 
 def test_run_checks_its_output_before_simulating(tmp_path):
-    from twin.workflows import run_scenario
+    from twin.run.workflows import run_scenario
 
     blocker = tmp_path / "file.txt"
     blocker.write_text("x")
@@ -229,8 +229,8 @@ def test_every_writing_command_takes_overwrite(command):
 
 
 def test_studies_refuse_a_folder_holding_their_machine_file(tmp_path, monkeypatch):
-    from twin.placement import placement_study
-    from twin.studies import thesis_protocol_study
+    from twin.compensation.studies import thesis_protocol_study
+    from twin.placement.study import placement_study
 
     machine = tmp_path / "my_machine.toml"
     machine.write_text("[machine]\n")

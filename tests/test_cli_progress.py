@@ -3,7 +3,7 @@ import inspect
 
 import pytest
 
-from twin.progress import progress_bar
+from twin.infra.progress import progress_bar
 
 
 @pytest.mark.parametrize("unit", ["step", "scenario"])
@@ -21,11 +21,14 @@ def test_the_unit_must_be_chosen():
 
 
 def test_commands_name_what_they_count():
-    from twin import cli_gap, cli_models, cli_run
+    from twin.compensation import cli as compensation_cli
+    from twin.gap import cli as gap_cli
+    from twin.placement import cli as placement_cli
+    from twin.run import cli as run_cli
 
     units = {name: inspect.getsource(getattr(module, name)) for module, name in
-             ((cli_run, "cmd_run"), (cli_models, "cmd_study"), (cli_models, "cmd_place"),
-              (cli_gap, "cmd_diagnose"), (cli_gap, "cmd_benchmark"))}
+             ((run_cli, "cmd_run"), (compensation_cli, "cmd_study"), (placement_cli, "cmd_place"),
+              (gap_cli, "cmd_diagnose"), (gap_cli, "cmd_benchmark"))}
     assert 'unit="step"' in units["cmd_run"]
     assert 'unit="scenario"' in units["cmd_study"]
     assert 'unit="simulation"' in units["cmd_place"]

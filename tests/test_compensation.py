@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 
 from twin.cli import main
-from twin.compensation import evaluate, load_dataset, score, train
-from twin.dataset import ChannelInfo, Dataset
+from twin.compensation.model_names import MODEL_NAMES
+from twin.compensation.store import CompensationModel, fit_compensation_model, make_estimator, parse_params
+from twin.compensation.train import evaluate, load_dataset, score, train
+from twin.core.dataset import ChannelInfo, Dataset
 from twin.errors import TwinInputError
-from twin.model_names import MODEL_NAMES
-from twin.model_store import CompensationModel, fit_compensation_model, make_estimator, parse_params
 
 
 def _record(seed=0, n=400, dt=30.0, offsets=(0.0, 0.0, 0.0), gain=1.0, label=None):

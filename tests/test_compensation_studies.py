@@ -4,10 +4,10 @@ import json
 import numpy as np
 import pytest
 
-from twin.compensation import physics_prediction
-from twin.placement import MachineSpec
-from twin.simulate import simulate
-from twin.studies import cross_condition_study, hybrid_study
+from twin.compensation.studies import cross_condition_study, hybrid_study
+from twin.compensation.train import physics_prediction
+from twin.core.simulate import simulate
+from twin.placement.study import MachineSpec
 
 RECORD = """
 [scenario]
@@ -47,7 +47,7 @@ def test_physics_prediction_reproduces_the_twin_from_operating_channels(machine,
     pred = physics_prediction(machine, ds, ("Z", "Y"))
     assert np.allclose(pred["Z"], ds["Z"], atol=1e-6) and np.allclose(pred["Y"], ds["Y"], atol=1e-6)
     # a record with one air thermometer instead of the zone ambients drives every zone with it
-    from twin.dataset import ChannelInfo, Dataset
+    from twin.core.dataset import ChannelInfo, Dataset
 
     air = Dataset(ds.time_s, np.column_stack([ds["spindle"], ds["ambient_room"]]),
                   [ChannelInfo("spindle", "rpm", "spindle_speed"), ChannelInfo("room_air", "degC", "air")])

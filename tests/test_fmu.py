@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from twin.cli import main
-from twin.fmu import (export_fmu, input_table, scenario_start, simulate, simulate_table, validate)
+from twin.core.scenario import load_scenario
+from twin.fmu.export import export_fmu, input_table, scenario_start, simulate, simulate_table, validate
 from twin.fmu.session import FMUSession, FMUStepError
-from twin.rom import simulate_rom
-from twin.scenario import load_scenario
+from twin.rom.reduction import simulate_rom
 
 KINDS = ("native", "python")
 

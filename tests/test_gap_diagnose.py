@@ -4,12 +4,12 @@ import json
 import numpy as np
 import pytest
 
-from twin.dataset import ChannelInfo, Dataset
+from twin.core.dataset import ChannelInfo, Dataset
 from twin.errors import TwinInputError
-from twin.gap.benchmark import DRIFT_GAP, GOAL_DRIFT_SHRINK, BenchmarkTask, TRUTH_HIDDEN, TRUTH_VALUES, cases
+from twin.gap.benchmark import DRIFT_GAP, GOAL_DRIFT_SHRINK, TRUTH_HIDDEN, TRUTH_VALUES, BenchmarkTask, cases
 from twin.gap.effects import default_library
 from twin.gap.measured import match_record
-from twin.sweep import cached, run_tasks
+from twin.infra.sweep import cached, run_tasks
 
 QUICK = "gap_quick_8h"
 LIB = {e.name: e for e in default_library()}
@@ -73,7 +73,8 @@ def test_bad_channel_gives_a_clear_error_listing_valid_names(machine):
 
 def test_nan_gaps_offsets_missing_channels_and_other_sampling(machine, tmp_path):
     """Every third row with jitter (another sampling), NaN gaps, constant offsets, a missing sensor: still named."""
-    from twin.gap import diagnose, write_report
+    from twin.gap.diagnose import diagnose
+    from twin.gap.report import write_report
 
     data = truth(machine, "belt_drive")
     rng = np.random.default_rng(0)
@@ -163,7 +164,7 @@ def test_fl_thermal_import_path(machine, fl_thermal_csv):
 def test_cli_truth_writes_a_blind_record(tmp_path):
     """``twin gap truth``: the measured CSV without a sidecar (the diagnosis must not see the truth), the truth beside."""
     from twin.cli import main
-    from twin.dataset import Dataset, sidecar_path
+    from twin.core.dataset import Dataset, sidecar_path
 
     csv = tmp_path / "new" / "measured.csv"                                 # the folder is created
     assert main(["gap", "truth", "--effect", "belt_drive", "--scenario", QUICK, "--truth-mesh-size", "0",

@@ -4,15 +4,15 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from twin.core.machine import reassemble
+from twin.core.scenario import load_scenario
 from twin.gap.drive import ScenarioDrive
 from twin.gap.effects import default_library, library_by_name
 from twin.gap.engine import FullBackend
 from twin.gap.model import GapModel
 from twin.gap.signals import lag, uniform_grid
 from twin.gap.structure import RADIATIVE_COEFFICIENT, facet_table
-from twin.machine import reassemble
-from twin.scenario import load_scenario
-from twin.sweep import cached
+from twin.infra.sweep import cached
 
 LIB = {e.name: e for e in default_library()}
 

@@ -8,8 +8,8 @@ from meshes.builder import build_mesh, mesh_statistics
 from meshes.cachefiles import content_problem
 from meshes.definition import load_geometry
 from meshes.tomlspec import DefinitionError
-from twin.machine import build_machine
-from twin.machine_definition import load_machine
+from twin.core.machine import build_machine
+from twin.core.machine_definition import load_machine
 
 MINI = Path(__file__).parent / "data" / "mini_machine.toml"
 
@@ -56,7 +56,7 @@ def test_convection_group_covers_the_outside_and_joint_splits_nodes(mini):
 
 
 def test_heated_column_grows_the_tool_point_up(mini):
-    from twin.simulate import simulate
+    from twin.core.simulate import simulate
 
     path = MINI.parent / "mini_scenario.toml"
     ds = simulate(path, mini, noise=False).dataset

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from twin.cli import main
-from twin.placement import (CandidateSpec, MachineSpec, RecordTask, ResponseTask, candidate_locations,
-                            elementary_inputs, perturbed_definition)
-from twin.scenario import load_scenario
+from twin.core.scenario import load_scenario
+from twin.placement.study import (CandidateSpec, MachineSpec, RecordTask, ResponseTask, candidate_locations,
+                                  elementary_inputs, perturbed_definition)
 
 HEAT = """
 [scenario]
@@ -78,7 +78,7 @@ def test_record_task_records_candidates_and_drift_only(machine, tmp_path):
     assert rec.temperatures.shape == (len(load_scenario(sc).times()), 40)
     assert set(rec.drift) == {"Y", "Z"}
     assert np.ptp(rec.drift["Z"]) > 1.0 and rec.temperatures.max() > 21.0
-    from twin.simulate import simulate
+    from twin.core.simulate import simulate
 
     ds = simulate(sc, machine, noise=False).dataset
     assert np.allclose(rec.drift["Z"], ds["Z"], atol=1e-9)      # the same run as the full twin

@@ -5,8 +5,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from twin import plots
-from twin.dataset import ChannelInfo, Dataset
+from twin.core.dataset import ChannelInfo, Dataset
+from twin.infra import plots
 
 HOURS = np.linspace(0.0, 6.0, 61)
 

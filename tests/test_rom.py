@@ -7,11 +7,11 @@ import scipy.linalg
 import scipy.sparse as sp
 
 import fea
-from twin.rom import (DEFAULT_ORDER, FORMAT_VERSION, ROMError, ReducedModel, build_rom, cached_rom, krylov_basis,
-                      simulate_rom)
-from twin.rom_report import GOAL_TCP_UM, GOAL_TEMPERATURE_K, max_errors
-from twin.scenario import load_scenario
-from twin.simulate import simulate
+from twin.core.scenario import load_scenario
+from twin.core.simulate import simulate
+from twin.rom.reduction import (DEFAULT_ORDER, FORMAT_VERSION, ROMError, ReducedModel, build_rom, cached_rom,
+                                krylov_basis, simulate_rom)
+from twin.rom.report import GOAL_TCP_UM, GOAL_TEMPERATURE_K, max_errors
 
 
 def _fe_outputs(machine, rom, T, u):

@@ -11,8 +11,8 @@ from doc_examples import check_example, examples
 
 from meshes.tomlspec import DefinitionError, read_toml
 from twin.cli import main
-from twin.machine_definition import load_machine
-from twin.scenario import HOUR, SCENARIOS_DIR, available_scenarios, load_scenario
+from twin.core.machine_definition import load_machine
+from twin.core.scenario import HOUR, SCENARIOS_DIR, available_scenarios, load_scenario
 
 SHIPPED = available_scenarios()
 DOC = Path(__file__).resolve().parents[1] / "docs" / "scenarios.md"
@@ -385,7 +385,7 @@ def test_unknown_scenario_name_lists_the_library():
 @pytest.fixture
 def no_mesh(monkeypatch):
     """Fail loudly if the command got as far as building the machine (meshing)."""
-    import twin.workflows as workflows
+    import twin.run.workflows as workflows
 
     def forbidden(*args, **kwargs):
         raise AssertionError("the error should have been reported before the machine is built")

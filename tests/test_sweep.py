@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from twin.errors import TwinInputError
-from twin.sweep import cached, run_tasks
+from twin.infra.sweep import cached, run_tasks
 
 
 @dataclass(frozen=True)
@@ -70,8 +70,8 @@ def test_scheduler_argument_is_checked():
 
 def test_workers_rebuild_the_machine_from_caches_and_match_serial(cluster, tmp_path):
     """Twin runs as sweep tasks: the workers get names, rebuild the machine from the caches, equal serial."""
-    from twin.machine import build_machine
-    from twin.placement import CandidateSpec, MachineSpec, RecordTask
+    from twin.core.machine import build_machine
+    from twin.placement.study import CandidateSpec, MachineSpec, RecordTask
 
     build_machine("vmc_ram")                       # the caches exist (the workers only read them)
     body = """

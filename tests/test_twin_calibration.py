@@ -1,8 +1,8 @@
 """The default machine meets the thesis calibration ranges (docs/calibration.md)."""
 import pytest
 
-from twin.calibration import TARGETS, calibration_table
-from twin.machine import build_machine
+from twin.core.machine import build_machine
+from twin.run.calibration import TARGETS, calibration_table
 
 
 @pytest.fixture(scope="module")

@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from twin.dataset import ChannelInfo, Dataset, sidecar_path
+from twin.core.dataset import ChannelInfo, Dataset, sidecar_path
 from twin.errors import TwinInputError
 
 

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from twin.cli import main
-from twin.dataset import Dataset
-from twin.scenario import load_scenario
-from twin.simulate import simulate
+from twin.core.dataset import Dataset
+from twin.core.scenario import load_scenario
+from twin.core.simulate import simulate
 
 
 def _scenario(tmp_path, body, name="probe"):
@@ -94,7 +94,7 @@ def test_cli_run_writes_dataset_plots_and_summary(tmp_path, capsys):
 
 
 def test_interrupted_run_leaves_nothing_that_looks_complete(tmp_path, monkeypatch):
-    import twin.workflows as workflows
+    import twin.run.workflows as workflows
 
     def interrupt(*args, **kwargs):
         raise KeyboardInterrupt

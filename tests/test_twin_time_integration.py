@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 import fea
-from twin.scenario import load_scenario
-from twin.simulate import ScenarioInputs, simulate
-from twin.summary import format_summary, run_summary
+from twin.core.scenario import load_scenario
+from twin.core.simulate import ScenarioInputs, simulate
+from twin.run.summary import format_summary, run_summary
 
 NC_CYCLE = """
 [scenario]

@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from twin.deformation import PICTURE_TOLERANCE, displacement_fields
-from twin.machine import build_machine, elastic_problem
-from twin.render import deformation_scale
-from twin.scenario import load_scenario
-from twin.simulate import simulate
+from twin.core.deformation import PICTURE_TOLERANCE, displacement_fields
+from twin.core.machine import build_machine, elastic_problem
+from twin.core.scenario import load_scenario
+from twin.core.simulate import simulate
+from twin.infra.render import deformation_scale
 
 DATA = Path(__file__).parent / "data"
 VIEW_TIMES_H = (1.0, 2.0)
@@ -140,7 +140,7 @@ def test_default_machine_field_at_the_picture_tolerance_matches_the_drift_channe
 
 def test_categorical_points_get_a_legend_and_scores_a_colour_bar(mini, monkeypatch):
     """The chosen-sensors picture (``twin place``) labels its axis categories in a legend, not on a colour bar."""
-    from twin.render import machine_scene
+    from twin.infra.render import machine_scene
 
     monkeypatch.setenv("THERMAL_TWIN_CACHE", str(mini / "cache"))
     machine = build_machine(mini / "mini_machine.toml")

@@ -1,10 +1,10 @@
 """The ``twin`` command line: a thin layer over functions a notebook user can call directly.
 
-Each command lives in a ``twin/cli_<topic>.py`` module with a ``register(subparsers)``
-function; this module only assembles them and turns user errors, missing files
+Each capability subpackage has a ``cli`` module (``twin/run/cli.py``, ``twin/gap/cli.py``, …) with a
+``register(subparsers)`` function; this module only assembles them and turns user errors, missing files
 and Ctrl-C into one line and a non-zero exit code.
 
-Start-up time: the ``cli*`` modules import only the standard library and
+Start-up time: the ``cli`` modules import only the standard library and
 light twin modules when the parser is built; each command imports the
 numerical libraries inside its handler, so ``--help`` and argument errors
 answer at once (tests/test_cli_startup.py, bench/cli_startup.py).
@@ -12,17 +12,23 @@ answer at once (tests/test_cli_startup.py, bench/cli_startup.py).
 from __future__ import annotations
 
 import argparse
-import importlib
 import os
 import shlex
 import signal
 import sys
 
+from .compensation import cli as compensation_cli
 from .errors import user_errors
-from .outdir import COMMAND
-from .progress import close_bars
+from .fmu import cli as fmu_cli
+from .gap import cli as gap_cli
+from .infra.outdir import COMMAND
+from .infra.progress import close_bars
+from .placement import cli as placement_cli
+from .rom import cli as rom_cli
+from .run import cli as run_cli
 
-COMMAND_MODULES = ("twin.cli_run", "twin.cli_fmu", "twin.cli_models", "twin.cli_gap")
+#: The command modules, in the order ``twin --help`` lists their commands.
+COMMAND_MODULES = (run_cli, fmu_cli, rom_cli, compensation_cli, placement_cli, gap_cli)
 INTERRUPTED = 130          # the shell's code for a process ended by SIGINT (128 + 2)
 
 
@@ -30,7 +36,7 @@ def build_parser():
     parser = argparse.ArgumentParser(prog="twin", description="Thermal digital twin of a CNC machine tool.")
     sub = parser.add_subparsers(dest="command", required=True)
     for module in COMMAND_MODULES:
-        importlib.import_module(module).register(sub)
+        module.register(sub)
     return parser
 
 

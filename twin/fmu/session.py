@@ -10,7 +10,7 @@ from __future__ import annotations
 import shutil
 from ctypes import byref
 
-from . import FMUError
+from .spec import FMUError
 
 
 class FMUStepError(FMUError):

@@ -22,6 +22,8 @@ import uuid
 from dataclasses import dataclass
 from xml.etree.ElementTree import Element, SubElement
 
+from ..errors import TwinInputError
+
 #: FMU unit name → (base-unit exponents, factor, offset) as in FMI 2.0 §2.2.2.
 UNITS = {
     "degC": ({"K": 1}, 1.0, 273.15),
@@ -31,11 +33,15 @@ UNITS = {
     "rpm": ({"rad": 1, "s": -1}, 2 * math.pi / 60.0, 0.0),
     "mm/min": ({"m": 1, "s": -1}, 1e-3 / 60.0, 0.0),
 }
-#: ROM output unit tokens (twin.dataset) → FMU unit names.
+#: ROM output unit tokens (twin.core.dataset) → FMU unit names.
 OUTPUT_UNITS = {"degC": "degC", "um": "um", "ue": "ue"}
 AMBIENT_RANGE_C = (-50.0, 100.0)
 GRADIENT_RANGE_K_PER_M = (-50.0, 50.0)
 DEFAULT_STEP_S = 10.0
+
+
+class FMUError(TwinInputError):
+    """An FMU cannot be exported or used as asked."""
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,7 @@
 
 Resources next to this script:
 - ``interface.json``: the FMU variables (see ``twin.fmu.spec``), the engine and its options;
-- ``rom.npz``: the reduced model (``twin.rom`` format, no pickle) for ``engine = "rom"``.
+- ``rom.npz``: the reduced model (``twin.rom.reduction`` format, no pickle) for ``engine = "rom"``.
 
 Engines: ``rom`` integrates the ROM exactly for inputs held over each
 communication step (zero-order hold in reduced modal coordinates, any step
@@ -15,7 +15,7 @@ import math
 import os
 
 import numpy as np
-from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Boolean, Real
+from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
 from pythonfmu.enums import Fmi2Initial, Fmi2Status
 
 
@@ -69,8 +69,9 @@ class _FeEngine:
     """The full FE twin (needs the ``twin`` package in the importing Python)."""
 
     def __init__(self, resources, config):
-        from twin.machine import build_machine
+        # here, not at the top: the slave runs inside an FMU, and only this engine needs the twin installed
         import fea
+        from twin.core.machine import build_machine
 
         fe = config["fe"]
         self.machine = build_machine(fe["machine"], fe.get("mesh_size_m"))

@@ -23,8 +23,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from .fit import Coordinates
 from .model import output_effects
-from .structure import facet_table
+from .structure import facet_table, point_info
 
 
 def _drift_rows(structure, names):
@@ -154,7 +155,6 @@ def separating_sensor(model, result_a, result_b, nominal, noise_K=0.05, count=30
     cache = getattr(model, "_candidate_cache", None)
     if cache is None or cache[0] != key:
         nodes, pts = candidate_points(s, count)
-        from .structure import point_info
 
         info = point_info(s, pts)
         rows = backend.basis[nodes]                             # (k, r): one-hot node rows
@@ -200,7 +200,5 @@ def _effect(model, name):
 
 
 def _split(result, model):
-    from .fit import Coordinates
-
     effects = [_effect(model, n) for n in result.effects]
     return [th for _, th in Coordinates(effects, model.structure.machine).split(result.values)]

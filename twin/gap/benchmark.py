@@ -15,7 +15,7 @@ For every effect of the library (:data:`TRUTH_VALUES`), a few pairs
 3. returns a small summary: the top-ranked effect, the fitted parameters of
    the true effect and their error, and the held-out shrinkage.
 
-The tasks go through :func:`twin.sweep.run_tasks` (a local Dask cluster by
+The tasks go through :func:`twin.infra.sweep.run_tasks` (a local Dask cluster by
 default, as ``twin place``).  :func:`benchmark` collects them into a
 confusion table and checks the goals: top-1 correct in ≥ 90 % of the
 single-effect cases, held-out drift residual −70 % once the named effect is
@@ -30,8 +30,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .diagnose import _machine
+from ..core.dataset import json_default
+from ..errors import TwinInputError
+from ..infra.outdir import atomic_directory, check_output_folder
+from ..infra.sweep import describe_scheduler, run_tasks
+from .attribution import separating_sensor
+from .diagnose import _machine, diagnose
 from .effects import default_library
+from .truth import truth_dataset
 
 #: Truth parameter values of the single-effect cases (in the library's units).
 TRUTH_VALUES = {
@@ -87,7 +93,6 @@ def cases(which="all"):
     pairs = [Case(f"{a}+{b}", ((a, TRUTH_VALUES[a]), (b, TRUTH_VALUES[b]))) for a, b in PAIRS]
     none = [Case("none" if i == 0 else f"none (seed {s})", (), s) for i, s in enumerate(NO_EFFECT_SEEDS)]
     groups = {"all": singles + pairs + none, "singles": singles, "pairs": pairs, "none": none}
-    from ..errors import TwinInputError
 
     out = []
     for name in [w.strip() for w in str(which or "all").split(",") if w.strip()]:
@@ -105,8 +110,6 @@ def cases(which="all"):
 
 def case_record(case, scenario=SCENARIO, machine="vmc_ram", truth_mesh_size_m=TRUTH_MESH_SIZE_M):
     """The "measured" record of a case: the truth run with the effects' truth variants, the rig's channels only."""
-    from .truth import truth_dataset
-
     library = {e.name: e for e in default_library()}
     truth_machine = _machine(machine, truth_mesh_size_m)
     active = [(library[n].variant(**TRUTH_HIDDEN.get(n, {})), np.array(v, float)) for n, v in case.effects]
@@ -127,8 +130,6 @@ class BenchmarkTask:
     engine_options: tuple = ()
 
     def __call__(self):
-        from .diagnose import diagnose
-
         t0 = time.perf_counter()
         nominal = _machine(self.machine, self.nominal_mesh_size_m)
         data = case_record(self.case, self.scenario, self.machine, self.truth_mesh_size_m)
@@ -180,8 +181,6 @@ def summarise(case, d):
     if true_names and not correct and truth_result is not None and len(true_names) == 1 and d.ranking:
         other = d.winner or d.ranking[0]
         if other is not truth_result:
-            from .attribution import separating_sensor
-
             try:
                 out["separation"] = separating_sensor(d.model, truth_result, other, d.nominal,
                                                       noise_K=max(d.noise.get("temperature", 0.02), 0.02))
@@ -218,11 +217,8 @@ def benchmark(which="all", scheduler="local", out_dir=None, scenario=SCENARIO, t
               overwrite=False):
     """Run the blind benchmark (see the module docstring); write ``out_dir`` (Markdown, JSON, PNG) if given.
 
-    ``out_dir`` is checked before the work (``overwrite``: see :func:`twin.outdir.check_output_folder`).
+    ``out_dir`` is checked before the work (``overwrite``: see :func:`twin.infra.outdir.check_output_folder`).
     """
-    from ..outdir import atomic_directory, check_output_folder
-    from ..sweep import describe_scheduler, run_tasks
-
     check_output_folder(out_dir, overwrite, inputs=(scenario,))
 
     t0 = time.perf_counter()
@@ -238,8 +234,6 @@ def benchmark(which="all", scheduler="local", out_dir=None, scenario=SCENARIO, t
     md = format_benchmark(results, metrics, wall, settings)
     path = None
     if out_dir is not None:
-        from ..dataset import json_default
-
         path = Path(out_dir)
         with atomic_directory(path, overwrite) as tmp:
             (tmp / "benchmark.md").write_text(md)
@@ -349,7 +343,8 @@ def format_benchmark(results, metrics, wall, settings):
 
 def plot_confusion(results, path):
     """Heat map of true effect against top-ranked effect (PNG)."""
-    from ..plots import save_figure  # first: it selects the Agg backend
+    # imported on use, and first: twin.infra.plots switches matplotlib to its Agg backend
+    from ..infra.plots import save_figure
 
     import matplotlib.pyplot as plt
 

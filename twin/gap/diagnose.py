@@ -35,7 +35,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..core.machine import build_machine
+from ..core.scenario import Scenario, load_scenario
 from ..errors import TwinInputError
+from ..infra.sweep import cached
 from . import attribution, where
 from .drive import measured_drive
 from .effects import library_by_name
@@ -163,9 +166,7 @@ def _parsimonious(ranking, sigma):
 
 
 def engine(machine, effects, backend="rom", **options):
-    """(structure, backend) for a machine and a library, built once per process (see :func:`twin.sweep.cached`)."""
-    from ..sweep import cached
-
+    """(structure, backend) for a machine and a library, built once per process (:func:`twin.infra.sweep.cached`)."""
     key = ("gap-engine", id(machine), tuple(e.name for e in effects), backend, tuple(sorted(options.items())))
 
     def build():
@@ -182,9 +183,6 @@ def engine(machine, effects, backend="rom", **options):
 def _machine(machine, mesh_size_m=None):
     """A built machine as given, or one built by name (and mesh size) once per process."""
     if isinstance(machine, str):
-        from ..machine import build_machine
-        from ..sweep import cached
-
         return cached(("machine", machine, mesh_size_m), lambda: build_machine(machine, mesh_size_m))
     return machine
 
@@ -195,8 +193,8 @@ def diagnose(measured, machine="vmc_ram", scenario=None, column_map=None, holdou
 
     Parameters
     ----------
-    measured : a :class:`~twin.dataset.Dataset`, a twin dataset path (CSV with sidecar) or a measured CSV
-    machine : machine name or a built :class:`~twin.machine.Machine`
+    measured : a :class:`~twin.core.dataset.Dataset`, a twin dataset path (CSV with sidecar) or a measured CSV
+    machine : machine name or a built :class:`~twin.core.machine.Machine`
     scenario : optional scenario (name, path or object): fallback for missing spindle/feeds/ambient and the
         initial state
     column_map : dict csv column → ``<name>_<unit>`` for measured CSVs
@@ -216,8 +214,6 @@ def diagnose(measured, machine="vmc_ram", scenario=None, column_map=None, holdou
     machine = _machine(machine)
     sc = None
     if scenario is not None:
-        from ..scenario import Scenario, load_scenario
-
         sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     record = match_record(read_measured(measured, column_map), machine)
     if initial is None:

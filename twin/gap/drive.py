@@ -10,15 +10,15 @@ and the benchmark's truth runs (scenario inputs).
 Measured ambients come from the air sensors: each zone's ambient at the
 reference height is the mean of its air sensors corrected by the gradient;
 a zone with a lag (the enclosure) and no sensor follows the room through
-that lag, as :meth:`twin.scenario.Scenario.zone_ambient` does; other zones
+that lag, as :meth:`twin.core.scenario.Scenario.zone_ambient` does; other zones
 without sensors take the room.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from ..core.machine_definition import room_zone
 from ..errors import TwinInputError
-from ..machine_definition import room_zone
 from .signals import lag, step_values
 
 

@@ -30,6 +30,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..core.machine import reassemble
+from ..core.machine_definition import HeatSource
+from ..errors import TwinInputError
 from .signals import lag
 from .structure import RADIATIVE_COEFFICIENT, facet_table, lumped_facet_load
 
@@ -115,8 +118,6 @@ def _scaled_definition(definition, groups=(), joint=None, factor=2.0):
 
 
 def _system_difference(structure, definition):
-    from ..machine import reassemble
-
     changed = reassemble(structure.machine, definition)
     if list(changed.thermal.input_names) != list(structure.machine.thermal.input_names):
         raise RuntimeError("internal: a system change altered the inputs")
@@ -280,9 +281,6 @@ class UnmodelledSource(Effect):
         return self.hidden["part"] in machine.definition.geometry.part_names()
 
     def prepare(self, structure):
-        from ..machine import reassemble
-        from ..machine_definition import HeatSource
-
         d = structure.machine.definition
         src = HeatSource("gap_belt_drive", self.label, self.hidden["part"], tuple(self.hidden["box"]), "spindle",
                          1.0, self.hidden["reference_rpm"], 1.0)
@@ -463,8 +461,6 @@ def default_library():
 
 def library_by_name(names=None, library=None):
     """Effects of the library by name (all without names); unknown names raise a clear error."""
-    from ..errors import TwinInputError
-
     library = library or default_library()
     if not names:
         return library

@@ -10,7 +10,7 @@ start input plus optional initial-field shapes, and return the FE outputs
     One Galerkin basis for the whole library (parametric model reduction by
     concatenation): the block-Krylov basis of the nominal system on all
     inputs (machine inputs and the effects' extra columns; via
-    :mod:`twin.rom`'s ``krylov_basis``), plus small Krylov bases of every
+    :func:`twin.rom.reduction.krylov_basis`), plus small Krylov bases of every
     system term's perturbed system at its parameter bounds, M-orthonormalised
     together.  The reduced matrices are affine in the coefficients, so one
     evaluation costs an r×r eigendecomposition and an exact ZOH recursion in
@@ -18,12 +18,8 @@ start input plus optional initial-field shapes, and return the FE outputs
     attribution, candidate sensors and renders.
 :class:`FullBackend`
     The assembled FE system, backward Euler or θ-scheme, one factorisation
-    per evaluation.  The fallback when the ROM module is missing something,
-    the reference in the tests, and the truth generator of the benchmark.
-
-:func:`reduction` is the one adapter to :mod:`twin.rom`: if the ROM module
-is unavailable or lacks what is used, it returns None and the caller falls
-back to the full FE.
+    per evaluation.  ``--backend fe`` of ``twin gap diagnose``, the reference
+    in the tests, and the truth generator of the benchmark.
 """
 from __future__ import annotations
 
@@ -33,23 +29,16 @@ from types import SimpleNamespace
 import numpy as np
 import scipy.sparse as sp
 
+from fea.linsolve import factorize
+
+from ..rom.reduction import krylov_basis, slowest_rate
+
 #: Default orders: the nominal Krylov basis, and the basis added per system term and bound.
 NOMINAL_ORDER = 100
 TERM_ORDER = 30
 
 
-def reduction():
-    """``(krylov_basis, slowest_rate)`` from :mod:`twin.rom`, or None when unavailable (→ full FE)."""
-    try:
-        from ..rom import krylov_basis, slowest_rate
-    except Exception:  # pragma: no cover - depends on the ROM helper's state
-        return None
-    return krylov_basis, slowest_rate
-
-
 def _factor(matrix):
-    from fea.linsolve import factorize
-
     return factorize(sp.csc_matrix(matrix), symmetric_positive_definite=True)
 
 
@@ -88,7 +77,6 @@ class ReducedBackend:
     name = "rom"
 
     def __init__(self, structure, nominal_order=NOMINAL_ORDER, term_order=TERM_ORDER, keep_basis=True):
-        krylov_basis, slowest_rate = reduction()
         start = time.perf_counter()
         s = structure
         M, A0, B0 = s.mass, s.stiffness, s.input_matrix
@@ -226,8 +214,8 @@ class FullBackend:
 
 
 def make_backend(structure, backend="rom", **options):
-    """A backend by name (``rom`` or ``fe``); ``rom`` falls back to ``fe`` when :mod:`twin.rom` is unavailable."""
-    if backend == "rom" and reduction() is not None:
+    """A backend by name: ``rom`` (the parametric reduced model) or ``fe`` (full finite elements)."""
+    if backend == "rom":
         return ReducedBackend(structure, **{k: v for k, v in options.items()
                                             if k in ("nominal_order", "term_order", "keep_basis")})
     return FullBackend(structure, **{k: v for k, v in options.items() if k == "theta"})

@@ -1,6 +1,6 @@
 """Measured data for the gap diagnosis: import, match the channels to the machine's sensors, report what is missing.
 
-A measured record is read through :class:`twin.dataset.Dataset` (a twin
+A measured record is read through :class:`twin.core.dataset.Dataset` (a twin
 dataset with its sidecar, or a measured CSV with ``<name>_<unit>`` columns
 or a column map), NaNs kept.  Every channel must be one of the machine's
 sensors (``T01_degC``, ``Z_um``, ``FBG1_ue``, air sensors …) or an operating
@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..dataset import Dataset, sidecar_path
+from ..core.dataset import Dataset, sidecar_path
 from ..errors import TwinInputError
 
 SENSOR_KINDS = ("temperature", "air", "displacement", "strain")
@@ -48,7 +48,7 @@ class Record:
 
 
 def read_measured(data, column_map=None):
-    """A :class:`~twin.dataset.Dataset` from a path (twin dataset or measured CSV) or a Dataset, NaNs kept."""
+    """A :class:`~twin.core.dataset.Dataset` from a path (twin dataset or measured CSV) or a Dataset, NaNs kept."""
     if isinstance(data, Dataset):
         return data
     path = Path(data)

@@ -17,9 +17,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ..dataset import json_default  # noqa: E402
-from ..outdir import atomic_directory  # noqa: E402
-from ..plots import save_figure  # noqa: E402
+from ..core.dataset import json_default  # noqa: E402
+from ..infra.outdir import atomic_directory  # noqa: E402
+from ..infra.plots import save_figure  # noqa: E402
 from .fit import GROUP_UNIT  # noqa: E402
 
 GROUP_LABEL = {"temperature": "surface temperatures", "air": "air sensors", "displacement": "TCP drift",
@@ -37,14 +37,14 @@ def _ratio(x):
 
 
 def _save(fig, path):
-    """Save a figure atomically (:func:`twin.plots.save_figure`); the file name, for the Markdown links."""
+    """Save a figure atomically (:func:`twin.infra.plots.save_figure`); the file name, for the Markdown links."""
     return save_figure(fig, path).name
 
 
 def write_report(d, out_dir, render=True, overwrite=False):
     """Write ``report.md``, ``diagnosis.json`` and the figures of a :class:`~twin.gap.diagnose.Diagnosis`.
 
-    ``out_dir`` is written as :func:`twin.outdir.atomic_directory` does (``overwrite`` likewise).
+    ``out_dir`` is written as :func:`twin.infra.outdir.atomic_directory` does (``overwrite`` likewise).
     """
     out_dir = Path(out_dir)
     with atomic_directory(out_dir, overwrite) as tmp:
@@ -191,7 +191,7 @@ def plot_attribution(d, path):
 
 def render_figures(d, tmp):
     """Off-screen renders: sensors and parts coloured by residual; the winner's temperature change."""
-    from ..render import render_machine
+    from ..infra.render import render_machine  # on use: pyvista/VTK take seconds to load
 
     s = d.model.structure
     machine = s.machine

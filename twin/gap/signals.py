@@ -14,7 +14,7 @@ def lag(x, step_s, tau_s):
     """First-order lag ``τ ẏ = x − y`` of signals x (n,) or (n, k) on a uniform grid, starting in equilibrium.
 
     Exact for x linear between the samples (the recursion of
-    :func:`twin.scenario.first_order_lag`); τ ≤ 0 returns x unchanged.
+    :func:`twin.core.scenario.first_order_lag`); τ ≤ 0 returns x unchanged.
     """
     x = np.asarray(x, float)
     tau_s = float(tau_s)

@@ -24,6 +24,8 @@ import scipy.sparse as sp
 
 from fea.mesh import LOCAL_FACES
 
+from .engine import _factor
+
 #: 4 σ T³ at 20 °C: the linearised radiative coefficient of a black surface, W/(m² K).
 RADIATIVE_COEFFICIENT = 4 * 5.670374419e-8 * 293.15 ** 3
 
@@ -227,7 +229,6 @@ def build_structure(machine, effects=(), nuisance=True):
             u = np.zeros(machine.thermal.n_inputs)
             for src in spindle:
                 u[machine.thermal.input_index(f"power:{src.name}")] = src.power_W(np.array([ref]), zeros)[0]
-            from .engine import _factor
 
             rise = _factor(machine.thermal.stiffness)(np.asarray(machine.thermal.input_matrix @ u).ravel())
             structure.add_field("initial_residual_heat", rise / max(float(np.abs(rise).max()), 1e-12))

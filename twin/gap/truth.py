@@ -15,8 +15,9 @@ import time
 
 import numpy as np
 
-from ..dataset import ChannelInfo, Dataset, project_version
-from ..noise import apply_noise
+from ..core.dataset import ChannelInfo, Dataset, project_version
+from ..core.noise import apply_noise
+from ..core.scenario import Scenario, load_scenario
 from .drive import ScenarioDrive
 from .engine import FullBackend
 from .model import GapModel
@@ -25,12 +26,10 @@ from .structure import build_structure
 
 
 def truth_dataset(scenario, machine, active=(), seed=None, noise=True, step_s=None):
-    """A :class:`~twin.dataset.Dataset` of ``scenario`` on ``machine`` with ``active`` = [(effect, θ), …] on.
+    """A :class:`~twin.core.dataset.Dataset` of ``scenario`` on ``machine`` with ``active`` = [(effect, θ), …] on.
 
     ``step_s`` overrides the scenario's time step (it must divide the sampling interval).
     """
-    from ..scenario import Scenario, load_scenario
-
     t0 = time.perf_counter()
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     sc.check_machine(machine.definition)

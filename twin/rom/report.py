@@ -1,7 +1,7 @@
 """Error report of reduced models against the full FE twin, over scenarios and orders.
 
 For every scenario (default: all shipped ``scenarios/*.toml``) the full model
-runs once (:func:`twin.simulate.simulate`, no noise); each ROM then runs the
+runs once (:func:`twin.core.simulate.simulate`, no noise); each ROM then runs the
 same scenario with the **same θ-scheme on the same step grid**
 (``simulate_rom(..., scheme="theta")``), so the differences are the
 reduction error alone, not a difference of time discretisation.  The report
@@ -16,7 +16,7 @@ plus, for information, the difference of the exact zero-order-hold ROM (what
 the FMUs run) from the FE at the largest order: that one includes the FE's
 own backward-Euler time-discretisation error.
 
-Bases are nested in the order (:func:`twin.rom.compute_basis`), so each method
+Bases are nested in the order (:func:`twin.rom.reduction.compute_basis`), so each method
 computes one basis at the largest order and truncates it.
 """
 from __future__ import annotations
@@ -26,7 +26,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .rom import compute_basis, reduce_with_basis, simulate_rom
+from ..core.scenario import SCENARIOS_DIR, load_scenario
+from ..core.simulate import simulate
+from .reduction import compute_basis, reduce_with_basis, simulate_rom
 
 GROUPS = (("temperature", "K"), ("displacement", "um"), ("strain", "ue"))
 #: The issue's goals: largest TCP drift and sensor temperature errors with r ≤ 100.
@@ -63,8 +65,6 @@ class ErrorReport:
 
 
 def shipped_scenarios():
-    from .scenario import SCENARIOS_DIR
-
     return sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))
 
 
@@ -81,9 +81,6 @@ def max_errors(rom_dataset, fe_dataset):
 def error_report(machine, orders=(10, 20, 30, 40, 60, 80, 100), methods=("krylov", "modal"), scenarios=None,
                  points=None, progress=None):
     """Run the report; ``progress(message)`` is called as it goes (e.g. ``print``)."""
-    from .scenario import load_scenario
-    from .simulate import simulate
-
     say = progress or (lambda message: None)
     orders = sorted(int(r) for r in orders)
     scenarios = shipped_scenarios() if scenarios is None else list(scenarios)

@@ -1,8 +1,8 @@
-"""CLI commands ``twin run`` and ``twin mesh``."""
+"""CLI commands ``twin run``, ``twin mesh`` and ``twin report``: a thin layer over :mod:`twin.run.workflows`."""
 from __future__ import annotations
 
-from .cli_common import add_overwrite
-from .progress import progress_bar
+from ..infra.cli_common import add_overwrite, read_column_map
+from ..infra.progress import progress_bar
 
 # Handlers import the library inside them, never up here: start-up time (`twin --help` must not load scipy).
 
@@ -43,7 +43,6 @@ def cmd_mesh(args):
 
 
 def cmd_report(args):
-    from .compensation import read_column_map
     from .summary import format_summary
     from .workflows import report_dataset
 

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import TwinInputError
+from ..errors import TwinInputError
 
 FORMAT = "thermal-twin-dataset"
 FORMAT_VERSION = 1

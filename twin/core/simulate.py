@@ -2,7 +2,7 @@
 
 One thermal solve per time step and one output-operator product per sample,
 for the recorded outputs only; no elastic solve and no stored field unless
-fields are asked for.  The result is a :class:`~twin.dataset.Dataset` in edge
+fields are asked for.  The result is a :class:`~twin.core.dataset.Dataset` in edge
 units (°C, µm, µε) with the operating conditions (spindle speed, feeds, zone
 ambients, source powers) alongside the sensors, an energy balance of the run
 checked against the energy the scenario asks for, and (on request) a

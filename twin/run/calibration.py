@@ -13,7 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .simulate import simulate
+from ..core.simulate import simulate
+from ..infra.tables import markdown_table
 
 
 @dataclass(frozen=True)
@@ -58,9 +59,8 @@ def calibration_table(machine):
 
 
 def format_table(rows):
-    lines = ["| target | thesis range (µm) | simulated (µm) | met | command |", "|---|---|---|---|---|"]
-    for target, value, ok in rows:
-        span = f"{target.low:g}–{target.high:g}" if np.isfinite(target.high) else f"≥ {target.low:g}"
-        lines.append(f"| {target.name} | {span} | {value:.1f} | {'yes' if ok else 'NO'} | "
-                     f"`twin run {target.scenario}` |")
-    return "\n".join(lines)
+    """The rows of :func:`calibration_table` as a Markdown table (as in docs/calibration.md)."""
+    cells = [(target.name, f"{target.low:g}–{target.high:g}" if np.isfinite(target.high) else f"≥ {target.low:g}",
+              value, "yes" if ok else "NO", f"`twin run {target.scenario}`") for target, value, ok in rows]
+    return markdown_table(cells, ["target", "thesis range (µm)", "simulated (µm)", "met", "command"],
+                          formats=[None, None, ".1f", None, None])

@@ -1,4 +1,4 @@
-"""The functions behind the CLI's ``run`` and ``mesh`` commands (callable from Python too)."""
+"""The functions behind the CLI's ``run``, ``mesh`` and ``report`` commands (callable from Python too)."""
 from __future__ import annotations
 
 import json
@@ -14,14 +14,15 @@ from meshes.builder import build_mesh, mesh_statistics
 from meshes.cachefiles import SHIPPED_CACHE, sidecar
 from meshes.definition import load_geometry
 
-from . import plots
-from .machine import build_machine, convection_summary
-from .machine_definition import load_machine
-from .outdir import atomic_directory, check_output_folder
-from .deformation import DisplacementJob
-from .render import render_deformed_views, render_machine, render_temperature_views, render_thermal_image
-from .scenario import load_scenario
-from .simulate import simulate
+from ..core.dataset import Dataset, sidecar_path
+from ..core.deformation import DisplacementJob
+from ..core.machine import build_machine, convection_summary
+from ..core.machine_definition import load_machine
+from ..core.scenario import load_scenario
+from ..core.simulate import simulate
+from ..infra import plots
+from ..infra.outdir import atomic_directory, check_output_folder
+from ..infra.render import render_deformed_views, render_machine, render_temperature_views, render_thermal_image
 from .summary import format_summary, run_summary
 
 
@@ -42,7 +43,7 @@ def run_scenario(scenario, machine=None, mesh_size_m=None, out_dir=None, fields=
     machine : machine name or path overriding the scenario's
     mesh_size_m : mesh size override, m
     out_dir : result folder (default ``runs/<scenario>``); checked before the simulation, written
-        atomically (see :mod:`twin.outdir`)
+        atomically (see :mod:`twin.infra.outdir`)
     fields : also write VTK temperature fields at the scenario's ``fields_at_h`` times
     progress : callable ``progress(done, total)``
     camera : record the camera spots in the dataset (default: as the scenario says)
@@ -106,8 +107,6 @@ def report_dataset(path, out_dir=None, column_map=None, nan_policy="error", prob
     (``column_map``, ``nan_policy``); the import report (gaps, NaNs) is
     written beside the summary. ``overwrite`` as in :func:`run_scenario`.
     """
-    from .dataset import Dataset, sidecar_path
-
     path = Path(path)
     out_dir = Path(out_dir or Path("runs") / f"report_{path.stem}")
     check_output_folder(out_dir, overwrite, inputs=(path, sidecar_path(path)))

@@ -10,7 +10,7 @@ Procedure (:func:`placement_study`):
 2. **Records**: every scenario (training and held-out) is run through the twin
    with an output operator of the candidates and the TCP drift only — no
    full field is stored.  The runs are independent tasks of
-   :func:`twin.sweep.run_tasks` (a local Dask cluster by default); each worker
+   :func:`twin.infra.sweep.run_tasks` (a local Dask cluster by default); each worker
    rebuilds the machine from the on-disk caches and keeps it.  Records are
    cached on disk (noise-free) keyed by machine, scenario and candidates.
    Sensor noise (DS18S20 thermometers, S65 camera, NCDT probes) is drawn
@@ -61,9 +61,20 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
+import fea
+from meshes.cachefiles import checked, user_cache_dir, write_checked
 from models.selection import SEED_METHODS, SeedSelector, greedy_loso, pod_modes, qr_drift, seed_scores
 
-from .errors import TwinInputError
+from ..compensation.store import make_estimator
+from ..core.dataset import ChannelInfo, Dataset, json_default, project_version
+from ..core.machine import build_machine
+from ..core.machine_definition import load_machine
+from ..core.noise import apply_noise
+from ..core.scenario import Scenario, available_scenarios, load_scenario
+from ..core.simulate import ScenarioInputs, initial_temperature, machine_condition_channels
+from ..errors import TwinInputError
+from ..infra.outdir import atomic_directory, check_output_folder
+from ..infra.sweep import cached, run_tasks
 
 OWN_METHODS = ("greedy-loso", "qr-drift", "greedy-physics")
 METHODS = SEED_METHODS + OWN_METHODS
@@ -108,14 +119,9 @@ class MachineSpec:
         return self.source_scale != 1.0 or self.convection_scale != 1.0
 
     def build(self):
-        from .sweep import cached
-
         return cached(("machine", self), self._build)
 
     def _build(self):
-        from .machine import build_machine
-        from .machine_definition import load_machine
-
         if not self.perturbed:
             return build_machine(self.name, self.mesh_size_m)
         return build_machine(self.name, self.mesh_size_m, definition=perturbed_definition(
@@ -166,8 +172,6 @@ class CandidateSpec:
     exclude_groups: tuple = ("cavities", "floor")
 
     def build(self, machine):
-        from .sweep import cached
-
         return cached(("candidates", id(machine), self), lambda: candidate_locations(machine, **vars(self)))
 
 
@@ -253,8 +257,6 @@ class Record:
 
 
 def _scenario_obj(scenario):
-    from .scenario import Scenario, load_scenario
-
     return scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
 
 
@@ -278,10 +280,6 @@ class RecordTask:
     record_interval_s: float | None = 60.0
 
     def __call__(self):
-        import fea
-
-        from .simulate import ScenarioInputs, initial_temperature
-
         start = time.perf_counter()
         machine = self.machine.build()
         cands = self.candidates.build(machine)
@@ -297,8 +295,6 @@ class RecordTask:
 
 def _record_operator(machine, cands, axes):
     """Output operator of a record: the candidates (°C) followed by the drift ``axes`` (m)."""
-    import fea
-
     drift = machine.outputs.subset(list(axes))
     return fea.OutputOperator(list(cands.names) + list(axes), ["°C"] * len(cands) + ["m"] * len(axes),
                               sp.vstack([cands.rows, drift.matrix]).tocsr(),
@@ -366,8 +362,6 @@ class ResponseTask:
         return f"step:{self.input_name}"
 
     def __call__(self):
-        import fea
-
         start = time.perf_counter()
         machine = self.machine.build()
         cands = self.candidates.build(machine)
@@ -390,8 +384,6 @@ def _file_digest(path):
 
 
 def record_cache_key(task):
-    from .machine_definition import load_machine
-
     definition = load_machine(task.machine.name)
     payload = {"v": RECORD_CACHE_VERSION, "machine": repr(task.machine), "machine_file": _file_digest(
         definition.source), "candidates": repr(task.candidates), "axes": task.axes}
@@ -406,8 +398,6 @@ def record_cache_key(task):
 
 
 def _cache_dir():
-    from meshes.cachefiles import user_cache_dir
-
     d = user_cache_dir() / "placement-records"
     d.mkdir(parents=True, exist_ok=True)
     return d
@@ -421,8 +411,6 @@ def _load_record(path):
 
 
 def _save_record(path, rec):
-    from meshes.cachefiles import write_checked
-
     write_checked(path, lambda tmp: np.savez(
         tmp, scenario=rec.scenario, time_s=rec.time_s, temperatures=rec.temperatures, axes=np.array(list(rec.drift)),
         seconds=rec.seconds, **{f"drift_{a}": v for a, v in rec.drift.items()}))
@@ -430,10 +418,6 @@ def _save_record(path, rec):
 
 def run_records(tasks, scheduler="local", use_cache=True, progress=None):
     """Records of :class:`RecordTask` s, from the disk cache where possible, the rest through the sweep."""
-    from meshes.cachefiles import checked
-
-    from .sweep import run_tasks
-
     keys = [record_cache_key(t) for t in tasks] if use_cache else [None] * len(tasks)
     out = [None] * len(tasks)
     todo = []
@@ -453,8 +437,6 @@ def run_records(tasks, scheduler="local", use_cache=True, progress=None):
 
 def add_noise(record, kinds, seed):
     """Measured-like copy of a record: DS18S20 thermometers, S65 camera spots, NCDT drift probes."""
-    from .noise import apply_noise
-
     temp_kinds = [NOISE[k] for k in kinds]
     settings = {"temperature": "DS18S20", "camera": "S65", "displacement": "NCDT"}
     temps = apply_noise(record.temperatures, temp_kinds, settings, seed)
@@ -497,8 +479,6 @@ def _stack(records, cols, axis):
 
 
 def _score_sets(train, test, cols, axis, model="mlr"):
-    from .model_store import make_estimator
-
     X, y = _stack(train, cols, axis)
     est = make_estimator(model).fit(X, y)
     res, per = [], {}
@@ -523,11 +503,8 @@ def placement_study(machine="vmc_ram", mesh_size_m=None, parts=DEFAULT_PARTS, n_
     record as a dataset with the best sets' sensors as thermometers, for ``twin train``.
     Returns a :class:`PlacementResult`.  Missing scenarios are skipped with a
     note; at least two training scenarios and one held-out scenario are needed.
-    ``out_dir`` is checked before the work (``overwrite``: see :func:`twin.outdir.check_output_folder`).
+    ``out_dir`` is checked before the work (``overwrite``: see :func:`twin.infra.outdir.check_output_folder`).
     """
-    from .outdir import atomic_directory, check_output_folder
-    from .scenario import Scenario, available_scenarios
-
     check_output_folder(out_dir, overwrite, inputs=(machine,))
 
     t_start = time.perf_counter()
@@ -782,12 +759,9 @@ def placement_summary(result):
 
 
 def record_dataset(record, candidates, columns, machine, scenario):
-    """A :class:`~twin.dataset.Dataset` of a (noisy) record: operating conditions, the chosen candidates as
+    """A :class:`~twin.core.dataset.Dataset` of a (noisy) record: operating conditions, the chosen candidates as
     thermometers (°C, with positions) and the drift axes (µm) — what a machine fitted with those sensors
     would log, ready for ``twin train`` / ``twin evaluate``."""
-    from .dataset import ChannelInfo, Dataset, project_version
-    from .simulate import ScenarioInputs, machine_condition_channels
-
     sc = _scenario_obj(scenario)
     cond = ScenarioInputs(machine, sc).conditions(record.time_s)
     channels, cols = machine_condition_channels(machine, cond)
@@ -811,8 +785,7 @@ def write_placement_report(result, machine, folder):
     matplotlib.use("Agg")
     import pandas as pd
 
-    from .dataset import json_default
-    from .render import render_machine
+    from ..infra.render import render_machine  # on use: pyvista/VTK take seconds to load
 
     folder = Path(folder)
     (folder / "placement.md").write_text(result.summary, encoding="utf-8")

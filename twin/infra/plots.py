@@ -9,7 +9,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .dataset import UNITS  # noqa: E402
+from ..core.dataset import UNITS  # noqa: E402
 
 
 def _hours(dataset):

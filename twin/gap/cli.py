@@ -1,8 +1,13 @@
 """CLI commands ``twin gap diagnose``, ``truth`` and ``benchmark``: a thin layer over :mod:`twin.gap`."""
 from __future__ import annotations
 
-from .cli_common import add_overwrite
-from .progress import progress_bar
+import json
+from pathlib import Path
+
+from ..errors import TwinInputError
+from ..infra.cli_common import add_overwrite, read_column_map, split_names
+from ..infra.outdir import check_output_file, check_output_folder
+from ..infra.progress import progress_bar
 
 # Handlers import the library inside them, never up here: start-up time (`twin --help` must not load scipy).
 # So twin.gap.benchmark's truth-run defaults are copied here (tests/test_cli_startup.py keeps them equal).
@@ -11,10 +16,9 @@ TRUTH_MESH_SIZE_M = 0.035
 
 
 def cmd_diagnose(args):
-    from .compensation import read_column_map, split_names
-    from .dataset import sidecar_path
-    from .gap import diagnose, write_report
-    from .outdir import check_output_folder
+    from ..core.dataset import sidecar_path
+    from .diagnose import diagnose
+    from .report import write_report
 
     given = (args.measured, sidecar_path(args.measured), args.column_map, args.scenario, args.machine)
     check_output_folder(args.out, args.overwrite, inputs=given)
@@ -34,7 +38,7 @@ def cmd_diagnose(args):
 
 
 def cmd_benchmark(args):
-    from .gap import benchmark
+    from .benchmark import benchmark
 
     res = benchmark(args.cases, scheduler=args.scheduler, out_dir=args.out, scenario=args.scenario,
                     truth_mesh_size_m=None if args.truth_mesh_size <= 0 else args.truth_mesh_size,
@@ -45,16 +49,10 @@ def cmd_benchmark(args):
 
 
 def cmd_truth(args):
-    import json
-    from pathlib import Path
-
-    from .dataset import sidecar_path
-    from .gap.benchmark import case_record, cases
-    from .outdir import check_output_file
+    from ..core.dataset import sidecar_path
+    from .benchmark import case_record, cases
 
     if "," in args.effect or args.effect in ("all", "singles", "pairs"):
-        from .errors import TwinInputError
-
         raise TwinInputError(f"--effect takes one effect, one a+b pair or 'none', got {args.effect!r}")
     out = Path(args.out)
     truth = out.with_name(out.stem + ".truth.json")

@@ -33,7 +33,7 @@ from contextlib import contextmanager
 from datetime import datetime, timezone
 from pathlib import Path, PurePosixPath
 
-from .errors import TwinInputError
+from ..errors import TwinInputError
 
 MARKER = ".thermal-twin-output.json"
 JOURNAL = ".thermal-twin-output.partial.json"

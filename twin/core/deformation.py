@@ -3,7 +3,7 @@
 A run's drift channels come from adjoint rows (no field is ever solved for);
 a picture of the deformed machine needs the whole field, one forward elastic
 solve ``K u = F (T − T_ref)`` per temperature field, with the machine's own
-elastic problem (:func:`twin.machine.elastic_problem`: same element degree,
+elastic problem (:func:`twin.core.machine.elastic_problem`: same element degree,
 materials and 3-2-1 mount as its drift outputs).
 
 Cost on the default machine (P2, 257,000 dofs; quiet 2-core machine): about

@@ -1,7 +1,7 @@
 """Compensation models with their channel contract: which inputs, which target, units, preprocessing.
 
 A :class:`CompensationModel` wraps a fitted ``models`` estimator with what is
-needed to use it on a :class:`~twin.dataset.Dataset`: the input channels (in
+needed to use it on a :class:`~twin.core.dataset.Dataset`: the input channels (in
 order) and the target channel, their units, the preprocessing, the training
 datasets and, for grey time-series models, the sampling interval the
 coefficients belong to.
@@ -33,8 +33,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .dataset import json_default, project_version
-from .errors import TwinInputError
+import models
+from models.persistence import model_from_document, model_to_document
+
+from ..core.dataset import json_default, project_version
+from ..errors import TwinInputError
 from .model_names import MODEL_NAMES
 
 FORMAT = "thermal-twin-compensation-model"
@@ -46,8 +49,6 @@ TIME_SERIES_MODELS = {"GM0NRegressor", "GM1NRegressor", "GMCRegressor", "GNNMCIR
 
 def make_estimator(name, params=None):
     """An unfitted estimator by model name (see :data:`MODEL_NAMES`) with hyperparameters overridden."""
-    import models
-
     key = str(name).lower()
     if key not in MODEL_NAMES:
         raise TwinInputError(f"unknown model {name!r}; available: {sorted(MODEL_NAMES)}")
@@ -192,8 +193,6 @@ class CompensationModel:
 
     # ------------------------------------------------------------------ files
     def to_document(self):
-        from models.persistence import model_to_document
-
         return {
             "format": FORMAT, "version": FORMAT_VERSION, "model_name": self.model_name,
             "inputs": list(self.inputs), "input_units": list(self.input_units),
@@ -215,8 +214,6 @@ class CompensationModel:
     @classmethod
     def load(cls, path):
         """Read a model written by :meth:`save`; a wrong format or version is a clear error."""
-        from models.persistence import model_from_document
-
         path = Path(path)
         if not path.exists():
             raise TwinInputError(f"{path}: model file not found")

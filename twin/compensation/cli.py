@@ -1,12 +1,13 @@
-"""CLI commands ``twin train``, ``twin evaluate``, ``twin study`` and ``twin place``.
+"""CLI commands ``twin train``, ``twin evaluate`` and ``twin study``.
 
-A thin layer over :mod:`twin.compensation`, :mod:`twin.studies` and
-:mod:`twin.placement`: parse, call, print where the results went.
+A thin layer over :mod:`twin.compensation.train` and :mod:`twin.compensation.studies`: parse, call, print where
+the results went.
 """
 from __future__ import annotations
 
-from .cli_common import add_overwrite
-from .progress import progress_bar
+from ..infra.cli_common import add_cluster_options, add_overwrite, read_column_map, split_names
+from ..infra.progress import progress_bar
+from .model_names import MODEL_NAMES
 
 # Handlers import the library inside them, never up here: start-up time (`twin --help` must not load scipy).
 
@@ -17,8 +18,8 @@ def _datasets_help():
 
 
 def cmd_train(args):
-    from .compensation import train
-    from .model_store import parse_params
+    from .store import parse_params
+    from .train import train
 
     cm = train(args.datasets, args.inputs, args.target, model=args.model, params=parse_params(args.param),
                out=args.out, zero_reference=not args.no_zero_reference, reference_samples=args.reference_samples,
@@ -33,7 +34,7 @@ def cmd_train(args):
 
 
 def cmd_evaluate(args):
-    from .compensation import evaluate
+    from .train import evaluate
 
     ev = evaluate(args.model, args.datasets, out_dir=args.out, column_map=_column_map(args),
                   nan_policy=args.nan_policy, plots=not args.no_plots, overwrite=args.overwrite)
@@ -43,14 +44,11 @@ def cmd_evaluate(args):
 
 
 def _column_map(args):
-    from .compensation import read_column_map
-
     return read_column_map(getattr(args, "column_map", None))
 
 
 def cmd_study(args):
     from . import studies
-    from .compensation import split_names
 
     common = dict(machine=args.machine, mesh_size_m=args.mesh_size, scheduler=args.scheduler,
                   progress=progress_bar("simulating", unit="scenario"), overwrite=args.overwrite)
@@ -72,39 +70,14 @@ def cmd_study(args):
     print(f"results in {res.out_dir}/")
 
 
-def cmd_place(args):
-    from .compensation import split_names
-    from .placement import DEFAULT_PARTS, DEFAULT_TEST, DEFAULT_TRAIN, METHODS, placement_study
-
-    res = placement_study(machine=args.machine, mesh_size_m=args.mesh_size,
-                          parts=split_names(args.parts) or DEFAULT_PARTS, n_candidates=args.candidates,
-                          camera=not args.no_camera, train=split_names(args.train) or DEFAULT_TRAIN,
-                          test=split_names(args.test) or DEFAULT_TEST, methods=split_names(args.methods) or METHODS,
-                          k_max=args.k_max, axes=tuple(split_names(args.axes)), record_interval_s=args.record_interval,
-                          scheduler=args.scheduler, use_cache=not args.no_cache, out_dir=args.out,
-                          progress=progress_bar("simulating", unit="simulation"),
-                          response_horizon_s=args.response_horizon * 3600.0, overwrite=args.overwrite)
-    print(res.summary)
-    print(f"report, tables, candidate scores and render in {res.out_dir}/")
-
-
 def _add_data_options(p):
     p.add_argument("--column-map", help="JSON file or inline JSON mapping measured CSV columns to <name>_<unit>")
     p.add_argument("--nan-policy", default="error", choices=("error", "interpolate", "drop"),
                    help="NaNs in a measured CSV (default: error)")
 
 
-def _add_cluster_options(p):
-    p.add_argument("--machine", default="vmc_ram", help="machine name or TOML path")
-    p.add_argument("--mesh-size", type=float, help="target tetrahedron edge length, m")
-    p.add_argument("--scheduler", default="local",
-                   help="'local' (a local Dask cluster, default), 'serial', or tcp://HOST:8786 for an existing one")
-
-
 def register(sub):
-    """Add ``train``, ``evaluate``, ``study`` and ``place``."""
-    from .model_names import MODEL_NAMES
-
+    """Add ``train``, ``evaluate`` and ``study``."""
     t = sub.add_parser("train", help="train a compensation model on datasets and save it (JSON, no pickle)")
     t.add_argument("datasets", nargs="+", help=_datasets_help())
     t.add_argument("--inputs", required=True, action="append", help="input channels, comma-separated")
@@ -138,23 +111,5 @@ def register(sub):
     s.add_argument("--physics", default="fe", choices=("fe", "rom"), help="hybrid: physics backend")
     s.add_argument("--out", help="result folder (default runs/study_<name>)")
     add_overwrite(s)
-    _add_cluster_options(s)
+    add_cluster_options(s)
     s.set_defaults(func=cmd_study)
-
-    p = sub.add_parser("place", help="sensor-placement study: candidates, selection methods, K × method table")
-    p.add_argument("--parts", help="parts whose surface nodes are candidates (default: all outer parts)")
-    p.add_argument("--candidates", type=int, default=2000, help="surface candidates after thinning (default 2000)")
-    p.add_argument("--no-camera", action="store_true", help="leave the camera spots out of the candidates")
-    p.add_argument("--train", help="training scenarios, comma-separated")
-    p.add_argument("--test", help="held-out scenarios, comma-separated")
-    p.add_argument("--methods", help="selection methods, comma-separated (default: all)")
-    p.add_argument("--k-max", type=int, default=8)
-    p.add_argument("--axes", default="Z,Y")
-    p.add_argument("--record-interval", type=float, default=60.0, help="recording interval, s (default 60)")
-    p.add_argument("--response-horizon", type=float, default=48.0,
-                   help="greedy-physics: length of the elementary step responses, h (default 48)")
-    p.add_argument("--no-cache", action="store_true", help="simulate again even if records are cached")
-    p.add_argument("--out", default="runs/placement", help="result folder (default runs/placement)")
-    add_overwrite(p)
-    _add_cluster_options(p)
-    p.set_defaults(func=cmd_place)

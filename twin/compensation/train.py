@@ -3,9 +3,9 @@
 The functions behind ``twin train`` and ``twin evaluate`` (callable from Python):
 
 - :func:`load_dataset`: a dataset by path (a twin dataset with its sidecar, or
-  a measured CSV through :meth:`~twin.dataset.Dataset.from_measured_csv`) or by
+  a measured CSV through :meth:`~twin.core.dataset.Dataset.from_measured_csv`) or by
   scenario name (simulated on the spot);
-- :func:`train` fits a :class:`~twin.model_store.CompensationModel` and saves it;
+- :func:`train` fits a :class:`~twin.compensation.store.CompensationModel` and saves it;
 - :func:`evaluate` scores a model on datasets — a table (RMSE, NSE, R, max
   residual, improvement %) and a measured-vs-predicted PNG per dataset;
 - :func:`physics_prediction`: the twin's own prediction of drift channels
@@ -13,7 +13,7 @@ The functions behind ``twin train`` and ``twin evaluate`` (callable from Python)
   through the full FE model or the ROM — the physics half of the hybrid model.
 
 Every metric is on the zero-referenced target (the change since the start of
-the record, see :mod:`twin.model_store`); "uncompensated" is that change
+the record, see :mod:`twin.compensation.store`); "uncompensated" is that change
 itself, so improvement % = (1 − max|residual| / max|change|) × 100.
 """
 from __future__ import annotations
@@ -24,9 +24,18 @@ from pathlib import Path
 
 import numpy as np
 
-from .dataset import Dataset
-from .errors import TwinInputError
-from .model_store import CompensationModel, dataset_label, fit_compensation_model
+import fea
+from models import metrics
+
+from ..core.dataset import Dataset, sidecar_path
+from ..core.scenario import available_scenarios
+from ..core.simulate import simulate
+from ..errors import TwinInputError
+from ..infra.cli_common import split_names
+from ..infra.outdir import atomic_directory, check_output_file, check_output_folder
+from ..infra.tables import markdown_table
+from ..rom.reduction import cached_rom
+from .store import CompensationModel, dataset_label, fit_compensation_model
 
 METRIC_COLUMNS = ("rmse", "nse", "r", "max_residual", "improvement_percent", "uncompensated_max", "rows")
 
@@ -45,8 +54,6 @@ def load_dataset(spec, column_map=None, nan_policy="error", machine=None, noise=
         return spec
     path = Path(str(spec))
     if path.exists():
-        from .dataset import sidecar_path
-
         if sidecar_path(path).exists() and column_map is None:
             ds = Dataset.read(path)
         else:
@@ -57,12 +64,9 @@ def load_dataset(spec, column_map=None, nan_policy="error", machine=None, noise=
             ds = Dataset.from_measured_csv(path, column_map=column_map, nan_policy=nan_policy,
                                            time_column=time_cols[0] if time_cols else "time_s")
     else:
-        from .scenario import available_scenarios
-
         names = available_scenarios()
         if str(spec) not in names:
             raise TwinInputError(f"{spec!r} is neither a dataset file nor a scenario; scenarios: {names}")
-        from .simulate import simulate
 
         ds = simulate(str(spec), machine, noise=noise).dataset
     if label:
@@ -72,65 +76,29 @@ def load_dataset(spec, column_map=None, nan_policy="error", machine=None, noise=
 
 def _input_files(specs):
     """The files among dataset/model specs (paths, not objects or scenario names), with their sidecars."""
-    from .dataset import sidecar_path
-
     paths = [Path(s) for s in specs if isinstance(s, (str, Path)) and Path(s).is_file()]
     return paths + [sidecar_path(p) for p in paths]
-
-
-def read_column_map(value):
-    """A column map from a JSON file path or inline JSON (``{"t1": "T01_degC"}``), or None."""
-    if value is None:
-        return None
-    path = Path(value)
-    text = path.read_text(encoding="utf-8") if path.exists() else value
-    try:
-        out = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise TwinInputError(f"column map {value!r} is neither a JSON file nor inline JSON ({exc})") from None
-    if not isinstance(out, dict):
-        raise TwinInputError(f"column map must be a JSON object csv column → '<name>_<unit>', got {out!r}")
-    return out
-
-
-def split_names(value):
-    """``"T01,T05"`` or ``["T01", "T05"]`` → ``["T01", "T05"]``."""
-    if value is None:
-        return []
-    if isinstance(value, str):
-        value = [value]
-    return [n.strip() for item in value for n in str(item).split(",") if n.strip()]
 
 
 # ----------------------------------------------------------------------------- metrics
 def score(y_true, y_pred):
     """Metrics of a prediction of the (zero-referenced) target: dict of :data:`METRIC_COLUMNS`."""
-    from models import metrics as m
-
     y_true, y_pred = np.asarray(y_true, float), np.asarray(y_pred, float)
     peak = float(np.max(np.abs(y_true)))
-    out = {"rmse": m.rmse(y_true, y_pred), "max_residual": m.max_abs_residual(y_true, y_pred),
+    out = {"rmse": metrics.rmse(y_true, y_pred), "max_residual": metrics.max_abs_residual(y_true, y_pred),
            "uncompensated_max": peak, "uncompensated_rmse": float(np.sqrt(np.mean(y_true ** 2))),
            "rows": int(len(y_true))}
     spread_ok = np.ptp(y_true) > 0
-    out["nse"] = m.nse(y_true, y_pred) if spread_ok else float("nan")
-    out["r"] = m.pearson_r(y_true, y_pred) if spread_ok and np.ptp(y_pred) > 0 else float("nan")
-    out["improvement_percent"] = m.improvement_percent(y_true, y_pred) if peak > 0 else float("nan")
+    out["nse"] = metrics.nse(y_true, y_pred) if spread_ok else float("nan")
+    out["r"] = metrics.pearson_r(y_true, y_pred) if spread_ok and np.ptp(y_pred) > 0 else float("nan")
+    out["improvement_percent"] = metrics.improvement_percent(y_true, y_pred) if peak > 0 else float("nan")
     return out
 
 
-def format_table(rows, columns=None, floatfmt="{:.3g}"):
-    """Markdown table of a list of dicts."""
+def format_table(rows, columns=None, floatfmt=".3g"):
+    """Markdown table of a list of dicts: ``columns`` (default: the first row's keys), floats as ``floatfmt``."""
     columns = columns or list(rows[0])
-    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
-    for r in rows:
-        cells = []
-        for c in columns:
-            v = r.get(c, "")
-            cells.append(floatfmt.format(v) if isinstance(v, (float, np.floating)) and np.isfinite(v) else
-                         ("–" if isinstance(v, float) else str(v)))
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+    return markdown_table([[r.get(c, "") for c in columns] for r in rows], columns, formats=floatfmt) + "\n"
 
 
 # ----------------------------------------------------------------------------- train / evaluate
@@ -149,15 +117,13 @@ def train(datasets, inputs, target, model="anfis", params=None, out=None, zero_r
           reference_samples=1, column_map=None, nan_policy="error", machine=None, overwrite=False):
     """Fit a compensation model on datasets (paths, scenario names or :class:`Dataset`) and save it to ``out``.
 
-    ``out`` is checked before the work (:func:`twin.outdir.check_output_file`): an existing
+    ``out`` is checked before the work (:func:`twin.infra.outdir.check_output_file`): an existing
     file is replaced only with ``overwrite``, and never a dataset of the training.
 
     Returns the :class:`CompensationModel`; its training metrics are in
     ``model.metadata["training_metrics"]``.
     """
     if out is not None:
-        from .outdir import check_output_file
-
         check_output_file(out, overwrite, inputs=_input_files(datasets))
     loaded = [load_dataset(d, column_map, nan_policy, machine) for d in datasets]
     cm = fit_compensation_model(loaded, split_names(inputs), target, model, params, zero_reference,
@@ -178,8 +144,6 @@ def evaluate(model, datasets, out_dir=None, column_map=None, nan_policy="error",
     change and the residual).  A dataset whose channels do not match the
     model's raises a :class:`TwinInputError` naming them.
     """
-    from .outdir import check_output_folder
-
     check_output_folder(out_dir, overwrite, inputs=_input_files([model, *datasets]))
     cm = model if isinstance(model, CompensationModel) else CompensationModel.load(model)
     loaded = [load_dataset(d, column_map, nan_policy, machine) for d in datasets]
@@ -199,8 +163,6 @@ def evaluate(model, datasets, out_dir=None, column_map=None, nan_policy="error",
     out_dir = Path(out_dir) if out_dir is not None else None
     result = Evaluation(rows, out_dir, predictions)
     if out_dir is not None:
-        from .outdir import atomic_directory
-
         with atomic_directory(out_dir, overwrite) as tmp:
             _write_evaluation(cm, result, tmp, plots)
         result.out_dir = out_dir
@@ -210,7 +172,7 @@ def evaluate(model, datasets, out_dir=None, column_map=None, nan_policy="error",
 def _write_evaluation(cm, result, folder, plots):
     import pandas as pd
 
-    from .plots import plot_measured_vs_predicted
+    from ..infra.plots import plot_measured_vs_predicted  # on use: it switches matplotlib to Agg
 
     head = (f"# Evaluation of {cm.describe()}\n\nTrained on: "
             f"{', '.join(t['label'] for t in cm.training) or '?'}. Metrics on the target's change since the "
@@ -289,19 +251,17 @@ def physics_prediction(machine, dataset, outputs=("Z", "Y"), backend="fe", max_s
 
     Parameters
     ----------
-    machine : the (nominal) :class:`~twin.machine.Machine`
+    machine : the (nominal) :class:`~twin.core.machine.Machine`
     dataset : record with spindle speed, feeds and ambient channels (see :class:`RecordSchedule`)
     outputs : channel names of the machine to predict (drift X/Y/Z/Y_top, sensors …)
     backend : ``"fe"`` (full finite-element run, one factorisation reused for every step)
-        or ``"rom"`` (the cached reduced model of :mod:`twin.rom`, when available)
+        or ``"rom"`` (the cached reduced model of :mod:`twin.rom.reduction`, when available)
     max_step_s : sub-step length (default: the record's sampling interval)
     initial : ``"rest"`` — steady state with spindle and feeds stopped at the first ambient
         (a record rarely knows more); or a uniform temperature in °C
 
     Returns a dict name → (n,) array, absolute (not zero-referenced).
     """
-    import fea
-
     if backend not in PHYSICS_BACKENDS:
         raise TwinInputError(f"unknown physics backend {backend!r}; available: {PHYSICS_BACKENDS}")
     outputs = list(outputs)
@@ -310,8 +270,6 @@ def physics_prediction(machine, dataset, outputs=("Z", "Y"), backend="fe", max_s
     schedule = RecordSchedule(machine, dataset)
     times = dataset.time_s
     if backend == "rom":
-        from .rom import cached_rom
-
         rom = cached_rom(machine)
         z0 = rom.steady_state(schedule.at_rest()) if initial == "rest" else rom.uniform(float(initial))
         U = schedule.sample(times)

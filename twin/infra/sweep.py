@@ -31,7 +31,7 @@ from __future__ import annotations
 import os
 import threading
 
-from .errors import TwinInputError
+from ..errors import TwinInputError
 
 SERIAL = "serial"
 LOCAL = "local"

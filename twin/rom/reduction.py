@@ -55,11 +55,16 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
+from fea.inputs import interval_means
+from fea.linsolve import factorize
 from fea.transient import step_grid
+from meshes.cachefiles import checked, user_cache_dir, write_checked
 
-from .dataset import json_default
-from .errors import TwinInputError
-from .machine_definition import room_zone
+from ..core.dataset import ChannelInfo, Dataset, json_default, project_version
+from ..core.machine_definition import room_zone
+from ..core.scenario import Scenario, load_scenario
+from ..core.simulate import condition_channels
+from ..errors import TwinInputError
 
 FORMAT = "thermal-twin-rom"
 FORMAT_VERSION = 1
@@ -110,8 +115,6 @@ def _check_lti(system):
 
 
 def _spd_factor(matrix):
-    from fea.linsolve import factorize
-
     return factorize(sp.csc_matrix(matrix), symmetric_positive_definite=True)
 
 
@@ -325,7 +328,7 @@ class ReducedModel:
 
     # ------------------------------------------------------------------ operating conditions → u
     def inputs_from_conditions(self, spindle_rpm, feed_mm_min, ambient_C, gradient_K_per_m=0.0):
-        """Thermal inputs (k, m) from operating conditions, as :meth:`twin.machine.Machine.input_matrix`.
+        """Thermal inputs (k, m) from operating conditions, as :meth:`twin.core.machine.Machine.input_matrix`.
 
         ``spindle_rpm`` (k,), ``feed_mm_min`` dict axis → (k,), ``ambient_C``
         dict zone → (k,) (or a number/array for every zone), ``gradient_K_per_m``.
@@ -458,7 +461,7 @@ class ReducedModel:
 
 
 def source_power(src, spindle_rpm, feed_mm_min):
-    """Power (W) of a source model dict (see :class:`twin.machine_definition.HeatSource`)."""
+    """Power (W) of a source model dict (see :class:`twin.core.machine_definition.HeatSource`)."""
     rpm = np.asarray(spindle_rpm, float)
     driver = src["driver"]
     if driver == "constant":
@@ -485,7 +488,7 @@ def compute_basis(machine, order, method="krylov", points=None):
     """The projection basis V (n, order) and the expansion points used (Krylov) or [] (modal).
 
     Bases are nested: the first r columns of an order-R basis are the order-r basis
-    (the construction is sequential), which :func:`twin.rom_report.error_report` uses.
+    (the construction is sequential), which :func:`twin.rom.report.error_report` uses.
     """
     if method not in METHODS:
         raise ROMError(f"unknown ROM method {method!r}; methods: {list(METHODS)}")
@@ -504,7 +507,7 @@ def compute_basis(machine, order, method="krylov", points=None):
 
 def build_rom(machine, order=DEFAULT_ORDER, method="krylov", points=None, kinds=DEFAULT_KINDS,
               keep_basis=False):
-    """Reduce a built :class:`~twin.machine.Machine` to a :class:`ReducedModel` of ``order`` states.
+    """Reduce a built :class:`~twin.core.machine.Machine` to a :class:`ReducedModel` of ``order`` states.
 
     Parameters
     ----------
@@ -575,8 +578,6 @@ def reduce_with_basis(machine, V, method="krylov", kinds=DEFAULT_KINDS, keep_bas
 
 
 def rom_cache_path(machine, order, method="krylov", points=None, kinds=DEFAULT_KINDS):
-    from meshes.cachefiles import user_cache_dir
-
     key = hashlib.sha256(json.dumps([machine_digest(machine), int(order), method,
                                      None if points is None else [float(p) for p in points],
                                      sorted(kinds)]).encode()).hexdigest()[:16]
@@ -585,8 +586,6 @@ def rom_cache_path(machine, order, method="krylov", points=None, kinds=DEFAULT_K
 
 def cached_rom(machine, order=DEFAULT_ORDER, method="krylov", points=None, kinds=DEFAULT_KINDS, rebuild=False):
     """:func:`build_rom`, or the ROM saved earlier for the same machine matrices and settings."""
-    from meshes.cachefiles import checked, write_checked
-
     path = rom_cache_path(machine, order, method, points, kinds)
     if path.exists() and not rebuild and checked(path) is not None:
         rom = ReducedModel.load(path)
@@ -610,7 +609,7 @@ class ScenarioConditions:
 
 
 def scenario_conditions(scenario, zones, times, lags_s=None):
-    """Operating conditions of a scenario at ``times`` (as :class:`twin.simulate.ScenarioInputs` gives them)."""
+    """Operating conditions of a scenario at ``times`` (as :class:`twin.core.simulate.ScenarioInputs` gives them)."""
     t = np.atleast_1d(np.asarray(times, float))
     rpm, feeds = scenario.operating(t)
     ambient = scenario.zone_ambient(t, zones, lags_s) if lags_s else scenario.zone_ambient(t, zones)
@@ -624,7 +623,7 @@ def initial_state(rom, scenario):
     if init["kind"] == "uniform":
         value = init.get("temperature_C")
         return rom.uniform(cond.ambient_C[room_zone(rom.zones)][0] if value is None else value)
-    # The machine stands idle before the test unless the scenario names a speed (as twin.simulate does).
+    # The machine stands idle before the test unless the scenario names a speed (as twin.core.simulate does).
     rpm = np.array([init.get("spindle_rpm") or 0.0])
     idle = {a: np.zeros(1) for a in "xyz"}
     ambient = cond.ambient_C if init.get("ambient_C") is None else \
@@ -647,15 +646,11 @@ def held_conditions(scenario, zones, times, lags_s=None):
 
 @functools.lru_cache(maxsize=1)
 def _project_version():
-    from .dataset import project_version
-
     return project_version()
 
 
 def scenario_step_means(rom, scenario, step_times):
-    """Mean ROM inputs over each step (len − 1, m): the FE run's mechanism (:class:`twin.simulate.ScenarioInputs`)."""
-    from fea.inputs import interval_means
-
+    """Mean ROM inputs over each step (len − 1, m), as the FE run takes them (see ``ScenarioInputs``)."""
     def inputs_at(t):
         c = scenario_conditions(scenario, rom.zones, t, rom.zone_lags_s)
         return rom.inputs_from_conditions(c.spindle_rpm, c.feed_mm_min, c.ambient_C, c.gradient_K_per_m)
@@ -664,22 +659,18 @@ def scenario_step_means(rom, scenario, step_times):
 
 
 def simulate_rom(rom, scenario, scheme="zoh", theta=None, sample_times=None, inputs="mean"):
-    """Run a scenario (name, path or Scenario) on a ROM; return a :class:`~twin.dataset.Dataset`.
+    """Run a scenario (name, path or Scenario) on a ROM; return a :class:`~twin.core.dataset.Dataset`.
 
-    Channels as in :func:`twin.simulate.simulate` (conditions, then the ROM's
+    Channels as in :func:`twin.core.simulate.simulate` (conditions, then the ROM's
     outputs, no noise).  ``scheme="zoh"``: exact for the inputs held over
     each step; ``"theta"``: the FE's θ-method on its step grid (like-for-like
     with the full model).  ``inputs="mean"`` drives each step by the mean of
     the inputs over it, as the FE run does, so every segment injects its
     energy whatever the grid; ``inputs="held"`` holds the conditions at the
     step's end instead (left limits, :func:`held_conditions`): what an FMU
-    master feeds from :func:`twin.fmu.input_table`, equal to the mean for
+    master feeds from :func:`twin.fmu.export.input_table`, equal to the mean for
     duty cycles on the step grid and a constant ambient.
     """
-    from .dataset import ChannelInfo, Dataset
-    from .scenario import Scenario, load_scenario
-    from .simulate import condition_channels
-
     if inputs not in ("mean", "held"):
         raise ROMError(f"unknown inputs {inputs!r}; use 'mean' or 'held'")
     scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)

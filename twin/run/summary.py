@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..infra.tables import markdown_table
+
 
 def tilt_urad(dataset, probe_spacing_m):
     """Tilt in the YZ plane from the two Y probes, µrad (= µm per m)."""
@@ -68,9 +70,9 @@ def format_summary(summary):
     elif "energy_balance_relative_error" in summary:
         lines.append(f"- energy balance (stored vs in − out), max relative error: "
                      f"{summary['energy_balance_relative_error']:.1e}")
-    lines += ["", "| channel | peak drift (µm) | at (h) | range (µm) |", "|---|---|---|---|"]
-    for axis, d in summary["drift"].items():
-        lines.append(f"| {axis} | {d['peak_um']:.2f} | {d['at_h']:.2f} | {d['range_um']:.2f} |")
+    drift = [(axis, d["peak_um"], d["at_h"], d["range_um"]) for axis, d in summary["drift"].items()]
+    lines += ["", markdown_table(drift, ["channel", "peak drift (µm)", "at (h)", "range (µm)"],
+                                 formats=[None, ".2f", ".2f", ".2f"])]
     if "iso230_3_etve" in summary:
         e = summary["iso230_3_etve"]
         lines += ["", "## ISO 230-3 ETVE", "",

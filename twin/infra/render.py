@@ -163,7 +163,7 @@ def render_deformed_shape(machine, displacement, path, scale, title=None, clim_u
     """The machine deformed by ``scale`` × ``displacement`` (m), coloured by |u| in µm.
 
     ``displacement`` is (n, 3) on the nodes of the elastic space, the mesh
-    vertices first (as :func:`twin.deformation.displacement_fields` gives it);
+    vertices first (as :func:`twin.core.deformation.displacement_fields` gives it);
     the vertices' rows are drawn.  The undeformed part edges are drawn in grey
     and the drawing scale is written in the picture.
     """

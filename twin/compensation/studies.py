@@ -12,8 +12,8 @@
   records come from a *perturbed* twin (scaled source powers and convection,
   sensor noise), the physics model is the nominal twin: a known sim-to-real gap.
 
-All simulations are independent tasks of :func:`twin.sweep.run_tasks`.
-Inputs and targets are zero-referenced per record (see :mod:`twin.model_store`).
+All simulations are independent tasks of :func:`twin.infra.sweep.run_tasks`.
+Inputs and targets are zero-referenced per record (see :mod:`twin.compensation.store`).
 """
 from __future__ import annotations
 
@@ -24,12 +24,17 @@ from pathlib import Path
 
 import numpy as np
 
-from .compensation import format_table, physics_prediction, score
-from .dataset import json_default
-from .errors import TwinInputError
-from .model_store import dataset_label, fit_compensation_model
-from .outdir import atomic_directory, check_output_folder
-from .placement import MachineSpec, _zero_ref
+from models import select_sensors
+
+from ..core.dataset import ChannelInfo, Dataset, json_default
+from ..core.scenario import available_scenarios
+from ..core.simulate import simulate
+from ..errors import TwinInputError
+from ..infra.outdir import atomic_directory, check_output_folder
+from ..infra.sweep import run_tasks
+from ..placement.study import MachineSpec, _scenario_obj, _zero_ref
+from .store import dataset_label, fit_compensation_model
+from .train import format_table, physics_prediction, score
 
 #: Scenario families of the cross-condition study: the first available scenario of each is used.
 FAMILIES = {
@@ -61,9 +66,6 @@ class SimulateTask:
     seed: int | None = None
 
     def __call__(self):
-        from .placement import _scenario_obj
-        from .simulate import simulate
-
         sc = _scenario_obj(self.scenario)
         if self.noise and self.instrument_noise:
             sc = replace(sc, noise={**INSTRUMENT_NOISE, **{k: v for k, v in sc.noise.items() if v != "none"}})
@@ -89,15 +91,11 @@ class PhysicsTask:
 
 
 def _available(names):
-    from .scenario import available_scenarios
-
     known = set(available_scenarios())
     return [n for n in names if n in known or Path(str(n)).exists()]
 
 
 def simulate_many(scenarios, machine=MachineSpec(), scheduler="local", noise=True, progress=None):
-    from .sweep import run_tasks
-
     machine.build()       # mesh and operator caches ready before the workers start (none meshes twice)
 
     return run_tasks([SimulateTask(machine, s, noise) for s in scenarios], scheduler=scheduler, progress=progress)
@@ -109,8 +107,6 @@ def installed_thermometers(dataset):
 
 def select_inputs(datasets, target, k=4, method="gm-influence+fcm", candidates=None, random_state=0):
     """Choose ``k`` input channels for ``target`` on training datasets by a seed method (zero-referenced)."""
-    from models import select_sensors
-
     candidates = candidates or installed_thermometers(datasets[0])
     X = np.vstack([_zero_ref(d.matrix(candidates)) for d in datasets])
     y = np.concatenate([d[target] - d[target][0] for d in datasets])
@@ -137,7 +133,7 @@ def cross_condition_study(families=None, axes=("Z", "Y"), model="mlr", inputs=No
     thermometers on each training family with ``select_method`` (as a user
     would on their one training condition).  Cells are the held-out max
     |residual|, RMSE and improvement %; the diagonal is the training fit.
-    ``out_dir`` is checked before the work (``overwrite``: see :func:`twin.outdir.check_output_folder`).
+    ``out_dir`` is checked before the work (``overwrite``: see :func:`twin.infra.outdir.check_output_folder`).
     """
     check_output_folder(out_dir, overwrite, inputs=(machine,))
     families = dict(families or FAMILIES)
@@ -272,7 +268,7 @@ def thesis_protocol_study(axes=("Z", "Y"), models=("anfis", "mlr"), inputs=None,
     result = StudyResult("thesis-protocol", None, {"thesis_protocol": rows}, "\n".join(md) + "\n")
     if out_dir is not None:
         def figs(tmp):
-            from .plots import plot_measured_vs_predicted
+            from ..infra.plots import plot_measured_vs_predicted  # on use: it switches matplotlib to Agg
 
             for (axis, model, label), (t, y, p) in plots.items():
                 plot_measured_vs_predicted(t, y, p, "um", f"{axis} on {label} ({model}, trained on Test IV)",
@@ -290,13 +286,12 @@ def hybrid_study(train=HYBRID_TRAIN, test=HYBRID_TEST, axes=("Z", "Y"), model="a
     "Measured" records: the twin with ``gap`` (default :data:`DEFAULT_GAP`:
     bearing and drive powers ±20–30 %, convection −20 %) and instrument noise.
     Physics: the nominal twin driven by the records' spindle speed, feeds and
-    ambient (:func:`twin.compensation.physics_prediction`), started at rest.
+    ambient (:func:`twin.compensation.train.physics_prediction`), started at rest.
     Data-driven: ``model`` on ``k`` thermometers (chosen on the training records).
     Hybrid: the same ``model`` and inputs fitted to the physics residual
     (measured − physics change); prediction = physics + learned residual.
     """
     check_output_folder(out_dir, overwrite, inputs=(machine,))
-    from .sweep import run_tasks
 
     gap = dict(DEFAULT_GAP if gap is None else gap)
     train, test = _available(train), _available(test)
@@ -373,8 +368,6 @@ def hybrid_study(train=HYBRID_TRAIN, test=HYBRID_TEST, axes=("Z", "Y"), model="a
 
 
 def _with_residual(ds, axis, physics_abs):
-    from .dataset import ChannelInfo, Dataset
-
     r = (ds[axis] - ds[axis][0]) - (physics_abs - physics_abs[0])
     return Dataset(ds.time_s, np.column_stack([ds.values, r]),
                    ds.channels + [ChannelInfo(f"{axis}_residual", ds.info(axis).unit, "displacement")], ds.metadata)

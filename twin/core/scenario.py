@@ -21,7 +21,7 @@ import numpy as np
 
 from meshes.tomlspec import DefinitionError, Table, plain_value, read_toml, resolve_definition
 
-SCENARIOS_DIR = Path(__file__).resolve().parent.parent / "scenarios"
+SCENARIOS_DIR = Path(__file__).resolve().parents[2] / "scenarios"
 HOUR = 3600.0
 #: Ambient temperatures (°C) accepted as plausible for a machine-tool room (the FMU's input range too).
 AMBIENT_RANGE_C = (-50.0, 100.0)

@@ -1,0 +1,456 @@
+"""FMI 2.0 (and, for the native kind, 3.0) Co-Simulation export of the thermal twin.
+
+Two kinds, one interface (:mod:`twin.fmu.spec`):
+
+``python``
+    Built with PythonFMU: the slave (``thermal_twin_slave.py``) and the ROM
+    matrices (``resources/rom.npz``, no pickle) travel inside the FMU; the
+    importing process needs Python with numpy (and the ``twin`` package for
+    ``engine="fe"``, the full finite-element model).
+``native``
+    Generated C (``sources/``: ``thermal_twin_rom.c``, ``model_data.h``, the
+    official FMI 2 headers) compiled with the machine's C compiler into
+    ``binaries/linux64/thermal_twin_rom.so``; needs nothing at run time.
+    ``modelDescription.xml`` lists the sources so other platforms can rebuild.
+    ``fmi_version=3`` makes an FMI 3.0 FMU instead (``binaries/x86_64-linux``,
+    ``sources/buildDescription.xml``).
+
+Both integrate the ROM exactly for inputs held over each communication step
+(zero-order hold, any step size) and are checked by :func:`validate` (fmpy).
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import tempfile
+import zipfile
+from pathlib import Path
+from xml.dom.minidom import parseString
+from xml.etree.ElementTree import Element, SubElement, fromstring, tostring
+
+import numpy as np
+
+from ..core.machine_definition import room_zone
+from ..core.scenario import Scenario, load_scenario
+from ..rom.reduction import scenario_conditions
+from . import spec
+from .native_source import FMI2_SOURCE, fmi3_source, model_data_header
+from .spec import FMUError
+
+KINDS = ("python", "native")
+ENGINES = ("rom", "fe")
+NATIVE_IDENTIFIER = "thermal_twin_rom"
+PYTHON_IDENTIFIER = "ThermalTwin"
+C_FILE = "thermal_twin_rom.c"
+
+
+def _output_rows(rom, outputs):
+    if outputs is None:
+        return list(range(rom.n_outputs))
+    return [rom.output_index(n) for n in outputs]
+
+
+def _subset(rom, rows):
+    """A shallow view of the ROM restricted to some outputs (for the interface only)."""
+    import copy
+
+    view = copy.copy(rom)
+    view.output_names = [rom.output_names[i] for i in rows]
+    view.output_units = [rom.output_units[i] for i in rows]
+    view.output_kinds = [rom.output_kinds[i] for i in rows]
+    return view
+
+
+def _description(rom, engine):
+    what = "full finite-element model" if engine == "fe" else f"{rom.method} ROM of order {rom.order}"
+    return (f"Thermal twin of machine {rom.machine!r} ({what}): spindle speed, feeds and ambient in; "
+            f"temperatures (degC), TCP drift (um) and strains (ue) out")
+
+
+def export_fmu(rom, out, kind="python", engine="rom", outputs=None, default_temperature_C=20.0,
+               step_s=spec.DEFAULT_STEP_S, fe_options=None, compiler="cc", fmi_version=2):
+    """Write an FMI 2.0 Co-Simulation FMU of ``rom`` to ``out``; return its path.
+
+    Parameters
+    ----------
+    kind : ``"python"`` (PythonFMU) or ``"native"`` (compiled C)
+    engine : ``"rom"`` or, for the Python kind only, ``"fe"`` (the full model; slow)
+    outputs : ROM output names to expose (default: all of the ROM's)
+    default_temperature_C : start value of ``T_initial`` and the ambient inputs
+    step_s : the DefaultExperiment step size (any step works)
+    fe_options : for ``engine="fe"``: dict(machine=name or TOML path, mesh_size_m=..., max_step_s=...)
+    compiler : C compiler command for the native kind
+    fmi_version : 2 (both kinds) or 3 (native kind only: FMI 3.0 Co-Simulation)
+    """
+    if kind not in KINDS:
+        raise FMUError(f"unknown FMU kind {kind!r}; kinds: {list(KINDS)}")
+    if engine not in ENGINES:
+        raise FMUError(f"unknown FMU engine {engine!r}; engines: {list(ENGINES)}")
+    if kind == "native" and engine != "rom":
+        raise FMUError("the native FMU runs the ROM only; use --kind python for --engine fe")
+    if int(fmi_version) not in (2, 3) or (kind == "python" and int(fmi_version) != 2):
+        raise FMUError(f"FMI version {fmi_version!r} is not available for the {kind} kind "
+                       f"(python: 2; native: 2 or 3)")
+    out = Path(out)
+    if out.suffix != ".fmu":
+        raise FMUError(f"{out}: the FMU file name must end in .fmu")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    rows = _output_rows(rom, outputs)
+    view = _subset(rom, rows)
+    variables = spec.interface(view, default_temperature_C)
+    if kind == "python":
+        return _export_python(rom, view, variables, out, engine, step_s, fe_options or {})
+    if int(fmi_version) == 3:
+        return _export_native3(rom, view, variables, rows, out, step_s, compiler)
+    return _export_native(rom, view, variables, rows, out, step_s, compiler)
+
+
+# ----------------------------------------------------------------------------- model description
+def _default_experiment(step_s):
+    return Element("DefaultExperiment", startTime="0.0", stepSize=repr(float(step_s)))
+
+
+def _append_units_logs_experiment(root, variables, step_s):
+    """Append UnitDefinitions, LogCategories and DefaultExperiment (step ``step_s`` in s) to ``root``.
+
+    The native FMUs of FMI 2.0 and 3.0 declare these alike, and both
+    standards place them in this order between CoSimulation and
+    ModelVariables.  The categories are the ones the C sources log under.
+    """
+    root.append(spec.unit_definitions({v.unit for v in variables if v.unit}))
+    cats = SubElement(root, "LogCategories")
+    for name, text in (("logStatusError", "errors: rejected inputs or calls"), ("logAll", "all messages")):
+        SubElement(cats, "Category", name=name, description=text)
+    root.append(_default_experiment(step_s))
+
+
+def _pretty(root):
+    return parseString(tostring(root, "UTF-8")).toprettyxml(encoding="UTF-8")
+
+
+def _native_model_description(view, variables, guid, step_s):
+    root = Element("fmiModelDescription", {
+        "fmiVersion": "2.0", "modelName": f"thermal_twin_{view.machine}", "guid": guid,
+        "description": _description(view, "rom"), "generationTool": "thermal-twin",
+        "variableNamingConvention": "structured", "numberOfEventIndicators": "0"})
+    cs = SubElement(root, "CoSimulation", {
+        "modelIdentifier": NATIVE_IDENTIFIER, "canHandleVariableCommunicationStepSize": "true",
+        "canGetAndSetFMUstate": "true", "canSerializeFMUstate": "true",
+        "canNotUseMemoryManagementFunctions": "false", "canInterpolateInputs": "false"})
+    files = SubElement(cs, "SourceFiles")
+    SubElement(files, "File", name=C_FILE)
+    _append_units_logs_experiment(root, variables, step_s)
+    mv = SubElement(root, "ModelVariables")
+    for v in variables:
+        mv.append(spec.scalar_variable(v))
+    root.append(spec.model_structure(variables))
+    return _pretty(root)
+
+
+def _patch_python_description(xml_bytes, view, variables, step_s):
+    """Declare units, ranges, InitialUnknowns and the default experiment in PythonFMU's description."""
+    root = fromstring(xml_bytes)
+    root.set("description", _description(view, "rom"))
+    by_name = {v.name: v for v in variables}
+    mv = root.find("ModelVariables")
+    for sv in mv.findall("ScalarVariable"):
+        v = by_name[sv.get("name")]
+        if int(sv.get("valueReference")) != v.vr:
+            raise FMUError(f"PythonFMU numbered {v.name!r} {sv.get('valueReference')}, expected {v.vr}")
+        sv.set("description", v.description)
+        child = sv.find(v.type)
+        if v.type == "Real":
+            for key in ("unit", "min", "max"):
+                value = getattr(v, key)
+                if value is not None:
+                    child.set(key, value if key == "unit" else spec._fmt(value))
+    children = list(root)
+    position = [c.tag for c in children].index("CoSimulation") + 1
+    root.insert(position, spec.unit_definitions({v.unit for v in variables if v.unit}))
+    old = root.find("DefaultExperiment")
+    if old is not None:
+        root.remove(old)
+    root.insert([c.tag for c in list(root)].index("ModelVariables"), _default_experiment(step_s))
+    root.remove(root.find("ModelStructure"))
+    root.append(spec.model_structure(variables))
+    return _pretty(root)
+
+
+# ----------------------------------------------------------------------------- python kind
+def _export_python(rom, view, variables, out, engine, step_s, fe_options):
+    from pythonfmu.builder import FmuBuilder
+
+    config = {"engine": engine, "description": _description(view, engine), "outputs": view.output_names,
+              "variables": [dict(name=v.name, vr=v.vr, type=v.type, causality=v.causality,
+                                 variability=v.variability, description=v.description, start=v.start,
+                                 initial=v.initial, min=v.min, max=v.max, role=v.role) for v in variables]}
+    if engine == "fe":
+        if "machine" not in fe_options:
+            raise FMUError("engine 'fe' needs fe_options['machine'] (machine name or TOML path)")
+        config["fe"] = dict(machine=str(fe_options["machine"]), mesh_size_m=fe_options.get("mesh_size_m"),
+                            max_step_s=float(fe_options.get("max_step_s", 60.0)), sources=rom.sources)
+    with tempfile.TemporaryDirectory(prefix="twin_fmu_") as tmp:
+        tmp = Path(tmp)
+        script = tmp / "thermal_twin_slave.py"
+        shutil.copy2(Path(__file__).with_name("thermal_twin_slave.py"), script)
+        (tmp / "interface.json").write_text(json.dumps(config, indent=1), encoding="utf-8")
+        files = [tmp / "interface.json"]
+        if engine == "rom":
+            rom.save(tmp / "rom.npz")
+            files.append(tmp / "rom.npz")
+        built = Path(FmuBuilder.build_FMU(script, dest=tmp / "build", project_files=files))
+        with zipfile.ZipFile(built) as zin, zipfile.ZipFile(out.with_suffix(".fmu.partial"), "w",
+                                                           zipfile.ZIP_DEFLATED) as zout:
+            for item in zin.infolist():
+                data = zin.read(item.filename)
+                if item.filename == "modelDescription.xml":
+                    data = _patch_python_description(data, view, variables, step_s)
+                zout.writestr(item.filename, data)
+    out.with_suffix(".fmu.partial").replace(out)
+    return out
+
+
+# ----------------------------------------------------------------------------- native kind
+def fmi_headers_dir():
+    """The official FMI 2 headers shipped with fmpy."""
+    import fmpy
+
+    path = Path(fmpy.__file__).parent / "c-code"
+    if not (path / "fmi2Functions.h").exists():
+        raise FMUError(f"the FMI 2 headers are not in {path}; reinstall fmpy")
+    return path
+
+
+def write_native_sources(rom, view, variables, rows, folder, guid):
+    """Write the C sources of the native FMU into ``folder``; return the C file."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"):
+        shutil.copy2(fmi_headers_dir() / name, folder / name)
+    (folder / "model_data.h").write_text(model_data_header(rom, variables, guid, rows), encoding="utf-8")
+    (folder / C_FILE).write_text(FMI2_SOURCE, encoding="utf-8")
+    return folder / C_FILE
+
+
+def compile_native(source, library, compiler="cc"):
+    """Compile the C source into a shared library; raise :class:`FMUError` with the compiler's message."""
+    cmd = [compiler, "-shared", "-fPIC", "-O2", "-std=c99", "-Wall", "-I", str(Path(source).parent), str(source),
+           "-o", str(library), "-lm"]
+    try:
+        run = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    except FileNotFoundError:
+        raise FMUError(f"C compiler {compiler!r} not found; install gcc or pass --compiler") from None
+    if run.returncode != 0:
+        raise FMUError(f"compiling the native FMU failed ({' '.join(cmd)}):\n{run.stderr.strip()}")
+    return library
+
+
+def _zip_fmu(folder, out):
+    """Zip every file below ``folder`` (paths relative to it) into the FMU ``out``.
+
+    The archive is written as ``<out>.fmu.partial`` and renamed onto ``out``
+    only when complete, so an interrupted export never leaves a truncated FMU
+    that looks valid.  Files are added in sorted order, so the archive lists
+    them the same way on every run.
+    """
+    partial = out.with_suffix(".fmu.partial")
+    with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as z:
+        for f in sorted(folder.rglob("*")):
+            if f.is_file():
+                z.write(f, f.relative_to(folder).as_posix())
+    partial.replace(out)
+
+
+def _export_native(rom, view, variables, rows, out, step_s, compiler):
+    guid = spec.guid(view, "native")
+    with tempfile.TemporaryDirectory(prefix="twin_fmu_native_") as tmp:
+        tmp = Path(tmp)
+        source = write_native_sources(rom, view, variables, rows, tmp / "sources", guid)
+        (tmp / "binaries" / "linux64").mkdir(parents=True)
+        compile_native(source, tmp / "binaries" / "linux64" / f"{NATIVE_IDENTIFIER}.so", compiler)
+        (tmp / "modelDescription.xml").write_bytes(_native_model_description(view, variables, guid, step_s))
+        (tmp / "documentation").mkdir()
+        (tmp / "documentation" / "index.html").write_text(
+            "<html><body><h1>Thermal twin ROM FMU</h1><p>" + _description(view, "rom") +
+            ". Rebuild on another platform: <code>cc -shared -fPIC -O2 -I sources sources/" + C_FILE +
+            " -o binaries/&lt;platform&gt;/" + NATIVE_IDENTIFIER + ".&lt;so|dll|dylib&gt; -lm</code>.</p>"
+            "</body></html>\n", encoding="utf-8")
+        _zip_fmu(tmp, out)
+    return out
+
+
+# ----------------------------------------------------------------------------- native kind, FMI 3.0
+FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
+FMI3_PLATFORM = "x86_64-linux"
+
+
+def _native_model_description3(view, variables, token, step_s):
+    root = Element("fmiModelDescription", {
+        "fmiVersion": "3.0", "modelName": f"thermal_twin_{view.machine}", "instantiationToken": token,
+        "description": _description(view, "rom"), "generationTool": "thermal-twin",
+        "variableNamingConvention": "structured"})
+    SubElement(root, "CoSimulation", {
+        "modelIdentifier": NATIVE_IDENTIFIER, "canHandleVariableCommunicationStepSize": "true",
+        "canGetAndSetFMUState": "true", "canSerializeFMUState": "true", "hasEventMode": "false",
+        "providesIntermediateUpdate": "false", "canReturnEarlyAfterIntermediateUpdate": "false"})
+    _append_units_logs_experiment(root, variables, step_s)
+    mv = SubElement(root, "ModelVariables")
+    SubElement(mv, "Float64", name="time", valueReference=str(max(v.vr for v in variables) + 1),
+               causality="independent", variability="continuous", description="simulation time")
+    for v in variables:
+        attrib = {"name": v.name, "valueReference": str(v.vr), "description": v.description,
+                  "causality": v.causality, "variability": v.variability}
+        if v.initial:
+            attrib["initial"] = v.initial
+        if v.type == "Real":
+            for key in ("unit", "min", "max"):
+                value = getattr(v, key)
+                if value is not None:
+                    attrib[key] = value if key == "unit" else spec._fmt(value)
+            if v.start is not None:
+                attrib["start"] = spec._fmt(v.start)
+            SubElement(mv, "Float64", attrib)
+        else:
+            attrib["start"] = "true" if v.start else "false"
+            SubElement(mv, "Boolean", attrib)
+    ms = SubElement(root, "ModelStructure")
+    outputs = [v for v in variables if v.causality == "output"]
+    for v in outputs:
+        SubElement(ms, "Output", valueReference=str(v.vr))
+    for v in outputs:
+        SubElement(ms, "InitialUnknown", valueReference=str(v.vr))
+    return _pretty(root)
+
+
+def _build_description3():
+    root = Element("fmiBuildDescription", fmiVersion="3.0")
+    config = SubElement(root, "BuildConfiguration", modelIdentifier=NATIVE_IDENTIFIER)
+    files = SubElement(config, "SourceFileSet", language="C99")
+    SubElement(files, "SourceFile", name=C_FILE)
+    SubElement(config, "Library", name="m", description="the C maths library (libm)")
+    return _pretty(root)
+
+
+def _export_native3(rom, view, variables, rows, out, step_s, compiler):
+    token = spec.guid(view, "native-fmi3")
+    headers = fmi_headers_dir()
+    with tempfile.TemporaryDirectory(prefix="twin_fmu_native3_") as tmp:
+        tmp = Path(tmp)
+        src = tmp / "sources"
+        src.mkdir()
+        for name in FMI3_HEADERS:
+            shutil.copy2(headers / name, src / name)
+        (src / "model_data.h").write_text(model_data_header(rom, variables, token, rows), encoding="utf-8")
+        (src / C_FILE).write_text(fmi3_source((headers / "fmi3FunctionTypes.h").read_text()), encoding="utf-8")
+        (src / "buildDescription.xml").write_bytes(_build_description3())
+        (tmp / "binaries" / FMI3_PLATFORM).mkdir(parents=True)
+        compile_native(src / C_FILE, tmp / "binaries" / FMI3_PLATFORM / f"{NATIVE_IDENTIFIER}.so", compiler)
+        (tmp / "modelDescription.xml").write_bytes(_native_model_description3(view, variables, token, step_s))
+        _zip_fmu(tmp, out)
+    return out
+
+
+# ----------------------------------------------------------------------------- checks and runs
+def validate(path):
+    """Problems fmpy finds in the FMU (an empty list when it is valid)."""
+    from fmpy.validation import validate_fmu
+
+    return list(validate_fmu(str(path)))
+
+
+def input_table(rom, scenario, times=None):
+    """A structured array (``time`` + FMU input names) driving the FMU through a scenario.
+
+    Two rows hold the conditions at initialisation — those at t₀, with the
+    machine idle for a steady start (as :func:`twin.core.simulate.simulate` does) —
+    at t₀ − 1 s (before the start, only so that fmpy sees the event at t₀) and
+    at t₀.  A row at the same time t₀ follows — an input event, which fmpy
+    applies after initialisation, for the first step — and then row i (at tᵢ)
+    holds what the master sets for the step to tᵢ₊₁: the scenario's conditions
+    at tᵢ₊₁ (left limits, :func:`twin.rom.reduction.held_conditions`).  So the FMU
+    reproduces :func:`twin.rom.reduction.simulate_rom` (zero-order hold) exactly,
+    initial state and feedthrough included.
+    """
+    scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    t = scenario.times() if times is None else np.asarray(times, float)
+    cond = scenario_conditions(scenario, rom.zones, t, rom.zone_lags_s)
+    rpm, feeds, ambient = cond.spindle_rpm, cond.feed_mm_min, cond.ambient_C
+    init = scenario.initial
+    rpm0 = rpm[0] if init["kind"] != "steady" else (init.get("spindle_rpm") or 0.0)
+    feed0 = {a: (feeds[a][0] if init["kind"] != "steady" else 0.0) for a in "xyz"}
+    amb0 = {z: (ambient[z][0] if init["kind"] != "steady" or init.get("ambient_C") is None else init["ambient_C"])
+            for z in rom.zones}
+
+    def held(values, first):
+        return np.r_[first, first, values[1:], values[-1]]
+
+    cols = [("time", np.r_[t[0] - 1.0, t[0], t]), ("spindle_speed", held(rpm, rpm0))]
+    cols += [(f"feed_{a}", held(feeds[a], feed0[a])) for a in "xyz"]
+    cols += [(f"ambient_{z}", held(ambient[z], amb0[z])) for z in rom.zones]
+    cols += [("ambient_gradient", held(cond.gradient_K_per_m, cond.gradient_K_per_m[0]))]
+    table = np.zeros(len(t) + 2, dtype=[(name, np.float64) for name, _ in cols])
+    for name, values in cols:
+        table[name] = values
+    return table
+
+
+def scenario_start(rom, scenario):
+    """FMU start parameters ``(T_initial, steady_start)`` for a scenario's initial state.
+
+    A steady start is the steady state for the inputs set at initialisation
+    (the first row of :func:`input_table`).
+    """
+    init = scenario.initial
+    if init["kind"] == "steady":
+        return 20.0, True
+    value = init.get("temperature_C")
+    if value is None:
+        value = scenario_conditions(scenario, rom.zones, [0.0], rom.zone_lags_s).ambient_C[room_zone(rom.zones)][0]
+    return float(value), False
+
+
+def table_inputs(rom, table):
+    """Thermal inputs (k, m) of the ROM for an FMU input table."""
+    feeds = {a: table[f"feed_{a}"] for a in "xyz"}
+    ambient = {z: table[f"ambient_{z}"] for z in rom.zones}
+    return rom.inputs_from_conditions(table["spindle_speed"], feeds, ambient, table["ambient_gradient"])
+
+
+def _start_index(t):
+    """Index of the initialisation row: the row before the first repeated time, else 0."""
+    same = np.flatnonzero(np.diff(t) == 0)
+    return int(same[0]) if len(same) else 0
+
+
+def simulate_table(rom, table, T_initial=20.0, steady_start=False, outputs=None):
+    """The in-process twin (ROM, ZOH) on an FMU input table: outputs (k, p) at the table's distinct times.
+
+    Semantics of fmpy's co-simulation loop: a row at the same time as the one
+    before it is an input event (the first row initialises, the second drives
+    the first step); row i is held over [tᵢ, tᵢ₊₁); an output at tᵢ uses the
+    inputs last set (those of the step just made).
+    """
+    t = np.asarray(table["time"], float)
+    U = table_inputs(rom, table)
+    k = _start_index(t)
+    init = U[k]
+    if k + 1 < len(t) and t[k + 1] == t[k]:
+        k += 1
+    t, U = t[k:], U[k:]
+    z0 = rom.steady_state(init) if steady_start else rom.uniform(T_initial)
+    _, Z = rom.states(t, U, z0, "zoh")
+    applied = np.vstack([init[None, :], U[:-1]])
+    return rom.outputs(Z, applied)[:, _output_rows(rom, outputs)]
+
+
+def simulate(path, table, T_initial=20.0, steady_start=False, outputs=None, **kwargs):
+    """Run an FMU in fmpy on an input table (output interval = the table's step); return fmpy's result."""
+    from fmpy import simulate_fmu
+
+    t = np.asarray(table["time"], float)
+    t = np.unique(t[_start_index(t):])
+    step = float(t[1] - t[0])
+    return simulate_fmu(str(path), start_time=float(t[0]), stop_time=float(t[-1]), output_interval=step,
+                        input=table, output=outputs, validate=True,
+                        start_values={"T_initial": T_initial, "steady_start": bool(steady_start)}, **kwargs)

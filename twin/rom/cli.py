@@ -1,0 +1,90 @@
+"""CLI commands ``twin rom build`` and ``twin rom report``: a thin layer over :mod:`twin.rom`."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..errors import TwinInputError
+from ..infra.cli_common import add_overwrite, check_out_file
+
+# Handlers import the library inside them, never up here: start-up time (`twin --help` must not load scipy).
+# So twin.rom.reduction's default order is copied here (tests/test_cli_startup.py keeps the two equal).
+DEFAULT_ORDER = 80
+
+
+def _orders(text):
+    try:
+        values = [int(v) for v in str(text).split(",") if v.strip()]
+    except ValueError:
+        raise TwinInputError(f"--orders must be comma-separated integers, got {text!r}") from None
+    if not values or min(values) < 1:
+        raise TwinInputError(f"--orders must be positive integers, got {text!r}")
+    return values
+
+
+def machine_and_rom(args):
+    """The machine and its (cached) ROM named by ``--machine``, ``--mesh-size``, ``--order`` and ``--method``."""
+    from ..core.machine import build_machine
+    from .reduction import cached_rom
+
+    machine = build_machine(args.machine, args.mesh_size)
+    return machine, cached_rom(machine, args.order, args.method, rebuild=getattr(args, "rebuild", False))
+
+
+def add_rom_options(p):
+    """Add the options that choose the machine and its ROM (``rom build``, ``fmu export``, ``fmu simulate``)."""
+    p.add_argument("--machine", default="vmc_ram", help="machine name or TOML path (default vmc_ram)")
+    p.add_argument("--mesh-size", type=float, help="target tetrahedron edge length, m")
+    p.add_argument("--order", type=int, default=DEFAULT_ORDER, help=f"ROM order (default {DEFAULT_ORDER})")
+    p.add_argument("--method", choices=("krylov", "modal"), default="krylov", help="reduction method")
+
+
+def cmd_rom_build(args):
+    check_out_file(args)
+    machine, rom = machine_and_rom(args)
+    i = rom.info
+    where = f"read from {i['from_cache']}" if i.get("from_cache") else f"built in {i['build_seconds']:.1f} s"
+    print(f"{rom}: {where}")
+    print(f"  {i['n_nodes']} thermal unknowns → {rom.order} states; time constants "
+          f"{i['fastest_time_constant_s']:.3g} s … {i['slowest_time_constant_s'] / 3600:.3g} h")
+    if args.out:
+        print(f"  saved to {rom.save(args.out)}")
+
+
+def cmd_rom_report(args):
+    from ..core.machine import build_machine
+    from .report import error_report, format_markdown, format_summary
+
+    check_out_file(args)
+    machine = build_machine(args.machine, args.mesh_size)
+    scenarios = args.scenarios.split(",") if args.scenarios else None
+    report = error_report(machine, _orders(args.orders), args.methods.split(","), scenarios, progress=print)
+    text = format_summary(report) + "\n\n" + format_markdown(report)
+    print()
+    print(text)
+    best = report.passes("krylov") if "krylov" in args.methods else None
+    print(f"\nsmallest Krylov order meeting TCP ≤ 0.05 µm and T ≤ 0.01 K on every scenario: {best}")
+    if args.out:
+        Path(args.out).write_text(text + "\n", encoding="utf-8")
+        print(f"table written to {args.out}")
+
+
+def register(sub):
+    """Add the ``rom`` command with its ``build`` and ``report`` subcommands."""
+    rom = sub.add_parser("rom", help="build reduced-order models and report their error against the FE")
+    rsub = rom.add_subparsers(dest="rom_command", required=True)
+    build = rsub.add_parser("build", help="build (or read from cache) a machine's ROM")
+    add_rom_options(build)
+    build.add_argument("--rebuild", action="store_true", help="build even if cached")
+    build.add_argument("--out", help="also save it to this .npz")
+    add_overwrite(build, "file")
+    build.set_defaults(func=cmd_rom_build)
+
+    report = rsub.add_parser("report", help="error vs order against the full FE over scenarios (slow)")
+    report.add_argument("--machine", default="vmc_ram")
+    report.add_argument("--mesh-size", type=float)
+    report.add_argument("--orders", default="10,20,30,40,60,80,100", help="comma-separated orders")
+    report.add_argument("--methods", default="krylov,modal", help="comma-separated: krylov,modal")
+    report.add_argument("--scenarios", help="comma-separated scenarios (default: all shipped)")
+    report.add_argument("--out", help="write the Markdown table here")
+    add_overwrite(report, "file")
+    report.set_defaults(func=cmd_rom_report)
