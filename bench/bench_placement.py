@@ -34,7 +34,8 @@ def main(argv=None):
     wall = time.perf_counter() - start
     t = res.timings
     cfg = res.config
-    print(f"placement study: {len(cfg['train']) + len(cfg['test'])} scenarios + {t.get('responses', 0)} step "
+    n_scenarios = len(cfg["train"]) + len(cfg["validation"]) + len(cfg["test"])
+    print(f"placement study: {n_scenarios} scenarios + {t.get('responses', 0)} step "
           f"responses, {cfg['n_candidates']} candidates, "
           f"{len(cfg['methods'])} methods × K = 1…{cfg['k_max']} × {len(cfg['axes'])} axes, scheduler {args.scheduler}")
     print(f"  simulations  {t['simulation_s']:7.1f} s  ({t['simulated']} run, {t['from_cache']} from cache; "

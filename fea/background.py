@@ -21,10 +21,17 @@ import os
 import resource
 import traceback
 import warnings
+from collections.abc import Callable
 
 
-def fork_available():
-    """Whether worker processes can be started by ``fork`` on this platform."""
+def fork_available() -> bool:
+    """Whether worker processes can be started by ``fork`` on this platform.
+
+    Returns
+    -------
+    bool
+        False on Windows.
+    """
     return "fork" in mp.get_all_start_methods()
 
 
@@ -50,7 +57,8 @@ def _child(conn, fn, args, kwargs, threads):
         payload = ("error", exc, traceback.format_exc())
     try:
         conn.send(payload)
-    except Exception as exc:  # e.g. an exception or result that cannot be pickled
+    except Exception as exc:  # noqa: BLE001 - pickling runs the result's own __reduce__, which may raise anything;
+        # the parent must still receive an error rather than wait for a result that never comes.
         conn.send(("error", RuntimeError(f"background result could not be sent: {exc!r}"),
                    traceback.format_exc()))
     conn.close()
@@ -65,9 +73,24 @@ class _RemoteTraceback(Exception):
 
 
 class Background:
-    """Handle on ``fn(*args, **kwargs)`` running in a forked worker (or already run in the caller)."""
+    """Handle on ``fn(*args, **kwargs)`` running in a forked worker (or already run in the caller).
 
-    def __init__(self, fn, args=(), kwargs=None, serial=False, worker_threads=1):
+    Parameters
+    ----------
+    fn : callable
+        The work; its result (or exception) must be picklable.
+    args : tuple
+        Its positional arguments.
+    kwargs : dict, optional
+        Its keyword arguments.
+    serial : bool
+        Run it here and now instead (also when ``fork`` is not available).
+    worker_threads : int
+        BLAS threads of the worker.
+    """
+
+    def __init__(self, fn: Callable, args: tuple = (), kwargs: dict | None = None, serial: bool = False,
+                 worker_threads: int = 1) -> None:
         kwargs = kwargs or {}
         self._state = None          # ("ok", value, peak_rss) or ("error", exc, text)
         self._process = self._conn = None
@@ -75,7 +98,7 @@ class Background:
         if not self.forked:
             try:
                 self._state = ("ok", fn(*args, **kwargs), None)
-            except Exception as exc:
+            except Exception as exc:  # noqa: BLE001 - not swallowed: result() re-raises it, as in the forked worker
                 self._state = ("error", exc, None)
             return
         ctx = mp.get_context("fork")
@@ -100,14 +123,26 @@ class Background:
         self._conn.close()
         self._process.join()
 
-    def done(self):
-        """True once the result (or the error) is available; never blocks."""
+    def done(self) -> bool:
+        """Whether the result (or the error) is available; never blocks.
+
+        Returns
+        -------
+        bool
+            True once it is.
+        """
         if self._state is None and self._conn.poll():
             self._receive()
         return self._state is not None
 
-    def result(self):
-        """Wait for the worker and return its value, or re-raise its exception."""
+    def result(self) -> object:
+        """Wait for the worker.
+
+        Returns
+        -------
+        object
+            The value of ``fn``; its exception is re-raised, with the worker's traceback as the cause.
+        """
         if self._state is None:
             self._receive()
         kind, value, extra = self._state
@@ -118,7 +153,7 @@ class Background:
         return value
 
     @property
-    def worker_peak_rss_bytes(self):
+    def worker_peak_rss_bytes(self) -> int | None:
         """Peak resident memory of the worker process (None when it ran in the caller or has not ended)."""
         if self._state is not None and self._state[0] == "ok":
             return self._state[2]
@@ -127,10 +162,10 @@ class Background:
     def __del__(self):
         try:
             self.cancel()
-        except Exception:  # noqa: BLE001 - interpreter shutdown
+        except Exception:  # noqa: BLE001, S110 - __del__ must not raise; at shutdown any module global may be gone
             pass
 
-    def cancel(self):
+    def cancel(self) -> None:
         """Stop the worker if it is still running."""
         if self._state is None and self._process is not None:
             self._process.terminate()
@@ -139,6 +174,21 @@ class Background:
             self._state = ("error", RuntimeError("the background computation was cancelled"), None)
 
 
-def start(fn, *args, serial=False, **kwargs):
-    """Start ``fn(*args, **kwargs)`` in a forked worker and return its :class:`Background` handle."""
+def start(fn: Callable, *args: object, serial: bool = False, **kwargs: object) -> Background:
+    """Start ``fn(*args, **kwargs)`` in a forked worker.
+
+    Parameters
+    ----------
+    fn : callable
+        The work.
+    *args, **kwargs
+        Its arguments.
+    serial : bool
+        Run it here and now instead.
+
+    Returns
+    -------
+    Background
+        The handle.
+    """
     return Background(fn, args, kwargs, serial=serial)

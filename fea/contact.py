@@ -19,7 +19,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from .errors import FEAInputError, require_positive
-from .mesh import LOCAL_FACES
+from .mesh import LOCAL_FACES, TetMesh
 
 
 @dataclass(frozen=True)
@@ -35,8 +35,21 @@ class Joint:
                          self.conductance)
 
 
-def joint_facets(mesh, joints):
-    """Interface facet pairs of each joint: list of (tet_a, local_a, tet_b, local_b, h_c)."""
+def joint_facets(mesh: TetMesh, joints: list[Joint]) -> list[tuple]:
+    """The interface facet pairs of each joint.
+
+    Parameters
+    ----------
+    mesh : TetMesh
+        The mesh and its regions.
+    joints : list of Joint
+        Region pairs and contact conductances.
+
+    Returns
+    -------
+    list of tuple
+        Per joint ``(tet_a, local_a, tet_b, local_b, h_c)``: facet arrays of each side and h_c in W/(m² K).
+    """
     ta, la, tb, lb = mesh.interface_facets()
     out = []
     for joint in joints:
@@ -53,7 +66,7 @@ def joint_facets(mesh, joints):
     return out
 
 
-def split_nodes(mesh, pairs):
+def split_nodes(mesh: TetMesh, pairs: list[tuple]) -> tuple[np.ndarray, np.ndarray]:
     """Thermal connectivity with the nodes on joint facets duplicated per side.
 
     Each (tetrahedron, local vertex) incidence is a graph vertex; incidences of
@@ -61,8 +74,19 @@ def split_nodes(mesh, pairs):
     the shared face is a joint facet.  Each connected component becomes one
     thermal node.
 
-    Returns ``(thermal_tets (m, 4), node_of (n_thermal,))`` where ``node_of``
-    maps a thermal node to its mesh node.
+    Parameters
+    ----------
+    mesh : TetMesh
+        The mesh.
+    pairs : list of tuple
+        From :func:`joint_facets`.
+
+    Returns
+    -------
+    thermal_tets : ndarray of int, shape (m, 4)
+        Connectivity in thermal-node numbering.
+    node_of : ndarray of int, shape (n_thermal,)
+        The mesh node of each thermal node.
     """
     m = mesh.n_tets
     tet, local, _, interior = mesh._face_pairs()
@@ -94,12 +118,28 @@ def split_nodes(mesh, pairs):
     return thermal.reshape(m, 4), node_of
 
 
-def interface_matrix(mesh, pairs, thermal_tets, n_thermal):
+def interface_matrix(mesh: TetMesh, pairs: list[tuple], thermal_tets: np.ndarray, n_thermal: int) -> sp.csr_matrix:
     """Assemble ∫_Γ h_c (T_a − T_b)(v_a − v_b) dS over all joint facets.
 
     On a linear triangle of area A the facet mass matrix is A/12·(1 + δ_ij),
     so each facet contributes that block times h_c to the (a, a) and (b, b)
     couplings and its negative to (a, b) and (b, a).
+
+    Parameters
+    ----------
+    mesh : TetMesh
+        The mesh.
+    pairs : list of tuple
+        From :func:`joint_facets`.
+    thermal_tets : ndarray of int, shape (m, 4)
+        Connectivity in thermal-node numbering.
+    n_thermal : int
+        Number of thermal nodes.
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix, shape (n_thermal, n_thermal)
+        W/K.
     """
     rows, cols, vals = [], [], []
     local_mass = (np.ones((3, 3)) + np.eye(3)) / 12.0

@@ -11,6 +11,8 @@ transient run needs no elastic solve per step.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
@@ -20,7 +22,12 @@ from . import elastic_forms
 from .errors import FEAInputError, require_finite
 from .lagrange import LagrangeSpace, barycentric_gradients
 from .linsolve import blas_threads, factorize
-from .materials import ELASTIC_PROPERTIES, per_tet, region_materials
+from .materials import ELASTIC_PROPERTIES, Material, per_tet, region_materials
+
+if TYPE_CHECKING:
+    from .elastic_forms import ThermalLoadOperator
+    from .heat import ThermalSystem
+    from .mesh import TetMesh
 
 #: Below this many free dofs a sparse direct factorisation is used, above it AMG.
 DIRECT_SOLVE_LIMIT = 20_000
@@ -30,8 +37,19 @@ AMG_TOLERANCE = 1e-10
 AXES = "xyz"
 
 
-def rigid_body_modes(points):
-    """The six rigid-body displacement fields on ``points`` as a (3N, 6) array (3 translations, 3 rotations)."""
+def rigid_body_modes(points: np.ndarray) -> np.ndarray:
+    """The six rigid-body displacement fields on some points.
+
+    Parameters
+    ----------
+    points : ndarray, shape (N, 3)
+        Coordinates, m.
+
+    Returns
+    -------
+    ndarray, shape (3N, 6)
+        3 translations (m per m) and 3 rotations about the centroid (m per rad), interleaved dofs.
+    """
     c = points - points.mean(axis=0)
     R = np.zeros((len(points), 3, 6))
     R[:, 0, 0] = R[:, 1, 1] = R[:, 2, 2] = 1.0
@@ -98,12 +116,19 @@ class ElasticProblem:
     Parameters
     ----------
     mesh : TetMesh
-    materials : mapping region → :class:`~fea.materials.Material` (E, ν, α used)
-    degree : 1 or 2, the displacement element
-    reference_temperature : T_ref in °C, the stress-free temperature
+        The mesh, m.
+    materials : dict of int or str to Material
+        Region → material (E in Pa, ν, α in 1/K used).
+    degree : int
+        1 or 2, the displacement element.
+    reference_temperature : float
+        T_ref, the stress-free temperature, °C.
+    backend : str, optional
+        Direct solver backend instead of AMG-CG (see :mod:`fea.linsolve`).
     """
 
-    def __init__(self, mesh, materials, degree=2, reference_temperature=20.0, backend=None):
+    def __init__(self, mesh: TetMesh, materials: dict[int | str, Material], degree: int = 2,
+                 reference_temperature: float = 20.0, backend: str | None = None) -> None:
         self.mesh = mesh
         self.space = LagrangeSpace(mesh.points, mesh.tets, degree)
         self.reference_temperature = float(require_finite("reference_temperature", reference_temperature))
@@ -143,11 +168,28 @@ class ElasticProblem:
                 self._constrained[3 * int(node) + AXES.index(axis)] = label
         self._solver = None
 
-    def add_point_support(self, point, components="xyz", tolerance=1e-6, name=None):
-        """Fix displacement components at the mesh vertex at ``point`` (m).
+    def add_point_support(self, point: np.ndarray, components: str = "xyz", tolerance: float = 1e-6,
+                          name: str | None = None) -> int:
+        """Fix displacement components at the mesh vertex at a point.
 
-        The vertex must lie within ``tolerance`` m of the point, so a support
+        The vertex must lie within ``tolerance`` of the point, so a support
         never lands silently somewhere else.
+
+        Parameters
+        ----------
+        point : ndarray, shape (3,)
+            Coordinates, m.
+        components : str
+            Fixed components, e.g. ``"xyz"``.
+        tolerance : float
+            Largest distance to the vertex, m.
+        name : str, optional
+            Named in errors.
+
+        Returns
+        -------
+        int
+            The vertex.
         """
         point = np.asarray(require_finite("support point", point), float)
         d = np.linalg.norm(self.mesh.points - point, axis=1)
@@ -158,12 +200,22 @@ class ElasticProblem:
         self._constrain(node, components, label)
         return node
 
-    def add_kinematic_mount(self, first, second, third, tolerance=1e-6):
+    def add_kinematic_mount(self, first: np.ndarray, second: np.ndarray, third: np.ndarray,
+                            tolerance: float = 1e-6) -> None:
         """A statically determinate 3-2-1 mount on three vertices that leaves free thermal growth unrestrained.
 
-        ``first`` is fixed in x, y, z; ``second`` in the two axes normal to
-        the line first→second; ``third`` in the axis normal to the plane of
-        the three points.  The line and the plane must be axis-aligned.
+        The line first→second and the plane of the three points must be axis-aligned.
+
+        Parameters
+        ----------
+        first : ndarray, shape (3,)
+            Fixed in x, y, z; m.
+        second : ndarray, shape (3,)
+            Fixed in the two axes normal to the line first→second; m.
+        third : ndarray, shape (3,)
+            Fixed in the axis normal to the plane of the three points; m.
+        tolerance : float
+            Largest distance of each point to its vertex, m.
         """
         p = [np.asarray(x, float) for x in (first, second, third)]
         line = _axis_of(p[1] - p[0], "the line from the first to the second mount point")
@@ -172,13 +224,27 @@ class ElasticProblem:
         self.add_point_support(p[1], AXES.replace(line, ""), tolerance, "3-2-1 mount point 2")
         self.add_point_support(p[2], normal, tolerance, "3-2-1 mount point 3")
 
-    def add_fixed_face(self, group, components="xyz"):
-        """Fix the given displacement components on every node of a facet group."""
+    def add_fixed_face(self, group: str, components: str = "xyz") -> None:
+        """Fix displacement components on every node of a facet group.
+
+        Parameters
+        ----------
+        group : str
+            A facet group of the mesh.
+        components : str
+            Fixed components, e.g. ``"xyz"``.
+        """
         nodes = self.space.facet_nodes(*self.mesh.facet_group(group))
         self._constrain(nodes, components, f"fixed face {group!r}")
 
-    def add_roller_face(self, group):
-        """Fix the normal displacement on a planar, axis-aligned facet group (it may slide in-plane)."""
+    def add_roller_face(self, group: str) -> None:
+        """Fix the normal displacement on a planar, axis-aligned facet group (it may slide in-plane).
+
+        Parameters
+        ----------
+        group : str
+            A facet group of the mesh.
+        """
         tet, local = self.mesh.facet_group(group)
         _, normals, _ = self.mesh.facet_geometry(tet, local)
         axis = _axis_of(normals.mean(axis=0), f"roller face {group!r}")
@@ -188,11 +254,12 @@ class ElasticProblem:
 
     # ---------------------------------------------------------------- assembly
     @property
-    def n_dofs(self):
+    def n_dofs(self) -> int:
+        """Number of displacement dofs, 3 per node of the space."""
         return 3 * self.space.n_nodes
 
     @property
-    def stiffness(self):
+    def stiffness(self) -> sp.csr_matrix:
         """The stiffness matrix K (3N × 3N, N/m), assembled once."""
         if self._stiffness is None:
             start = time.perf_counter()
@@ -201,11 +268,19 @@ class ElasticProblem:
             self.stats["stiffness_s"] = time.perf_counter() - start
         return self._stiffness
 
-    def thermal_load_operator(self, thermal_system=None):
-        """F with ``F (T − T_ref)`` the thermal load vector; T on the thermal nodes of ``thermal_system``.
+    def thermal_load_operator(self, thermal_system: ThermalSystem | None = None) -> ThermalLoadOperator:
+        """F with ``F (T − T_ref)`` the thermal load vector.
 
-        F (3N × n_thermal, N/K) is applied matrix-free: it supports ``F @ x``,
-        ``F.T @ z`` (vectors or blocks) and ``tocsr()`` for the assembled matrix.
+        Parameters
+        ----------
+        thermal_system : ThermalSystem, optional
+            Whose thermal nodes the temperature is on (default: the mesh nodes).
+
+        Returns
+        -------
+        ThermalLoadOperator
+            F (3N × n_thermal, N/K), applied matrix-free: ``F @ x``, ``F.T @ z``
+            (vectors or blocks) and ``tocsr()`` for the assembled matrix.
         """
         key = id(thermal_system)
         if key not in self._load_operators:
@@ -259,17 +334,35 @@ class ElasticProblem:
         return self._solver
 
     # ---------------------------------------------------------------- solves
-    def prepare(self):
-        """Assemble K and factorise it (or set up AMG) now, e.g. in a worker before the loads are known."""
+    def prepare(self) -> ElasticProblem:
+        """Assemble K and factorise it (or set up AMG) now, e.g. in a worker before the loads are known.
+
+        Returns
+        -------
+        ElasticProblem
+            ``self``.
+        """
         self._free_solver()
         return self
 
-    def solve_load(self, load, tolerance=AMG_TOLERANCE, initial_guess=None):
-        """Displacements (3N,) for a load vector (or (3N, k) block) in N, zero at the supports.
+    def solve_load(self, load: np.ndarray, tolerance: float = AMG_TOLERANCE,
+                   initial_guess: np.ndarray | None = None) -> np.ndarray:
+        """Displacements for a load, zero at the supports.
 
-        ``tolerance`` is the relative residual at which the iterative (AMG-CG)
-        solves stop, and ``initial_guess`` (3N,) their start (one load vector
-        only); a direct factorisation ignores both.
+        Parameters
+        ----------
+        load : ndarray, shape (3N,) or (3N, k)
+            Load vector(s), N.
+        tolerance : float
+            Relative residual at which the iterative (AMG-CG) solves stop
+            (a direct factorisation ignores it).
+        initial_guess : ndarray, shape (3N,), optional
+            Start of the iterative solve (one load vector only), m.
+
+        Returns
+        -------
+        ndarray, shape of ``load``
+            Displacements, m.
         """
         free, solver = self._free_solver()
         load = np.asarray(load, dtype=float)
@@ -282,24 +375,84 @@ class ElasticProblem:
                 out[free, k] = solver(load[free, k], tolerance)
         return out
 
-    def thermal_load(self, temperature, thermal_system=None):
-        """The load vector (3N,) in N of a temperature on the thermal nodes (°C)."""
+    def thermal_load(self, temperature: np.ndarray, thermal_system: ThermalSystem | None = None) -> np.ndarray:
+        """The load vector of a temperature field.
+
+        Parameters
+        ----------
+        temperature : ndarray
+            Temperature on the thermal nodes, °C.
+        thermal_system : ThermalSystem, optional
+            Whose thermal nodes the temperature is on (default: the mesh nodes).
+
+        Returns
+        -------
+        ndarray, shape (3N,)
+            Load, N.
+        """
         T = require_finite("temperature", temperature)
         return self.thermal_load_operator(thermal_system) @ (T - self.reference_temperature)
 
-    def displacement(self, temperature, thermal_system=None):
-        """Displacement field (N, 3) in m for a temperature on thermal nodes (°C), by a forward solve."""
+    def displacement(self, temperature: np.ndarray, thermal_system: ThermalSystem | None = None) -> np.ndarray:
+        """The displacement field of a temperature field, by a forward solve.
+
+        Parameters
+        ----------
+        temperature : ndarray
+            Temperature on the thermal nodes, °C.
+        thermal_system : ThermalSystem, optional
+            Whose thermal nodes the temperature is on (default: the mesh nodes).
+
+        Returns
+        -------
+        ndarray, shape (N, 3)
+            Displacement, m.
+        """
         return self.solve_load(self.thermal_load(temperature, thermal_system)).reshape(-1, 3)
 
-    def stress(self, displacement, temperature, thermal_system=None):
-        """Element-mean stress tensors (m, 3, 3) in Pa."""
+    def stress(self, displacement: np.ndarray, temperature: np.ndarray,
+               thermal_system: ThermalSystem | None = None) -> np.ndarray:
+        """Element-mean stress tensors.
+
+        Parameters
+        ----------
+        displacement : ndarray
+            Displacement, m (3N values).
+        temperature : ndarray
+            Temperature on the thermal nodes, °C.
+        thermal_system : ThermalSystem, optional
+            Whose thermal nodes the temperature is on (default: the mesh nodes).
+
+        Returns
+        -------
+        ndarray, shape (m, 3, 3)
+            Stress, Pa.
+        """
         tets = self.mesh.tets if thermal_system is None else thermal_system.tets
         excess = np.asarray(temperature)[tets].mean(axis=1) - self.reference_temperature
         return elastic_forms.element_stress(self.space, self._grad_lambda, np.ravel(displacement), excess,
                                             self.lame_lambda, self.lame_mu, self.thermal_stress_modulus)
 
-    def point_rows(self, points, components, names=None, snap_distance=0.0):
-        """Sparse rows (k × 3N) evaluating displacement ``components[i]`` at ``points[i]``."""
+    def point_rows(self, points: np.ndarray, components: str | Sequence[str], names: list[str] | None = None,
+                   snap_distance: float = 0.0) -> sp.csr_matrix:
+        """Sparse rows evaluating displacement components at points.
+
+        Parameters
+        ----------
+        points : ndarray, shape (k, 3)
+            Coordinates, m.
+        components : str or sequence of str
+            The component (``x``, ``y``, ``z``) of each row.
+        names : list of str, optional
+            Names of the points, in errors.
+        snap_distance : float
+            How far outside the mesh a point may lie and be snapped onto it, m.
+
+        Returns
+        -------
+        scipy.sparse.csr_matrix, shape (k, 3N)
+            Row i gives ``components[i]`` of the displacement at ``points[i]``, m per m.
+        """
         tet, lam = self.mesh.locate(points, names=names, snap_distance=snap_distance)
         values = self.space.shape_values(lam)                       # (k, nb)
         comp = np.array([AXES.index(c) for c in components])
@@ -307,11 +460,20 @@ class ElasticProblem:
         rows = np.repeat(np.arange(len(tet)), values.shape[1])
         return sp.csr_matrix((values.ravel(), (rows, cols.ravel())), shape=(len(tet), self.n_dofs))
 
-    def influence(self, rows, thermal_system=None):
-        """Adjoint influence matrix G (k × n_thermal) with ``rows @ u = G @ (T − T_ref)``.
+    def influence(self, rows: sp.spmatrix, thermal_system: ThermalSystem | None = None) -> np.ndarray:
+        """Adjoint influence matrix G with ``rows @ u = G @ (T − T_ref)``: one adjoint solve per row.
 
-        One adjoint solve ``K z = rowᵀ`` per output row; units are those of
-        the rows per kelvin (m/K for displacement rows).
+        Parameters
+        ----------
+        rows : scipy.sparse matrix, shape (k, 3N)
+            Output rows over the displacement dofs.
+        thermal_system : ThermalSystem, optional
+            Whose thermal nodes the temperature is on (default: the mesh nodes).
+
+        Returns
+        -------
+        ndarray, shape (k, n_thermal)
+            The rows' units per kelvin (m/K for displacement rows).
         """
         rows = sp.csr_matrix(rows)
         free, solver = self._free_solver()

@@ -11,8 +11,13 @@ checks both against scikit-fem's ``BilinearForm`` to round-off.
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import scipy.sparse as sp
+
+if TYPE_CHECKING:
+    from .lagrange import LagrangeSpace
 
 #: Elements per batch; bounds the memory of the (batch, 3nb, 3nb) element matrices.
 BATCH = 8192
@@ -46,14 +51,24 @@ def _element_stiffness(space, grad_lambda, volumes, lame_lambda, lame_mu, rule):
     return Ke
 
 
-def node_pairs(element_nodes, n_nodes):
+def node_pairs(element_nodes: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The node graph of a mesh: every unordered pair of distinct nodes sharing an element.
 
-    Returns ``(pairs, inverse, flipped)``: ``pairs`` (E, 2) sorted with
-    ``pairs[:, 0] < pairs[:, 1]`` and lexicographically ordered; for the
-    local pairs ``(a, b) = np.triu_indices(nb, 1)`` of each element,
-    ``inverse`` (m, nb(nb−1)/2) gives the row of ``pairs`` and ``flipped``
-    whether the element's node ``a`` is the larger of the two.
+    Parameters
+    ----------
+    element_nodes : ndarray of int, shape (m, nb)
+        Nodes of each element.
+    n_nodes : int
+        Number of nodes.
+
+    Returns
+    -------
+    pairs : ndarray of int, shape (E, 2)
+        Sorted with ``pairs[:, 0] < pairs[:, 1]``, lexicographically ordered.
+    inverse : ndarray of int, shape (m, nb(nb−1)/2)
+        For the local pairs ``(a, b) = np.triu_indices(nb, 1)`` of each element, the row of ``pairs``.
+    flipped : ndarray of bool, shape (m, nb(nb−1)/2)
+        Whether the element's node ``a`` is the larger of the two.
     """
     nb = element_nodes.shape[1]
     la, lb = np.triu_indices(nb, 1)
@@ -66,13 +81,32 @@ def node_pairs(element_nodes, n_nodes):
     return pairs, inverse.reshape(lo.shape), flipped
 
 
-def block_symmetric_matrix(n_nodes, pairs, diagonal_blocks, upper_blocks, block=3):
+def block_symmetric_matrix(n_nodes: int, pairs: np.ndarray, diagonal_blocks: np.ndarray, upper_blocks: np.ndarray,
+                           block: int = 3) -> sp.csr_matrix:
     """Assemble a symmetric node-block matrix as CSR from its diagonal and upper blocks.
 
     ``diagonal_blocks`` (N, b, b) sit at (i, i); ``upper_blocks`` (E, b, b)
     at ``(pairs[k, 0], pairs[k, 1])`` with their transposes mirrored below.
     ``pairs`` must be sorted as :func:`node_pairs` returns them, so the block
     layout is found by counting, without a sort of the entries.
+
+    Parameters
+    ----------
+    n_nodes : int
+        Number of nodes N.
+    pairs : ndarray of int, shape (E, 2)
+        From :func:`node_pairs`.
+    diagonal_blocks : ndarray, shape (N, b, b)
+        The blocks at (i, i).
+    upper_blocks : ndarray, shape (E, b, b)
+        The blocks at ``(pairs[k, 0], pairs[k, 1])``.
+    block : int
+        Block size b.
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix, shape (bN, bN)
+        The symmetric matrix.
     """
     rows, cols = pairs[:, 0], pairs[:, 1]
     n_upper = np.bincount(rows, minlength=n_nodes)
@@ -101,7 +135,8 @@ def block_symmetric_matrix(n_nodes, pairs, diagonal_blocks, upper_blocks, block=
     return sp.bsr_matrix((data, indices, indptr), shape=(size, size)).tocsr()
 
 
-def elastic_stiffness(space, grad_lambda, volumes, lame_lambda, lame_mu):
+def elastic_stiffness(space: LagrangeSpace, grad_lambda: np.ndarray, volumes: np.ndarray, lame_lambda: np.ndarray,
+                      lame_mu: np.ndarray) -> sp.csr_matrix:
     """Assemble the stiffness ``∫ λ div u div v + 2μ ε(u):ε(v)`` (3N × 3N CSR, N/m).
 
     Dofs are interleaved: dof ``3·node + component``.
@@ -113,7 +148,25 @@ def elastic_stiffness(space, grad_lambda, volumes, lame_lambda, lame_mu):
     The 3×3 node blocks are summed per node pair with ``bincount`` on a
     precomputed node graph (:func:`node_pairs`), which avoids sorting the
     9·nb² entries per element that a COO → CSR conversion would.
+
+    Parameters
+    ----------
+    space : LagrangeSpace
+        The displacement space (P1 or P2).
+    grad_lambda : ndarray, shape (m, 4, 3)
+        Barycentric gradients, 1/m.
+    volumes : ndarray, shape (m,)
+        Tetrahedron volumes, m³.
+    lame_lambda, lame_mu : ndarray, shape (m,)
+        Lamé parameters of each tetrahedron, Pa.
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix, shape (3N, 3N)
+        K, N/m.
     """
+    # About 60 lines: the P1 fast path and the batched general path fill the same block arrays
+    # (upper, diagonal), which the shared tail symmetrises; the hot path of every elastic solve.
     nb = space.nodes_per_element
     n = space.n_nodes
     rule = space.quadrature(2 * (space.degree - 1))
@@ -169,11 +222,33 @@ def elastic_stiffness(space, grad_lambda, volumes, lame_lambda, lame_mu):
     return block_symmetric_matrix(n, pairs, np.moveaxis(diagonal, -1, 0), np.moveaxis(upper, -1, 0))
 
 
-def thermal_load_operator(space, grad_lambda, volumes, thermal_stress_modulus, thermal_tets, n_thermal):
+def thermal_load_operator(space: LagrangeSpace, grad_lambda: np.ndarray, volumes: np.ndarray,
+                          thermal_stress_modulus: np.ndarray, thermal_tets: np.ndarray,
+                          n_thermal: int) -> sp.csr_matrix:
     """Assemble F with ``F @ (T − T_ref) = ℓ(v)``: ∫ (3λ+2μ) α ψ_c div v_(a i) (3N × n_thermal, N/K).
 
     ψ_c are the P1 temperature shape functions, on the thermal nodes of
     ``thermal_tets`` (which may differ from the mesh nodes at joints).
+
+    Parameters
+    ----------
+    space : LagrangeSpace
+        The displacement space (P1 or P2).
+    grad_lambda : ndarray, shape (m, 4, 3)
+        Barycentric gradients, 1/m.
+    volumes : ndarray, shape (m,)
+        Tetrahedron volumes, m³.
+    thermal_stress_modulus : ndarray, shape (m,)
+        (3λ+2μ) α of each tetrahedron, Pa/K.
+    thermal_tets : ndarray of int, shape (m, 4)
+        Connectivity in thermal-node numbering.
+    n_thermal : int
+        Number of thermal nodes.
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix, shape (3N, n_thermal)
+        F, N/K.
     """
     nb = space.nodes_per_element
     rule = space.quadrature(space.degree)
@@ -203,11 +278,17 @@ class ThermalLoadOperator:
     gather and one ``bincount`` scatter over the elements, cheaper than
     assembling F when only a few products are needed (the adjoint
     influence needs one transposed block product).
+
+    Parameters
+    ----------
+    space, grad_lambda, volumes, thermal_stress_modulus, thermal_tets, n_thermal
+        As :func:`thermal_load_operator`.
     """
 
     __array_ufunc__ = None        # let ``ndarray @ F`` defer to __rmatmul__
 
-    def __init__(self, space, grad_lambda, volumes, thermal_stress_modulus, thermal_tets, n_thermal):
+    def __init__(self, space: LagrangeSpace, grad_lambda: np.ndarray, volumes: np.ndarray,
+                 thermal_stress_modulus: np.ndarray, thermal_tets: np.ndarray, n_thermal: int) -> None:
         self.space = space
         self.grad_lambda, self.volumes = grad_lambda, volumes
         self.modulus = thermal_stress_modulus
@@ -277,19 +358,45 @@ class ThermalLoadOperator:
         other = other.toarray() if sp.issparse(other) else np.asarray(other, dtype=float)
         return self._apply(other.T, transpose=True).T
 
-    def dot(self, other):
+    def dot(self, other: np.ndarray) -> np.ndarray:
+        """``F @ other``, as scipy's ``dot``.
+
+        Parameters
+        ----------
+        other : ndarray, shape (n_thermal,) or (n_thermal, k)
+            Temperature excess over T_ref, K.
+
+        Returns
+        -------
+        ndarray
+            Load, N.
+        """
         return self @ other
 
     @property
-    def T(self):
+    def T(self) -> _Transposed:
+        """Fᵀ, matrix-free."""
         return _Transposed(self)
 
-    def tocsr(self):
-        """The assembled sparse matrix."""
+    def tocsr(self) -> sp.csr_matrix:
+        """The assembled sparse matrix.
+
+        Returns
+        -------
+        scipy.sparse.csr_matrix
+            F, N/K.
+        """
         return thermal_load_operator(self.space, self.grad_lambda, self.volumes, self.modulus,
                                      self.thermal_tets, self.n_thermal)
 
-    def toarray(self):
+    def toarray(self) -> np.ndarray:
+        """The assembled matrix, dense.
+
+        Returns
+        -------
+        ndarray
+            F, N/K.
+        """
         return self.tocsr().toarray()
 
 
@@ -324,11 +431,29 @@ class _Transposed:
         return self.tocsr().toarray()
 
 
-def element_stress(space, grad_lambda, u, temperature_excess, lame_lambda, lame_mu, thermal_stress_modulus):
-    """Mean stress tensor of each element (m, 3, 3) in Pa.
+def element_stress(space: LagrangeSpace, grad_lambda: np.ndarray, u: np.ndarray, temperature_excess: np.ndarray,
+                   lame_lambda: np.ndarray, lame_mu: np.ndarray, thermal_stress_modulus: np.ndarray) -> np.ndarray:
+    """Mean stress tensor of each element: σ = λ tr(ε) I + 2μ ε − (3λ+2μ) α ΔT I, averaged over the element.
 
-    σ = λ tr(ε) I + 2μ ε − (3λ+2μ) α ΔT I, averaged over the element with
-    ``temperature_excess`` the per-tetrahedron mean of T − T_ref (K).
+    Parameters
+    ----------
+    space : LagrangeSpace
+        The displacement space.
+    grad_lambda : ndarray, shape (m, 4, 3)
+        Barycentric gradients, 1/m.
+    u : ndarray, shape (3N,)
+        Displacement, m.
+    temperature_excess : ndarray, shape (m,)
+        Per-tetrahedron mean of T − T_ref, K.
+    lame_lambda, lame_mu : ndarray, shape (m,)
+        Lamé parameters, Pa.
+    thermal_stress_modulus : ndarray, shape (m,)
+        (3λ+2μ) α, Pa/K.
+
+    Returns
+    -------
+    ndarray, shape (m, 3, 3)
+        Stress, Pa.
     """
     lam = space.quadrature(space.degree)[0]
     G = space.shape_gradients(lam, grad_lambda)                 # (m, q, nb, 3)

@@ -17,8 +17,13 @@ lost or created.
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import scipy.sparse as sp
+
+if TYPE_CHECKING:
+    from .heat import ThermalSystem
 
 #: Energy below which a balance counts as zero: that of this many kelvin over the whole body's heat capacity.
 ENERGY_FLOOR_K = 1e-6
@@ -34,9 +39,18 @@ class EnergyLedger:
     (energy into the body since the start, per load), ``gross_J`` (Σ over
     steps and loads of |energy|: the throughput) and ``input_integral``
     (∫ u dt per input, e.g. J for a power input).
+
+    Parameters
+    ----------
+    system : ThermalSystem
+        The system integrated.
+    theta : float
+        The scheme's θ.
+    n_records : int
+        Number of recorded times.
     """
 
-    def __init__(self, system, theta, n_records):
+    def __init__(self, system: ThermalSystem, theta: float, n_records: int) -> None:
         self.system, self.theta = system, float(theta)
         flows = system.heat_flows
         self.names = list(flows) + [f"fixed:{g}" for g in system.fixed_groups]
@@ -60,8 +74,21 @@ class EnergyLedger:
         self._gross = 0.0
         self._inputs = np.zeros(system.n_inputs)
 
-    def step(self, T_old, T_new, u_mean, dt, u_old=None, u_new=None):
-        """Add one θ step from ``T_old`` to ``T_new`` driven by ``u_mean`` (point inputs for radiation)."""
+    def step(self, T_old: np.ndarray, T_new: np.ndarray, u_mean: np.ndarray, dt: float,
+             u_old: np.ndarray | None = None, u_new: np.ndarray | None = None) -> None:
+        """Add one θ step.
+
+        Parameters
+        ----------
+        T_old, T_new : ndarray
+            Temperature before and after the step, °C.
+        u_mean : ndarray
+            Inputs driving the step.
+        dt : float
+            Step, s.
+        u_old, u_new : ndarray, optional
+            Point inputs at the step ends (for radiation).
+        """
         th = self.theta
         T_theta = th * T_new + (1.0 - th) * T_old
         n_flows = self._r_T.shape[0]
@@ -82,26 +109,57 @@ class EnergyLedger:
         self._gross += float(np.abs(energy).sum())
         self._inputs += dt * np.asarray(u_mean, float)
 
-    def record(self, k, T):
-        """Keep the running totals as row ``k`` (the state ``T`` reached at that time)."""
+    def record(self, k: int, T: np.ndarray) -> None:
+        """Keep the running totals as a recorded row.
+
+        Parameters
+        ----------
+        k : int
+            Row (recorded time).
+        T : ndarray
+            The temperature reached at that time, °C.
+        """
         self.stored_J[k] = float(self._stored_row @ T)
         self.load_J[k] = self._load
         self.gross_J[k] = self._gross
         self.input_integral[k] = self._inputs
 
     @property
-    def residual_J(self):
+    def residual_J(self) -> np.ndarray:
         """Stored-energy change minus the energy the loads brought in, J, at each recorded time."""
         return self.stored_J - self.stored_J[0] - self.load_J.sum(axis=1)
 
-    def scale_J(self):
-        """The energy a balance error is measured against: the gross throughput, at least 1 µK of the body."""
+    def scale_J(self) -> float:
+        """The energy a balance error is measured against.
+
+        Returns
+        -------
+        float
+            The gross throughput, at least the energy of 1 µK of the whole body, J.
+        """
         return max(float(self.gross_J[-1]), ENERGY_FLOOR_K * self.capacity_J_per_K)
 
-    def relative_error(self):
-        """max |residual| over the run relative to :meth:`scale_J`."""
+    def relative_error(self) -> float:
+        """The energy-balance error of the run.
+
+        Returns
+        -------
+        float
+            max |residual| over the run relative to :meth:`scale_J`.
+        """
         return float(np.nanmax(np.abs(self.residual_J)) / self.scale_J())
 
-    def energy_of(self, input_name):
-        """∫ u dt (J for a power input) of a named input at each recorded time."""
+    def energy_of(self, input_name: str) -> np.ndarray:
+        """The time integral of an input since the start.
+
+        Parameters
+        ----------
+        input_name : str
+            E.g. ``power:front_bearings``.
+
+        Returns
+        -------
+        ndarray
+            ∫ u dt at each recorded time (J for a power input).
+        """
         return self.input_integral[:, self.system.input_index(input_name)]

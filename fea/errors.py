@@ -1,4 +1,11 @@
 """The error type raised for bad input to the solver."""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:   # numpy is imported inside the checks: importing this module stays light
+    import numpy as np
+    from numpy.typing import ArrayLike
 
 
 class FEAInputError(ValueError):
@@ -10,8 +17,26 @@ class FEAInputError(ValueError):
     """
 
 
-def require_finite(name, values):
-    """Raise :class:`FEAInputError` if ``values`` holds a NaN or an infinity."""
+def require_finite(name: str, values: ArrayLike) -> np.ndarray:
+    """Refuse values holding a NaN or an infinity.
+
+    Parameters
+    ----------
+    name : str
+        What the values are, named in the error.
+    values : array_like
+        Numbers.
+
+    Returns
+    -------
+    ndarray
+        ``values`` as floats.
+
+    Raises
+    ------
+    FEAInputError
+        Naming the first bad value and its index.
+    """
     import numpy as np
 
     arr = np.asarray(values, dtype=float)
@@ -23,8 +48,21 @@ def require_finite(name, values):
     return arr
 
 
-def require_positive(name, value):
-    """Raise :class:`FEAInputError` unless ``value`` is a finite number > 0."""
+def require_positive(name: str, value: float) -> float:
+    """Refuse anything but a finite number > 0.
+
+    Parameters
+    ----------
+    name : str
+        What the value is, named in the error.
+    value : float
+        The value.
+
+    Returns
+    -------
+    float
+        ``value``.
+    """
     import math
 
     try:

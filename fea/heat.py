@@ -22,8 +22,8 @@ from skfem import Basis, ElementTetP1, FacetBasis, MeshTet
 from . import heat_forms as forms
 from .contact import Joint, interface_matrix, joint_facets, split_nodes
 from .errors import FEAInputError, require_positive
-from .materials import HEAT_PROPERTIES, per_tet, region_materials
-from .mesh import LOCAL_FACES
+from .materials import HEAT_PROPERTIES, Material, per_tet, region_materials
+from .mesh import LOCAL_FACES, TetMesh
 
 #: Units of each kind of input.
 INPUT_UNITS = {
@@ -49,12 +49,38 @@ class RadiationTerm:
         return dict(temperature=self.basis.interpolate(T), ambient=float(u[self.ambient_column]),
                     emissivity=self.emissivity, radiative_coefficient=self.radiative_coefficient)
 
-    def excess(self, T, u):
-        """Vector ∫ [εσ(T⁴ − T_amb⁴) − h_r (T − T_amb)] φ in W."""
+    def excess(self, T: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """The part of the radiation its linearisation misses, ∫ [εσ(T⁴ − T_amb⁴) − h_r (T − T_amb)] φ.
+
+        Parameters
+        ----------
+        T : ndarray
+            Temperature on the thermal nodes, °C.
+        u : ndarray
+            Inputs (the ambient column is read).
+
+        Returns
+        -------
+        ndarray
+            Per thermal node, W.
+        """
         return forms.radiation_excess.assemble(self.basis, **self._fields(T, u))
 
-    def tangent(self, T, u):
-        """Jacobian of :meth:`excess` with respect to T, W/K."""
+    def tangent(self, T: np.ndarray, u: np.ndarray) -> sp.csr_matrix:
+        """The Jacobian of :meth:`excess` with respect to T.
+
+        Parameters
+        ----------
+        T : ndarray
+            Temperature on the thermal nodes, °C.
+        u : ndarray
+            Inputs.
+
+        Returns
+        -------
+        scipy.sparse matrix
+            W/K.
+        """
         return forms.radiation_tangent.assemble(self.basis, **self._fields(T, u))
 
 
@@ -83,33 +109,69 @@ class ThermalSystem:
     fixed_groups: dict = field(default_factory=dict)   # group → its fixed thermal nodes (disjoint)
 
     @property
-    def n_nodes(self):
+    def n_nodes(self) -> int:
+        """Number of thermal nodes."""
         return self.mass.shape[0]
 
     @property
-    def n_inputs(self):
+    def n_inputs(self) -> int:
+        """Number of inputs (columns of B)."""
         return len(self.input_names)
 
     @property
-    def points(self):
+    def points(self) -> np.ndarray:
         """Coordinates of the thermal nodes, m."""
         return self.mesh.points[self.node_of]
 
-    def input_index(self, name):
+    def input_index(self, name: str) -> int:
+        """The column of an input.
+
+        Parameters
+        ----------
+        name : str
+            Input name, e.g. ``ambient:room``.
+
+        Returns
+        -------
+        int
+            Its column in B.
+        """
         try:
             return self.input_names.index(name)
         except ValueError:
             raise FEAInputError(f"unknown input {name!r}; inputs: {self.input_names}") from None
 
-    def fixed_values(self, u):
-        """Temperatures of the fixed nodes for input vector ``u``, °C."""
+    def fixed_values(self, u: np.ndarray) -> np.ndarray:
+        """The temperatures of the fixed nodes.
+
+        Parameters
+        ----------
+        u : ndarray, shape (n_inputs,)
+            Input values.
+
+        Returns
+        -------
+        ndarray
+            Temperature of each fixed node, °C.
+        """
         return self.fixed_matrix @ u
 
-    def stored_energy(self, T):
-        """∫ ρc T dV in J (relative to 0 °C)."""
+    def stored_energy(self, T: np.ndarray) -> float:
+        """The heat stored in the body, ∫ ρc T dV.
+
+        Parameters
+        ----------
+        T : ndarray, shape (n_nodes,)
+            Temperature, °C.
+
+        Returns
+        -------
+        float
+            Energy, J (relative to 0 °C).
+        """
         return float(np.sum(self.mass @ T))
 
-    def power_in(self, T, u, rate=None):
+    def power_in(self, T: np.ndarray, u: np.ndarray, rate: np.ndarray | None = None) -> dict[str, float]:
         """Heat flow into the body through each load, W, keyed by load name.
 
         Fixed temperatures appear as ``fixed:<group>``: the reaction heat
@@ -117,6 +179,20 @@ class ThermalSystem:
         of (M Ṫ + A T + r(T) − B u).  ``rate`` is Ṫ (K/s on the thermal
         nodes) for the capacity of those nodes in a transient; omit it at
         steady state.  The flows then sum to d/dt ∫ ρcT dV.
+
+        Parameters
+        ----------
+        T : ndarray, shape (n_nodes,)
+            Temperature, °C.
+        u : ndarray, shape (n_inputs,)
+            Input values.
+        rate : ndarray, optional
+            Ṫ on the thermal nodes, K/s.
+
+        Returns
+        -------
+        dict of str to float
+            Load name → heat flow into the body, W.
         """
         flows = {name: float(r_u @ u - r_T @ T) for name, (r_T, r_u) in self.heat_flows.items()}
         excess = np.zeros(self.n_nodes)
@@ -132,14 +208,41 @@ class ThermalSystem:
             flows[f"fixed:{group}"] = float(np.sum(balance))
         return flows
 
-    def nodal_field(self, T):
-        """Temperature on mesh nodes (mean over the sides of split joint nodes), °C."""
+    def nodal_field(self, T: np.ndarray) -> np.ndarray:
+        """A thermal-node field on the mesh nodes (mean over the sides of split joint nodes).
+
+        Parameters
+        ----------
+        T : ndarray, shape (n_nodes,)
+            Temperature on the thermal nodes, °C.
+
+        Returns
+        -------
+        ndarray, shape (mesh.n_nodes,)
+            Temperature on the mesh nodes, °C.
+        """
         total = np.bincount(self.node_of, weights=T, minlength=self.mesh.n_nodes)
         count = np.bincount(self.node_of, minlength=self.mesh.n_nodes)
         return total / np.maximum(count, 1)
 
-    def point_weights(self, points, names=None, snap_distance=0.0):
-        """Sparse (k × n) matrix giving the P1 temperature at ``points`` (barycentric)."""
+    def point_weights(self, points: np.ndarray, names: list[str] | None = None,
+                      snap_distance: float = 0.0) -> sp.csr_matrix:
+        """The matrix giving the P1 temperature at points (barycentric weights).
+
+        Parameters
+        ----------
+        points : ndarray, shape (k, 3)
+            Coordinates, m.
+        names : list of str, optional
+            Names of the points, in errors.
+        snap_distance : float
+            How far outside the mesh a point may lie and be snapped onto it, m.
+
+        Returns
+        -------
+        scipy.sparse.csr_matrix, shape (k, n_nodes)
+            Rows summing to 1.
+        """
         tet, w = self.mesh.locate(points, names=names, snap_distance=snap_distance)
         rows = np.repeat(np.arange(len(tet)), 4)
         return sp.csr_matrix((w.ravel(), (rows, self.tets[tet].ravel())), shape=(len(tet), self.n_nodes))
@@ -158,9 +261,16 @@ class HeatProblem:
     >>> problem.add_convection("outside", 8.0, ambient="room")
     >>> problem.add_heat_flux("bearing", power="bearing_W")
     >>> system = problem.assemble()
+
+    Parameters
+    ----------
+    mesh : TetMesh
+        The mesh (m) with its regions and facet groups.
+    materials : dict of int or str to Material
+        Region id or name → material (conductivity W/(m K), density kg/m³, specific heat J/(kg K)).
     """
 
-    def __init__(self, mesh, materials):
+    def __init__(self, mesh: TetMesh, materials: dict[int | str, Material]) -> None:
         self.mesh = mesh
         materials = region_materials(mesh, materials, HEAT_PROPERTIES, "a heat problem")
         self.conductivity = per_tet(mesh, materials, "conductivity")
@@ -195,14 +305,25 @@ class HeatProblem:
         return group
 
     # ---------------------------------------------------------------- loads
-    def add_convection(self, group, convection_coefficient, ambient="ambient",
-                       ambient_gradient=None, reference_height=0.0):
+    def add_convection(self, group: str, convection_coefficient: float, ambient: str | float = "ambient",
+                       ambient_gradient: str | float | None = None, reference_height: float = 0.0) -> None:
         """Convection ``h (T_amb − T)`` into the body on a facet group.
 
-        ``convection_coefficient`` h in W/(m² K).  ``ambient`` names the input
-        giving the ambient temperature (°C).  ``ambient_gradient`` optionally
-        names an input in K/m for vertical stratification:
+        With a gradient the ambient is stratified vertically:
         ``T_amb(z) = ambient + gradient · (z − reference_height)``.
+
+        Parameters
+        ----------
+        group : str
+            A facet group of the mesh.
+        convection_coefficient : float
+            h, W/(m² K).
+        ambient : str or float
+            Input giving the ambient temperature (°C), or a constant.
+        ambient_gradient : str or float, optional
+            Input giving the vertical gradient, K/m.
+        reference_height : float
+            Height where the ambient is ``ambient``, m.
         """
         h = require_positive(f"convection coefficient on {group!r}", convection_coefficient)
         self._check_group(group)
@@ -211,8 +332,19 @@ class HeatProblem:
                                                                  f"gradient of {group}")
         self._convection.append((group, h, amb, grad, float(reference_height)))
 
-    def add_heat_flux(self, group, power=None, flux_density=None):
-        """Heat into the body over a facet group: total ``power`` (W, spread by area) or ``flux_density`` (W/m²)."""
+    def add_heat_flux(self, group: str, power: str | float | None = None,
+                      flux_density: str | float | None = None) -> None:
+        """Heat into the body over a facet group; give exactly one of ``power`` and ``flux_density``.
+
+        Parameters
+        ----------
+        group : str
+            A facet group of the mesh.
+        power : str or float, optional
+            Input (or constant) giving the total power, W, spread by area.
+        flux_density : str or float, optional
+            Input (or constant) giving the flux density, W/m².
+        """
         if (power is None) == (flux_density is None):
             raise FEAInputError(f"heat flux on {group!r}: give exactly one of power (W) or flux_density (W/m²)")
         self._check_group(group)
@@ -221,25 +353,55 @@ class HeatProblem:
         else:
             self._fluxes.append((group, self._input(flux_density, "flux_density", f"flux on {group}"), False))
 
-    def add_volumetric_source(self, name, tets, power):
-        """Heat generated in tetrahedra ``tets`` (indices), total ``power`` in W spread uniformly by volume."""
+    def add_volumetric_source(self, name: str, tets: np.ndarray, power: str | float) -> None:
+        """Heat generated in some tetrahedra, spread uniformly by volume.
+
+        Parameters
+        ----------
+        name : str
+            The source's name (its heat-flow ledger entry is ``source:<name>``).
+        tets : ndarray of int
+            Tetrahedron indices.
+        power : str or float
+            Input (or constant) giving the total power, W.
+        """
         tets = np.asarray(tets, dtype=np.int64)
         if tets.size == 0:
             raise FEAInputError(f"volumetric source {name!r} covers no tetrahedron")
         self._volume_sources.append((name, tets, self._input(power, "power", f"source {name}")))
 
-    def add_fixed_temperature(self, group, temperature):
-        """Prescribe the temperature (°C) on a facet group's nodes."""
+    def add_fixed_temperature(self, group: str, temperature: str | float) -> None:
+        """Prescribe the temperature on a facet group's nodes.
+
+        Parameters
+        ----------
+        group : str
+            A facet group of the mesh.
+        temperature : str or float
+            Input (or constant) giving the temperature, °C.
+        """
         self._check_group(group)
         self._fixed.append((group, self._input(temperature, "temperature", f"fixed T on {group}")))
 
-    def add_radiation(self, group, emissivity, ambient="ambient", linearise_about=None):
+    def add_radiation(self, group: str, emissivity: float, ambient: str | float = "ambient",
+                      linearise_about: float | None = None) -> None:
         """Radiation to surroundings at the ambient temperature on a facet group.
 
         With ``linearise_about`` (°C) the exchange is the linear
         ``h_r (T − T_amb)``, h_r = 4εσ(T₀ + 273.15)³.  Without it the full
         ``εσ (T⁴ − T_amb⁴)`` (kelvin) is solved by Newton iterations that
         start from that linearisation about 20 °C.
+
+        Parameters
+        ----------
+        group : str
+            A facet group of the mesh.
+        emissivity : float
+            ε, in (0, 1].
+        ambient : str or float
+            Input (or constant) giving the surroundings' temperature, °C.
+        linearise_about : float, optional
+            Temperature of the linearisation, °C.
         """
         eps = require_positive(f"emissivity on {group!r}", emissivity)
         if eps > 1.0:
@@ -251,13 +413,30 @@ class HeatProblem:
         h_r = 4.0 * eps * forms.STEFAN_BOLTZMANN * (T0 + forms.KELVIN) ** 3
         self._radiation.append((group, eps, amb, h_r, full))
 
-    def add_contact(self, region_a, region_b, conductance):
-        """A joint between two regions with contact conductance h_c in W/(m² K)."""
+    def add_contact(self, region_a: int, region_b: int, conductance: float) -> None:
+        """A joint between two regions: their interface nodes are split and coupled by a contact conductance.
+
+        Parameters
+        ----------
+        region_a, region_b : int
+            Region ids.
+        conductance : float
+            h_c, W/(m² K).
+        """
         self._joints.append(Joint(region_a, region_b, conductance))
 
     # ---------------------------------------------------------------- assembly
-    def assemble(self):
-        """Assemble M, A, B once and return the :class:`ThermalSystem`."""
+    def assemble(self) -> ThermalSystem:
+        """Assemble M, A, B once and return the :class:`ThermalSystem`.
+
+        Returns
+        -------
+        ThermalSystem
+            Capacity matrix M (J/K), conductance matrix A (W/K), input matrix B
+            (W per input unit: °C, K/m or W), on the thermal nodes.
+        """
+        # About 80 lines: one loop per load kind (convection, fluxes, sources, radiation), each adding its
+        # matrix, its input column and its heat-flow ledger entry; together they show the column order.
         mesh = self.mesh
         pairs = joint_facets(mesh, self._joints)
         if pairs:
@@ -286,39 +465,9 @@ class HeatProblem:
             r_T_old, r_u_old = flows.get(key, (0.0, 0.0))
             flows[key] = (r_T_old + r_T, r_u_old + r_u)
 
-        facet_bases = {}
         used = [g[0] for g in self._convection] + [g[0] for g in self._fluxes] + [g[0] for g in self._radiation]
-        if used:
-            # The facet forms are assembled on a mesh of only the tetrahedra under the facets used,
-            # with its own compact node numbering: scikit-fem then finds the facets of a few
-            # thousand elements instead of the whole mesh.  lift() maps the results back.
-            under = np.unique(np.concatenate([mesh.facet_group(g)[0] for g in used]))
-            facet_nodes, local_tets = np.unique(tets[under], return_inverse=True)
-            facet_mesh = MeshTet(np.ascontiguousarray(skmesh.p[:, facet_nodes]),
-                                 np.ascontiguousarray(local_tets.reshape(-1, 4).T))
-            element_of = np.full(len(tets), -1)
-            element_of[under] = np.arange(len(under))
-            facet_index = _skfem_facets(facet_mesh, mesh, tets, element_of, facet_nodes)
-
-        def facet_basis(group):
-            if group not in facet_bases:
-                facet_bases[group] = FacetBasis(facet_mesh, element, intorder=2,
-                                                facets=facet_index(*mesh.facet_group(group)))
-            return facet_bases[group]
-
-        def lift(local):
-            """A facet-mesh vector or matrix in the thermal node numbering."""
-            if sp.issparse(local):
-                local = local.tocoo()
-                return sp.csr_matrix((local.data, (facet_nodes[local.row], facet_nodes[local.col])), shape=(n, n))
-            out = np.zeros(n)
-            out[facet_nodes] = local
-            return out
-
-        def full_facet_basis(group):
-            """A facet basis on the whole mesh, for terms evaluated on thermal-node fields later."""
-            return FacetBasis(skmesh, element, intorder=2,
-                              facets=_skfem_facets(skmesh, mesh, tets)(*mesh.facet_group(group)))
+        facets = _FacetForms(mesh, skmesh, tets, element, used, n)
+        facet_basis, lift = facets.basis, facets.lift
 
         for group, h, amb, grad, z_ref in self._convection:
             fb = facet_basis(group)
@@ -359,30 +508,12 @@ class HeatProblem:
             b = lift(forms.weighted_load.assemble(fb, weight=h_r))
             B[:, col[amb]] += b
             if full:
-                radiation.append(RadiationTerm(group, full_facet_basis(group), eps, h_r, col[amb]))
+                radiation.append(RadiationTerm(group, facets.full_basis(group), eps, h_r, col[amb]))
             r_u = np.zeros(len(names))
             r_u[col[amb]] = b.sum()
             add_flow(f"radiation:{group}", np.asarray(H.sum(axis=0)).ravel(), r_u)
 
-        fixed_rows, fixed_cols, fixed_of = [], [], []
-        for k, (group, name) in enumerate(self._fixed):
-            tet, loc = mesh.facet_group(group)
-            nodes = np.unique(tets[tet[:, None], LOCAL_FACES[loc]])
-            fixed_rows.append(nodes)
-            fixed_cols.append(np.full(len(nodes), col[name]))
-            fixed_of.append(np.full(len(nodes), k))
-        if fixed_rows:
-            nodes = np.concatenate(fixed_rows)
-            cols = np.concatenate(fixed_cols)
-            # A node on two fixed groups takes the value (and belongs to the group) of the last one given.
-            nodes, last = np.unique(nodes[::-1], return_index=True)
-            cols = cols[::-1][last]
-            owner = np.concatenate(fixed_of)[::-1][last]
-            fixed_groups = {}
-            for k, (group, _) in enumerate(self._fixed):
-                fixed_groups[group] = np.union1d(fixed_groups.get(group, []), nodes[owner == k]).astype(np.int64)
-        else:
-            nodes, cols, fixed_groups = np.zeros(0, np.int64), np.zeros(0, np.int64), {}
+        nodes, cols, fixed_groups = _fixed_nodes(mesh, tets, self._fixed, col)
         fixed_matrix = sp.csr_matrix((np.ones(len(nodes)), (np.arange(len(nodes)), cols)),
                                      shape=(len(nodes), len(names)))
         return ThermalSystem(
@@ -392,6 +523,76 @@ class HeatProblem:
             radiation=radiation, heat_flows=flows, constant_inputs=dict(self._constants),
             fixed_groups=fixed_groups,
         )
+
+
+class _FacetForms:
+    """Facet bases for the boundary forms of :meth:`HeatProblem.assemble`, and the map back to thermal nodes.
+
+    The facet forms are assembled on a mesh of only the tetrahedra under the
+    facet groups used, with its own compact node numbering: scikit-fem then
+    finds the facets of a few thousand elements instead of the whole mesh.
+    :meth:`lift` maps the results back.
+    """
+
+    def __init__(self, mesh, skmesh, tets, element, used_groups, n):
+        self.mesh, self.skmesh, self.tets, self.element = mesh, skmesh, tets, element
+        self.n = n                  # thermal nodes (joint facets split mesh nodes)
+        self._bases = {}
+        if used_groups:
+            under = np.unique(np.concatenate([mesh.facet_group(g)[0] for g in used_groups]))
+            self.facet_nodes, local_tets = np.unique(tets[under], return_inverse=True)
+            self.facet_mesh = MeshTet(np.ascontiguousarray(skmesh.p[:, self.facet_nodes]),
+                                      np.ascontiguousarray(local_tets.reshape(-1, 4).T))
+            element_of = np.full(len(tets), -1)
+            element_of[under] = np.arange(len(under))
+            self._facet_index = _skfem_facets(self.facet_mesh, mesh, tets, element_of, self.facet_nodes)
+
+    def basis(self, group):
+        """The (cached) facet basis of a boundary group on the facet mesh."""
+        if group not in self._bases:
+            self._bases[group] = FacetBasis(self.facet_mesh, self.element, intorder=2,
+                                            facets=self._facet_index(*self.mesh.facet_group(group)))
+        return self._bases[group]
+
+    def lift(self, local):
+        """A facet-mesh vector or matrix in the thermal node numbering."""
+        n, facet_nodes = self.n, self.facet_nodes
+        if sp.issparse(local):
+            local = local.tocoo()
+            return sp.csr_matrix((local.data, (facet_nodes[local.row], facet_nodes[local.col])), shape=(n, n))
+        out = np.zeros(n)
+        out[facet_nodes] = local
+        return out
+
+    def full_basis(self, group):
+        """A facet basis on the whole mesh, for terms evaluated on thermal-node fields later."""
+        return FacetBasis(self.skmesh, self.element, intorder=2,
+                          facets=_skfem_facets(self.skmesh, self.mesh, self.tets)(*self.mesh.facet_group(group)))
+
+
+def _fixed_nodes(mesh, tets, fixed, col):
+    """(thermal nodes, input column of each, group → its nodes) of the fixed-temperature groups ``fixed``.
+
+    A node on two fixed groups takes the value (and belongs to the group) of the last one given.
+    """
+    fixed_rows, fixed_cols, fixed_of = [], [], []
+    for k, (group, name) in enumerate(fixed):
+        tet, loc = mesh.facet_group(group)
+        nodes = np.unique(tets[tet[:, None], LOCAL_FACES[loc]])
+        fixed_rows.append(nodes)
+        fixed_cols.append(np.full(len(nodes), col[name]))
+        fixed_of.append(np.full(len(nodes), k))
+    if not fixed_rows:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), {}
+    nodes = np.concatenate(fixed_rows)
+    cols = np.concatenate(fixed_cols)
+    nodes, last = np.unique(nodes[::-1], return_index=True)
+    cols = cols[::-1][last]
+    owner = np.concatenate(fixed_of)[::-1][last]
+    fixed_groups = {}
+    for k, (group, _) in enumerate(fixed):
+        fixed_groups[group] = np.union1d(fixed_groups.get(group, []), nodes[owner == k]).astype(np.int64)
+    return nodes, cols, fixed_groups
 
 
 def _skfem_facets(skmesh, mesh, thermal_tets, element_of=None, node_of=None):

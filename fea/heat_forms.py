@@ -12,6 +12,9 @@ STEFAN_BOLTZMANN = 5.670374419e-8
 #: Offset between °C and K.
 KELVIN = 273.15
 
+# Each form takes scikit-fem's arguments (trial u, test v, and w holding the coefficient fields), not
+# values of ours, so it is documented by the integral it assembles, with units, not by numpydoc sections.
+
 
 @BilinearForm
 def conduction(u, v, w):

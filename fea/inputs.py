@@ -11,9 +11,15 @@ piecewise-constant duty cycles, piecewise-linear samples.
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from .errors import FEAInputError
+
+if TYPE_CHECKING:
+    from .heat import ThermalSystem
 
 #: Gauss–Legendre nodes per sub-interval: exact for polynomials of degree ≤ 2·3 − 1 = 5.
 QUADRATURE_NODES = 3
@@ -21,14 +27,29 @@ QUADRATURE_NODES = 3
 QUADRATURE_CHUNK = 2**16
 
 
-def interval_means(values_at, times_s, breakpoints_s=(), nodes=QUADRATURE_NODES):
-    """Mean of a vector-valued input over each interval [tᵢ, tᵢ₊₁] of ``times_s`` → (len(times_s) − 1, m).
+def interval_means(values_at: Callable[[np.ndarray], np.ndarray], times_s: np.ndarray,
+                   breakpoints_s: Sequence[float] | np.ndarray = (), nodes: int = QUADRATURE_NODES) -> np.ndarray:
+    """Mean of a vector-valued input over each interval [tᵢ, tᵢ₊₁] of ``times_s``.
 
-    ``values_at(t)`` returns the input at the times ``t`` (k,) as (k, m) (or
-    (k,)).  Each interval is split at the ``breakpoints_s`` inside it and
-    every piece integrated by ``nodes``-point Gauss–Legendre quadrature; the
-    input is evaluated only inside pieces, so a value exactly at a jump is
-    never used.
+    Each interval is split at the breakpoints inside it and every piece
+    integrated by Gauss–Legendre quadrature; the input is evaluated only
+    inside pieces, so a value exactly at a jump is never used.
+
+    Parameters
+    ----------
+    values_at : callable
+        ``values_at(t)`` returns the input at times ``t`` (k,) as (k, m) or (k,).
+    times_s : ndarray
+        Interval ends, s, increasing.
+    breakpoints_s : sequence of float
+        Times where the input jumps or kinks, s.
+    nodes : int
+        Gauss–Legendre points per piece.
+
+    Returns
+    -------
+    ndarray, shape (len(times_s) − 1, m)
+        The means, in the input's units.
     """
     t = np.asarray(times_s, float)
     cuts = np.asarray(breakpoints_s, float).ravel()
@@ -49,12 +70,26 @@ def interval_means(values_at, times_s, breakpoints_s=(), nodes=QUADRATURE_NODES)
     return sums / np.diff(t)[:, None]
 
 
-def step_means(schedule, step_times_s, theta):
-    """Inputs driving each step of the θ-method (len − 1, m): the schedule's step means.
+def step_means(schedule: InputSchedule, step_times_s: np.ndarray, theta: float) -> np.ndarray:
+    """Inputs driving each step of the θ-method: the schedule's step means.
 
     A schedule without ``means`` (an object with ``sample`` only, e.g. a
     measured record whose samples describe the interval before them) is
     taken at its θ-weighted step ends, θ u(tᵢ₊₁) + (1 − θ) u(tᵢ).
+
+    Parameters
+    ----------
+    schedule : InputSchedule
+        Or any object with ``sample(times)`` and optionally ``means(step_times)``.
+    step_times_s : ndarray
+        Step ends, s.
+    theta : float
+        The scheme's θ.
+
+    Returns
+    -------
+    ndarray, shape (len(step_times_s) − 1, n_inputs)
+        Inputs per step.
     """
     means = getattr(schedule, "means", None)
     if means is not None:
@@ -64,9 +99,19 @@ def step_means(schedule, step_times_s, theta):
 
 
 class SampledSeries:
-    """A piecewise-linear input from samples ``(times_s, values)``; held constant outside them."""
+    """A piecewise-linear input from samples ``(times_s, values)``; held constant outside them.
 
-    def __init__(self, times_s, values, name="series"):
+    Parameters
+    ----------
+    times_s : ndarray
+        Sample times, s, strictly increasing.
+    values : ndarray
+        Samples, in the input's unit.
+    name : str
+        Named in errors.
+    """
+
+    def __init__(self, times_s: np.ndarray, values: np.ndarray, name: str = "series") -> None:
         t = np.asarray(times_s, dtype=float)
         v = np.asarray(values, dtype=float)
         if t.ndim != 1 or t.shape != v.shape or len(t) == 0:
@@ -83,7 +128,7 @@ class SampledSeries:
         return np.interp(t, self.times_s, self.values)
 
     @property
-    def breakpoints_s(self):
+    def breakpoints_s(self) -> np.ndarray:
         """Where the series kinks: its sample times, s."""
         return self.times_s
 
@@ -98,9 +143,19 @@ class InputSchedule:
     that step means are exact however the steps fall (a
     :class:`SampledSeries` gives its own).  A missing or unknown name, or a
     value that is not finite, raises :class:`FEAInputError` naming it and the time.
+
+    Parameters
+    ----------
+    system : ThermalSystem
+        Gives the input names.
+    sources : dict
+        Input name → number, callable ``f(t_s) -> value`` or :class:`SampledSeries`.
+    breakpoints_s : sequence of float
+        Jumps and kinks of the callable inputs, s.
     """
 
-    def __init__(self, system, sources, breakpoints_s=()):
+    def __init__(self, system: ThermalSystem, sources: dict[str, float | Callable | SampledSeries],
+                 breakpoints_s: Sequence[float] = ()) -> None:
         self.names = list(system.input_names)
         given = dict(system.constant_inputs)
         given.update(sources)
@@ -115,8 +170,19 @@ class InputSchedule:
         cuts += [s.breakpoints_s for s in self.sources if isinstance(s, SampledSeries)]
         self.breakpoints_s = np.unique(np.concatenate(cuts))
 
-    def sample(self, times_s):
-        """Input matrix (len(times_s), n_inputs) at the given times."""
+    def sample(self, times_s: np.ndarray) -> np.ndarray:
+        """The inputs at some times.
+
+        Parameters
+        ----------
+        times_s : ndarray
+            Times, s.
+
+        Returns
+        -------
+        ndarray, shape (len(times_s), n_inputs)
+            Input values (°C, K/m, W, …).
+        """
         t = np.atleast_1d(np.asarray(times_s, dtype=float))
         out = np.empty((len(t), len(self.names)))
         for j, source in enumerate(self.sources):
@@ -134,8 +200,19 @@ class InputSchedule:
             raise FEAInputError(f"input {self.names[j]!r} is {out[i, j]} at t = {t[i]:.6g} s")
         return out
 
-    def means(self, step_times_s):
-        """Mean input over each step between ``step_times_s`` (len − 1, n_inputs), see :func:`interval_means`."""
+    def means(self, step_times_s: np.ndarray) -> np.ndarray:
+        """Exact mean inputs over each step, see :func:`interval_means`.
+
+        Parameters
+        ----------
+        step_times_s : ndarray
+            Step ends, s.
+
+        Returns
+        -------
+        ndarray, shape (len(step_times_s) − 1, n_inputs)
+            Mean inputs.
+        """
         return interval_means(self.sample, step_times_s, self.breakpoints_s)
 
     def __call__(self, t):

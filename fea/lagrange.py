@@ -21,8 +21,23 @@ QUADRATURE_2 = (np.full((4, 4), _B) + np.eye(4) * (_A - _B), np.full(4, 0.25))
 QUADRATURE_1 = (np.full((1, 4), 0.25), np.ones(1))
 
 
-def barycentric_gradients(points, tets):
-    """∇λ_i of each tetrahedron (m, 4, 3) in 1/m, and volumes (m,) in m³."""
+def barycentric_gradients(points: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Gradients of the barycentric coordinates, and volumes, of each tetrahedron.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+        Node coordinates, m.
+    tets : ndarray of int, shape (m, 4)
+        Connectivity.
+
+    Returns
+    -------
+    grad_lambda : ndarray, shape (m, 4, 3)
+        ∇λ_i, 1/m.
+    volumes : ndarray, shape (m,)
+        Signed volumes, m³.
+    """
     X = points[tets]
     J = X[:, 1:, :] - X[:, :1, :]                  # rows: edge vectors from vertex 0
     inv = np.linalg.inv(J)                          # columns: ∇λ_1..∇λ_3
@@ -39,9 +54,18 @@ class LagrangeSpace:
     ----------
     element_nodes : (m, 4) for P1 or (m, 10) for P2 (4 vertices then the 6 edges of :data:`EDGES`)
     node_points : (n_nodes, 3) node coordinates, m
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+        Mesh vertices, m.
+    tets : ndarray of int, shape (m, 4)
+        Connectivity.
+    degree : int
+        1 or 2.
     """
 
-    def __init__(self, points, tets, degree):
+    def __init__(self, points: np.ndarray, tets: np.ndarray, degree: int) -> None:
         if degree not in (1, 2):
             raise ValueError(f"degree must be 1 or 2, got {degree!r}")
         self.degree = degree
@@ -58,21 +82,42 @@ class LagrangeSpace:
         self.n_nodes = len(self.node_points)
 
     @property
-    def nodes_per_element(self):
+    def nodes_per_element(self) -> int:
+        """4 for P1, 10 for P2."""
         return self.element_nodes.shape[1]
 
-    def shape_values(self, lam):
-        """Shape functions at barycentric points ``lam`` (..., 4) → (..., nodes_per_element)."""
+    def shape_values(self, lam: np.ndarray) -> np.ndarray:
+        """Shape functions at barycentric points.
+
+        Parameters
+        ----------
+        lam : ndarray, shape (..., 4)
+            Barycentric coordinates.
+
+        Returns
+        -------
+        ndarray, shape (..., nodes_per_element)
+            Shape function values.
+        """
         if self.degree == 1:
             return lam
         i, j = EDGES.T
         return np.concatenate([lam * (2 * lam - 1), 4 * lam[..., i] * lam[..., j]], axis=-1)
 
-    def shape_gradients(self, lam, grad_lambda):
+    def shape_gradients(self, lam: np.ndarray, grad_lambda: np.ndarray) -> np.ndarray:
         """Shape gradients at barycentric points.
 
-        ``lam`` is (q, 4) (the same points in every element), ``grad_lambda``
-        (m, 4, 3); the result is (m, q, nodes_per_element, 3) in 1/m.
+        Parameters
+        ----------
+        lam : ndarray, shape (q, 4)
+            The same points in every element.
+        grad_lambda : ndarray, shape (m, 4, 3)
+            From :func:`barycentric_gradients`, 1/m.
+
+        Returns
+        -------
+        ndarray, shape (m, q, nodes_per_element, 3)
+            Gradients, 1/m.
         """
         m, q = len(grad_lambda), len(lam)
         if self.degree == 1:
@@ -83,12 +128,36 @@ class LagrangeSpace:
                     + lam[None, :, j, None] * grad_lambda[:, None, i, :])
         return np.concatenate([vertex, edge], axis=2)
 
-    def quadrature(self, integrand_degree):
-        """Barycentric points and weights exact for polynomials of the given degree (≤ 2)."""
+    def quadrature(self, integrand_degree: int) -> tuple[np.ndarray, np.ndarray]:
+        """A quadrature rule on the reference tetrahedron.
+
+        Parameters
+        ----------
+        integrand_degree : int
+            Degree of the polynomial to integrate exactly (≤ 2).
+
+        Returns
+        -------
+        points : ndarray, shape (q, 4)
+            Barycentric points.
+        weights : ndarray, shape (q,)
+            Summing to 1 (multiply by the volume).
+        """
         return QUADRATURE_1 if integrand_degree <= 1 else QUADRATURE_2
 
-    def facet_nodes(self, tet, local):
-        """All nodes on boundary facets (vertices, and edge midpoints for P2)."""
+    def facet_nodes(self, tet: np.ndarray, local: np.ndarray) -> np.ndarray:
+        """All nodes on some facets (vertices, and edge midpoints for P2).
+
+        Parameters
+        ----------
+        tet, local : ndarray of int
+            Tetrahedron and local face of each facet.
+
+        Returns
+        -------
+        ndarray of int
+            Sorted unique node ids.
+        """
         tet, local = np.asarray(tet), np.asarray(local)
         vertices = LOCAL_FACES[local]                           # (k, 3) local vertices
         nodes = [self.element_nodes[tet[:, None], vertices]]

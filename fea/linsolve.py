@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import importlib.util
 import os
+from collections.abc import Callable, Iterator
 
 import numpy as np
 import scipy.sparse as sp
@@ -34,12 +35,22 @@ REFINEMENT_MAX_ITERATIONS = 8
 
 
 @contextlib.contextmanager
-def blas_threads(n):
-    """Limit the BLAS thread pools to ``n`` threads inside the block (a no-op without threadpoolctl).
+def blas_threads(n: int) -> Iterator[None]:
+    """Limit the BLAS thread pools inside the block (a no-op without threadpoolctl).
 
     Many small dense operations, as in an AMG setup, run far slower with a
     multi-threaded OpenBLAS than with one thread, and much slower still when
     another process competes for the cores.
+
+    Parameters
+    ----------
+    n : int
+        Threads.
+
+    Yields
+    ------
+    None
+        Inside the limit.
     """
     controller = _threadpool_controller()
     if controller is None:
@@ -63,8 +74,14 @@ def _threadpool_controller():
     return _CONTROLLER[0]
 
 
-def available_backends():
-    """Backends importable in this environment, fastest first."""
+def available_backends() -> list[str]:
+    """The solver backends importable in this environment.
+
+    Returns
+    -------
+    list of str
+        Fastest first, e.g. ``["cholmod", "superlu", "mixed"]``.
+    """
     found = []
     if importlib.util.find_spec("sksparse") is not None:
         found.append("cholmod")
@@ -75,8 +92,14 @@ def available_backends():
     return found
 
 
-def default_backend():
-    """The backend ``factorize`` uses when none is named."""
+def default_backend() -> str:
+    """The backend :func:`factorize` uses when none is named.
+
+    Returns
+    -------
+    str
+        ``$THERMAL_TWIN_SOLVER`` if set, else the fastest available.
+    """
     chosen = os.environ.get("THERMAL_TWIN_SOLVER", "").strip().lower()
     if chosen:
         if chosen not in BACKENDS:
@@ -85,12 +108,27 @@ def default_backend():
     return available_backends()[0]
 
 
-def factorize(matrix, symmetric_positive_definite=True, backend=None):
-    """Factorise a sparse matrix once; return ``solve(b)`` for vectors or (n, k) blocks.
+def factorize(matrix: sp.spmatrix, symmetric_positive_definite: bool = True,
+              backend: str | None = None) -> Callable[[np.ndarray], np.ndarray]:
+    """Factorise a sparse matrix once.
 
     For a symmetric positive definite matrix SuperLU is run with a symmetric
     minimum-degree ordering and no pivoting, which halves the factorisation
     time and the fill of the default COLAMD ordering on heat matrices.
+
+    Parameters
+    ----------
+    matrix : scipy.sparse matrix, shape (n, n)
+        The matrix.
+    symmetric_positive_definite : bool
+        It is SPD (allows Cholesky and the symmetric ordering).
+    backend : str, optional
+        One of :func:`available_backends` (default :func:`default_backend`).
+
+    Returns
+    -------
+    callable
+        ``solve(b)`` for vectors (n,) or blocks (n, k).
     """
     backend = backend or default_backend()
     if backend not in available_backends():
@@ -132,11 +170,16 @@ class MixedPrecisionSolve:
     double-precision direct solve to that tolerance.  ``solves`` counts the
     single-precision triangular solves, ``fallback`` tells whether the
     factorisation had to be redone in double precision.
+
+    Parameters
+    ----------
+    A : scipy.sparse matrix
+        The matrix (double precision).
     """
 
     accepts_guess = True
 
-    def __init__(self, A):
+    def __init__(self, A: sp.spmatrix) -> None:
         self.A = sp.csr_matrix(A)
         self._lu32 = _superlu(sp.csc_matrix(A, dtype=np.float32), True)
         self._double = None

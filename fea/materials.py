@@ -1,11 +1,16 @@
 """Isotropic thermal and elastic material properties, assigned per mesh region."""
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .errors import FEAInputError, require_positive
+
+if TYPE_CHECKING:
+    from .mesh import TetMesh
 
 
 #: The properties each kind of problem needs, with their units (for messages).
@@ -52,23 +57,34 @@ class Material:
         if self.expansion is not None and not np.isfinite(self.expansion):
             raise FEAInputError(f"{self.name}.expansion must be finite, got {self.expansion!r}")
 
-    def missing(self, properties):
-        """The names among ``properties`` that this material does not give."""
+    def missing(self, properties: Iterable[str]) -> list[str]:
+        """The properties this material does not give.
+
+        Parameters
+        ----------
+        properties : iterable of str
+            Property names, e.g. ``"conductivity"``.
+
+        Returns
+        -------
+        list of str
+            Those that are None here.
+        """
         return [p for p in properties if getattr(self, p) is None]
 
     @property
-    def volumetric_heat_capacity(self):
+    def volumetric_heat_capacity(self) -> float:
         """ρ c in J/(m³ K)."""
         return self.density * self.specific_heat
 
     @property
-    def lame(self):
+    def lame(self) -> tuple[float, float]:
         """Lamé parameters (λ, μ) in Pa."""
         E, nu = self.youngs_modulus, self.poisson_ratio
         return E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
 
     @property
-    def thermal_stress_modulus(self):
+    def thermal_stress_modulus(self) -> float:
         """(3λ + 2μ) α in Pa/K: the stress per kelvin of restrained expansion."""
         lam, mu = self.lame
         return (3 * lam + 2 * mu) * self.expansion
@@ -78,11 +94,25 @@ CAST_IRON = Material(48.0, 7200.0, 500.0, 110e9, 0.26, 10.5e-6, "cast iron")
 STEEL = Material(45.0, 7850.0, 470.0, 210e9, 0.30, 11.5e-6, "steel")
 
 
-def region_materials(mesh, materials, required, problem):
-    """``materials`` keyed by region id, checked: every region has a :class:`Material` giving ``required``.
+def region_materials(mesh: TetMesh, materials: dict[int | str, Material], required: dict[str, str],
+                     problem: str) -> dict[int, Material]:
+    """Materials keyed by region id, checked: every region has a :class:`Material` giving what is required.
 
-    ``materials`` maps region ids or names to materials; ``required`` maps
-    property names to units, ``problem`` names the problem in messages.
+    Parameters
+    ----------
+    mesh : TetMesh
+        The mesh and its regions.
+    materials : dict of int or str to Material
+        Region id or name → material.
+    required : dict of str to str
+        Property name → unit (for messages).
+    problem : str
+        Names the problem in messages.
+
+    Returns
+    -------
+    dict of int to Material
+        Region id → material.
     """
     table = {}
     for key, material in materials.items():
@@ -102,8 +132,23 @@ def region_materials(mesh, materials, required, problem):
     return table
 
 
-def per_tet(mesh, materials, attribute):
-    """Array of one material attribute per tetrahedron (``materials`` keyed by region id or name)."""
+def per_tet(mesh: TetMesh, materials: dict[int | str, Material], attribute: str) -> np.ndarray:
+    """One material property per tetrahedron.
+
+    Parameters
+    ----------
+    mesh : TetMesh
+        The mesh and its regions.
+    materials : dict of int or str to Material
+        Region id or name → material.
+    attribute : str
+        The property, e.g. ``"conductivity"``.
+
+    Returns
+    -------
+    ndarray, shape (n_tets,)
+        Its value in each tetrahedron (SI).
+    """
     table = {mesh.region_id(key): material for key, material in materials.items()}
     values = {rid: getattr(mat, attribute) for rid, mat in table.items()}
     out = np.empty(mesh.n_tets)

@@ -8,10 +8,17 @@ splitting that the contact model does at joints.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .errors import FEAInputError
+
+if TYPE_CHECKING:
+    import meshio
+    import pyvista as pv
+
+    from .selection import Selector
 
 #: Local faces of a positively oriented tetrahedron (a, b, c, d), each ordered
 #: so that its right-hand normal points out of the tetrahedron.  Face ``f`` is
@@ -24,8 +31,21 @@ LOCAL_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
 DEGENERATE_RELATIVE_VOLUME = 1e-9
 
 
-def signed_volumes(points, tets):
-    """Signed volume of each tetrahedron in m³ (positive for VTK ordering)."""
+def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """The signed volume of each tetrahedron.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+        Coordinates, m.
+    tets : ndarray of int, shape (m, 4)
+        Connectivity.
+
+    Returns
+    -------
+    ndarray, shape (m,)
+        Volume, m³ (positive for VTK ordering).
+    """
     a, b, c, d = (points[tets[:, i]] for i in range(4))
     return np.einsum("ij,ij->i", np.cross(b - a, c - a), d - a) / 6.0
 
@@ -50,11 +70,31 @@ class TetMesh:
 
     # ------------------------------------------------------------ construction
     @classmethod
-    def from_arrays(cls, points, tets, regions=None, region_names=None):
+    def from_arrays(cls, points: np.ndarray, tets: np.ndarray, regions: np.ndarray | None = None,
+                    region_names: dict[int, str] | None = None) -> TetMesh:
         """Build a mesh from plain arrays, reorienting inverted tetrahedra.
 
-        Raises :class:`FEAInputError` for a degenerate tetrahedron, an index
-        out of range, or arrays of the wrong shape.
+        Parameters
+        ----------
+        points : ndarray, shape (n, 3)
+            Node coordinates, m.
+        tets : ndarray of int, shape (m, 4)
+            Node indices of each tetrahedron.
+        regions : ndarray of int, shape (m,), optional
+            Region id of each tetrahedron (default 0).
+        region_names : dict of int to str, optional
+            Region id → name.
+
+        Returns
+        -------
+        TetMesh
+            With positively oriented tetrahedra.
+
+        Raises
+        ------
+        FEAInputError
+            A degenerate tetrahedron, an index out of range, a non-finite
+            coordinate, or arrays of the wrong shape.
         """
         points = np.asarray(points, dtype=np.float64)
         tets = np.asarray(tets)
@@ -96,11 +136,23 @@ class TetMesh:
         return cls(points, tets, regions, dict(region_names or {}))
 
     @classmethod
-    def from_pyvista(cls, grid, region_array=None, region_names=None):
+    def from_pyvista(cls, grid: pv.UnstructuredGrid, region_array: str | None = None,
+                     region_names: dict[int, str] | None = None) -> TetMesh:
         """Build a mesh from a pyvista ``UnstructuredGrid`` of linear tetrahedra.
 
-        ``region_array`` names the cell array holding region ids; without it
-        every tetrahedron is region 0.
+        Parameters
+        ----------
+        grid : pyvista.UnstructuredGrid
+            Only VTK_TETRA cells; coordinates in m.
+        region_array : str, optional
+            The cell array holding region ids; without it every tetrahedron is region 0.
+        region_names : dict of int to str, optional
+            Region id → name.
+
+        Returns
+        -------
+        TetMesh
+            As :meth:`from_arrays` builds it.
         """
         import pyvista as pv
 
@@ -120,8 +172,24 @@ class TetMesh:
         return cls.from_arrays(grid.points, cells[pv.CellType.TETRA], regions, region_names)
 
     @classmethod
-    def from_meshio(cls, mesh, region_array=None, region_names=None):
-        """Build a mesh from a ``meshio.Mesh`` holding a ``tetra`` block."""
+    def from_meshio(cls, mesh: meshio.Mesh, region_array: str | None = None,
+                    region_names: dict[int, str] | None = None) -> TetMesh:
+        """Build a mesh from a ``meshio.Mesh`` holding one ``tetra`` block.
+
+        Parameters
+        ----------
+        mesh : meshio.Mesh
+            Coordinates in m.
+        region_array : str, optional
+            The cell array holding region ids; without it every tetrahedron is region 0.
+        region_names : dict of int to str, optional
+            Region id → name.
+
+        Returns
+        -------
+        TetMesh
+            As :meth:`from_arrays` builds it.
+        """
         blocks = [i for i, c in enumerate(mesh.cells) if c.type == "tetra"]
         if len(blocks) != 1:
             raise FEAInputError(f"expected one 'tetra' cell block, found {len(blocks)}")
@@ -134,8 +202,20 @@ class TetMesh:
             regions = mesh.cell_data[region_array][blocks[0]]
         return cls.from_arrays(mesh.points, mesh.cells[blocks[0]].data, regions, region_names)
 
-    def to_pyvista(self, point_data=None, cell_data=None):
-        """The mesh as a pyvista ``UnstructuredGrid`` with a ``region`` cell array."""
+    def to_pyvista(self, point_data: dict[str, np.ndarray] | None = None,
+                   cell_data: dict[str, np.ndarray] | None = None) -> pv.UnstructuredGrid:
+        """The mesh as a pyvista ``UnstructuredGrid`` with a ``region`` cell array.
+
+        Parameters
+        ----------
+        point_data, cell_data : dict of str to ndarray, optional
+            Arrays to attach by name (names with units).
+
+        Returns
+        -------
+        pyvista.UnstructuredGrid
+            Coordinates in m.
+        """
         import pyvista as pv
 
         cells = np.hstack([np.full((len(self.tets), 1), 4), self.tets]).ravel()
@@ -149,23 +229,48 @@ class TetMesh:
 
     # ------------------------------------------------------------ geometry
     @property
-    def n_nodes(self):
+    def n_nodes(self) -> int:
+        """Number of nodes."""
         return len(self.points)
 
     @property
-    def n_tets(self):
+    def n_tets(self) -> int:
+        """Number of tetrahedra."""
         return len(self.tets)
 
     @property
-    def volumes(self):
+    def volumes(self) -> np.ndarray:
         """Volume of each tetrahedron, m³."""
         return signed_volumes(self.points, self.tets)
 
-    def region_ids(self):
+    def region_ids(self) -> np.ndarray:
+        """The region ids present.
+
+        Returns
+        -------
+        ndarray of int
+            Sorted, unique.
+        """
         return np.unique(self.regions)
 
-    def region_id(self, region):
-        """Region id for a name or an id; raises for an unknown one."""
+    def region_id(self, region: int | str) -> int:
+        """The id of a region given by name or id.
+
+        Parameters
+        ----------
+        region : int or str
+            Region id or name.
+
+        Returns
+        -------
+        int
+            Its id.
+
+        Raises
+        ------
+        FEAInputError
+            Unknown region.
+        """
         if isinstance(region, str):
             for rid, name in self.region_names.items():
                 if name == region:
@@ -206,15 +311,24 @@ class TetMesh:
             self._face_cache = (tet, local, boundary, interior)
         return self._face_cache
 
-    def boundary_facets(self):
-        """Boundary facets (faces of exactly one tetrahedron) as ``(tet, local_face)`` arrays."""
+    def boundary_facets(self) -> tuple[np.ndarray, np.ndarray]:
+        """The boundary facets (faces of exactly one tetrahedron).
+
+        Returns
+        -------
+        tet, local_face : ndarray of int
+            Tetrahedron and its local face (0–3) of each facet.
+        """
         tet, local, boundary, _ = self._face_pairs()
         return tet[boundary], local[boundary]
 
-    def interface_facets(self):
-        """Interior faces between tetrahedra of different regions.
+    def interface_facets(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The interior faces between tetrahedra of different regions.
 
-        Returns ``(tet_a, local_a, tet_b, local_b)`` arrays.
+        Returns
+        -------
+        tet_a, local_a, tet_b, local_b : ndarray of int
+            The two tetrahedra of each face and the face's local index in each.
         """
         tet, local, _, interior = self._face_pairs()
         a, b = interior
@@ -222,26 +336,69 @@ class TetMesh:
         a, b = a[differ], b[differ]
         return tet[a], local[a], tet[b], local[b]
 
-    def facet_nodes(self, tet, local, tets=None):
-        """Node ids (k, 3) of facets, ordered with outward normal."""
+    def facet_nodes(self, tet: np.ndarray, local: np.ndarray, tets: np.ndarray | None = None) -> np.ndarray:
+        """The nodes of facets, ordered with outward normal.
+
+        Parameters
+        ----------
+        tet, local : ndarray of int
+            Tetrahedron and local face of each facet.
+        tets : ndarray, optional
+            Another connectivity to read the nodes from (e.g. thermal numbering).
+
+        Returns
+        -------
+        ndarray of int, shape (k, 3)
+            Node ids.
+        """
         tets = self.tets if tets is None else tets
         return tets[np.asarray(tet)[:, None], LOCAL_FACES[np.asarray(local)]]
 
-    def facet_geometry(self, tet, local):
-        """Centroids (k, 3), unit outward normals (k, 3) and areas (k,) in m²."""
+    def facet_geometry(self, tet: np.ndarray, local: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Centroids, normals and areas of facets.
+
+        Parameters
+        ----------
+        tet, local : ndarray of int
+            Tetrahedron and local face of each facet.
+
+        Returns
+        -------
+        centroids : ndarray, shape (k, 3)
+            m.
+        normals : ndarray, shape (k, 3)
+            Unit outward normals.
+        areas : ndarray, shape (k,)
+            m².
+        """
         xyz = self.points[self.facet_nodes(tet, local)]
         cross = np.cross(xyz[:, 1] - xyz[:, 0], xyz[:, 2] - xyz[:, 0])
         area2 = np.linalg.norm(cross, axis=1)
         return xyz.mean(axis=1), cross / area2[:, None], 0.5 * area2
 
     # ------------------------------------------------------------ facet groups
-    def add_facet_group(self, name, selector, region=None):
-        """Select boundary facets geometrically and store them as group ``name``.
+    def add_facet_group(self, name: str, selector: Selector, region: int | str | None = None
+                        ) -> tuple[np.ndarray, np.ndarray]:
+        """Select boundary facets geometrically and store them as a named group.
 
-        ``selector`` is a :mod:`fea.selection` selector (a plane, a box, a
-        predicate or a combination).  ``region`` keeps only facets of
-        tetrahedra in that region.  A selection that matches nothing raises
-        :class:`FEAInputError`.
+        Parameters
+        ----------
+        name : str
+            The group's name.
+        selector : Selector
+            A :mod:`fea.selection` selector (a plane, a box, a predicate or a combination).
+        region : int or str, optional
+            Keep only facets of tetrahedra in that region.
+
+        Returns
+        -------
+        tet, local_face : ndarray of int
+            The group.
+
+        Raises
+        ------
+        FEAInputError
+            The selection matches nothing.
         """
         tet, local = self.boundary_facets()
         if region is not None:
@@ -254,8 +411,21 @@ class TetMesh:
         self.facet_groups[name] = (tet[mask], local[mask])
         return self.facet_groups[name]
 
-    def set_facet_group(self, name, tet, local):
-        """Store an explicitly computed group of boundary facets ``(tet, local_face)``."""
+    def set_facet_group(self, name: str, tet: np.ndarray, local: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Store an explicitly computed group of boundary facets.
+
+        Parameters
+        ----------
+        name : str
+            The group's name.
+        tet, local : ndarray of int
+            Tetrahedron and local face (0–3) of each facet.
+
+        Returns
+        -------
+        tet, local_face : ndarray of int
+            The group, as stored.
+        """
         tet, local = np.asarray(tet, dtype=np.int64), np.asarray(local, dtype=np.int64)
         if tet.size == 0:
             raise FEAInputError(f"facet group {name!r} is empty")
@@ -264,8 +434,24 @@ class TetMesh:
         self.facet_groups[name] = (tet, local)
         return self.facet_groups[name]
 
-    def facet_group(self, name):
-        """The ``(tet, local_face)`` arrays of a named group."""
+    def facet_group(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """A named facet group.
+
+        Parameters
+        ----------
+        name : str
+            The group's name.
+
+        Returns
+        -------
+        tet, local_face : ndarray of int
+            Its facets.
+
+        Raises
+        ------
+        FEAInputError
+            Unknown group (the message lists them).
+        """
         try:
             return self.facet_groups[name]
         except KeyError:
@@ -273,12 +459,36 @@ class TetMesh:
                 f"unknown facet group {name!r}; available: {sorted(self.facet_groups)}"
             ) from None
 
-    def facet_group_area(self, name):
-        """Total area of a facet group, m²."""
+    def facet_group_area(self, name: str) -> float:
+        """The total area of a facet group.
+
+        Parameters
+        ----------
+        name : str
+            The group's name.
+
+        Returns
+        -------
+        float
+            Area, m².
+        """
         return float(self.facet_geometry(*self.facet_group(name))[2].sum())
 
-    def select_tets(self, selector=None, region=None):
-        """Indices of tetrahedra whose centroid satisfies ``selector`` (and in ``region``)."""
+    def select_tets(self, selector: Selector | None = None, region: int | str | None = None) -> np.ndarray:
+        """The tetrahedra whose centroid a selector keeps (and in a region).
+
+        Parameters
+        ----------
+        selector : Selector, optional
+            A :mod:`fea.selection` selector.
+        region : int or str, optional
+            Keep only tetrahedra of that region.
+
+        Returns
+        -------
+        ndarray of int
+            Their indices.
+        """
         keep = np.ones(len(self.tets), bool)
         if region is not None:
             keep &= self.regions == self.region_id(region)
@@ -290,20 +500,28 @@ class TetMesh:
         return np.flatnonzero(keep)
 
     # ------------------------------------------------------------ point location
-    def locate(self, points, tolerance=1e-9, snap_distance=0.0, names=None):
+    def locate(self, points: np.ndarray, tolerance: float = 1e-9, snap_distance: float = 0.0,
+               names: list[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Containing tetrahedron and barycentric weights of each point.
 
         Parameters
         ----------
-        points : (k, 3) array, m
-        tolerance : relative barycentric tolerance for points on faces/edges
-        snap_distance : m; a point outside the mesh but closer than this to it
-            is moved onto the nearest tetrahedron (weights clipped to it)
-        names : optional labels used in error messages
+        points : ndarray, shape (k, 3)
+            Coordinates, m.
+        tolerance : float
+            Relative barycentric tolerance for points on faces and edges.
+        snap_distance : float
+            A point outside the mesh but closer than this to it (m) is moved
+            onto the nearest tetrahedron (weights clipped to it).
+        names : list of str, optional
+            Labels used in error messages.
 
         Returns
         -------
-        tets : (k,) int, weights : (k, 4) float (non-negative, summing to 1)
+        tets : ndarray of int, shape (k,)
+            Containing tetrahedra.
+        weights : ndarray, shape (k, 4)
+            Barycentric weights, non-negative, summing to 1.
         """
         from scipy.spatial import cKDTree
 

@@ -9,12 +9,18 @@ Values are SI: °C, m, and strain as a plain ratio.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
 
 from . import background
 from .errors import FEAInputError
+
+if TYPE_CHECKING:
+    from .background import Background
+    from .elastic import ElasticProblem
+    from .heat import ThermalSystem
 
 
 @dataclass(frozen=True)
@@ -69,9 +75,23 @@ class OutputOperator:
     that wants to go on meanwhile uses :meth:`poll`, :meth:`apply_available`
     and :attr:`deferred_rows` (as :meth:`fea.transient.ThermalSolver.run`
     does).
+
+    Parameters
+    ----------
+    names : list of str
+        Output names.
+    units : list of str
+        Their SI units (``°C``, ``m``, ``1``).
+    matrix : sparse matrix, shape (p, n_nodes)
+        Rows over the thermal nodes, output unit per °C.
+    offset : ndarray, shape (p,)
+        Constant terms, output unit.
+    deferred : tuple, optional
+        ``(rows, background job, finish)`` for rows still being computed.
     """
 
-    def __init__(self, names, units, matrix, offset, deferred=None):
+    def __init__(self, names: list[str], units: list[str], matrix: sp.spmatrix, offset: np.ndarray,
+                 deferred: tuple | None = None) -> None:
         self.names = list(names)
         self.units = list(units)
         self._matrix = sp.csr_matrix(matrix)
@@ -89,23 +109,36 @@ class OutputOperator:
         return self.__dict__
 
     @property
-    def n_outputs(self):
+    def n_outputs(self) -> int:
+        """Number of outputs."""
         return len(self.names)
 
     # ------------------------------------------------------------------ deferred rows
     @property
-    def deferred_rows(self):
+    def deferred_rows(self) -> np.ndarray:
         """Indices of the rows not yet available (empty once complete)."""
         return np.array([], dtype=int) if self._deferred is None else self._deferred[0]
 
-    def poll(self):
-        """True when every row is available; takes in finished background rows without blocking."""
+    def poll(self) -> bool:
+        """Take in finished background rows without blocking.
+
+        Returns
+        -------
+        bool
+            True when every row is available.
+        """
         if self._deferred is not None and self._deferred[1].done():
             self.resolve()
         return self._deferred is None
 
-    def resolve(self):
-        """Wait for deferred rows (re-raising the background job's error, if any)."""
+    def resolve(self) -> OutputOperator:
+        """Wait for deferred rows (re-raising the background job's error, if any).
+
+        Returns
+        -------
+        OutputOperator
+            ``self``, complete.
+        """
         if self._deferred is None:
             return self
         rows, job, finish = self._deferred
@@ -121,57 +154,105 @@ class OutputOperator:
         return self
 
     @property
-    def background(self):
+    def background(self) -> Background | None:
         """The background job computing deferred rows, or None."""
         return None if self._deferred is None else self._deferred[1]
 
     # ------------------------------------------------------------------ values
     @property
-    def matrix(self):
+    def matrix(self) -> sp.csr_matrix:
+        """The rows (p, n_nodes), output unit per °C; waits for deferred rows."""
         self.resolve()
         return self._matrix
 
     @matrix.setter
-    def matrix(self, value):
+    def matrix(self, value: sp.spmatrix) -> None:
         self.resolve()
         self._matrix = sp.csr_matrix(value)
 
     @property
-    def offset(self):
+    def offset(self) -> np.ndarray:
+        """The constant terms (p,), output unit; waits for deferred rows."""
         self.resolve()
         return self._offset
 
     @offset.setter
-    def offset(self, value):
+    def offset(self, value: np.ndarray) -> None:
         self.resolve()
         self._offset = np.asarray(value, dtype=float)
 
-    def apply(self, T):
-        """Outputs for one temperature vector (n,) or a block (n, k) → (p,) or (p, k)."""
+    def apply(self, T: np.ndarray) -> np.ndarray:
+        """The outputs for temperatures.
+
+        Parameters
+        ----------
+        T : ndarray, shape (n,) or (n, k)
+            Temperature on the thermal nodes, °C (one vector or k of them).
+
+        Returns
+        -------
+        ndarray, shape (p,) or (p, k)
+            Outputs in their units.
+        """
         y = self.matrix @ T
         return y + (self.offset if np.ndim(T) == 1 else self.offset[:, None])
 
-    def apply_available(self, T):
-        """Like :meth:`apply`, without waiting: deferred rows are NaN."""
+    def apply_available(self, T: np.ndarray) -> np.ndarray:
+        """Like :meth:`apply`, without waiting.
+
+        Parameters
+        ----------
+        T : ndarray, shape (n,) or (n, k)
+            Temperature on the thermal nodes, °C.
+
+        Returns
+        -------
+        ndarray, shape (p,) or (p, k)
+            Outputs in their units; deferred rows are NaN.
+        """
         y = self._matrix @ T
         y = y + (self._offset if np.ndim(T) == 1 else self._offset[:, None])
         y[self.deferred_rows] = np.nan
         return y
 
-    def subset(self, names):
-        """The operator restricted to the named outputs, in the given order."""
+    def subset(self, names: list[str]) -> OutputOperator:
+        """The operator restricted to some outputs.
+
+        Parameters
+        ----------
+        names : list of str
+            Output names, in the order wanted.
+
+        Returns
+        -------
+        OutputOperator
+            Complete (waits for deferred rows).
+        """
         index = [self.index(n) for n in names]
         return OutputOperator([self.names[i] for i in index], [self.units[i] for i in index],
                               self.matrix[index], self.offset[index])
 
-    def index(self, name):
+    def index(self, name: str) -> int:
+        """The row of an output.
+
+        Parameters
+        ----------
+        name : str
+            Output name.
+
+        Returns
+        -------
+        int
+            Its row.
+        """
         try:
             return self.names.index(name)
         except ValueError:
             raise FEAInputError(f"unknown output {name!r}; outputs: {self.names}") from None
 
 
-def build_output_operator(specs, thermal_system, elastic=None, snap_distance=0.0, concurrent=False):
+def build_output_operator(specs: list, thermal_system: ThermalSystem, elastic: ElasticProblem | None = None,
+                          snap_distance: float = 0.0, concurrent: bool = False) -> OutputOperator:
     """Precompute the operator for a list of output specifications.
 
     Displacement and strain outputs need ``elastic`` (an
@@ -187,24 +268,32 @@ def build_output_operator(specs, thermal_system, elastic=None, snap_distance=0.0
     rows arrive, and anything that needs the full operator waits for them.
     Bad specifications (points outside the mesh, missing supports) still
     raise here.  Without ``fork`` (Windows) the rows are computed at once.
+
+    Parameters
+    ----------
+    specs : list
+        :class:`PointTemperature`, :class:`PointDisplacement`,
+        :class:`RelativeDisplacement` and :class:`AxialStrain` specifications (points in m).
+    thermal_system : ThermalSystem
+        The thermal nodes the rows act on.
+    elastic : ElasticProblem, optional
+        Needed by displacement and strain outputs.
+    snap_distance : float
+        How far outside the mesh a point may lie and be snapped onto it, m.
+    concurrent : bool
+        Compute the adjoint rows in a forked worker and return at once.
+
+    Returns
+    -------
+    OutputOperator
+        Rows in °C, m or strain (1) per °C.
     """
-    names = [s.name for s in specs]
-    dupes = sorted({n for n in names if names.count(n) > 1})
-    if dupes:
-        raise FEAInputError(f"duplicate output names: {dupes}")
-    for s in specs:
-        if type(s) not in UNITS:
-            raise FEAInputError(f"unknown output specification {s!r}")
+    names = _checked_names(specs)
     n = thermal_system.n_nodes
     rows = [None] * len(specs)
     offset = np.zeros(len(specs))
     stats = {}
-    temps = [i for i, s in enumerate(specs) if isinstance(s, PointTemperature)]
-    if temps:
-        W = thermal_system.point_weights([specs[i].point for i in temps],
-                                         names=[specs[i].name for i in temps], snap_distance=snap_distance)
-        for k, i in enumerate(temps):
-            rows[i] = W[k]
+    _fill_temperature_rows(rows, specs, thermal_system, snap_distance)
     mech = [i for i, s in enumerate(specs) if not isinstance(s, PointTemperature)]
     deferred = None
     if mech:
@@ -234,6 +323,28 @@ def build_output_operator(specs, thermal_system, elastic=None, snap_distance=0.0
     operator.stats = stats
     operator.poll()                         # complete at once when the rows were computed serially
     return operator
+
+
+def _fill_temperature_rows(rows, specs, thermal_system, snap_distance):
+    """Put the barycentric row of every :class:`PointTemperature` of ``specs`` into ``rows`` (same order)."""
+    temps = [i for i, s in enumerate(specs) if isinstance(s, PointTemperature)]
+    if temps:
+        W = thermal_system.point_weights([specs[i].point for i in temps],
+                                         names=[specs[i].name for i in temps], snap_distance=snap_distance)
+        for k, i in enumerate(temps):
+            rows[i] = W[k]
+
+
+def _checked_names(specs):
+    """The names of output specifications, refusing duplicates and unknown specification types."""
+    names = [s.name for s in specs]
+    dupes = sorted({n for n in names if names.count(n) > 1})
+    if dupes:
+        raise FEAInputError(f"duplicate output names: {dupes}")
+    for s in specs:
+        if type(s) not in UNITS:
+            raise FEAInputError(f"unknown output specification {s!r}")
+    return names
 
 
 def _influence_with_stats(elastic, rows, thermal_system):

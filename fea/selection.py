@@ -18,7 +18,24 @@ class Selector:
     ``normals`` is ``None`` when tetrahedra rather than facets are selected.
     """
 
-    def mask(self, centroids, normals, vertices):  # pragma: no cover - interface
+    def mask(self, centroids: np.ndarray, normals: np.ndarray | None,
+             vertices: np.ndarray) -> np.ndarray:  # pragma: no cover - interface
+        """Which items the selector keeps.
+
+        Parameters
+        ----------
+        centroids : ndarray, shape (k, 3)
+            Centroids of the facets or tetrahedra, m.
+        normals : ndarray, shape (k, 3), or None
+            Unit outward normals of facets; None when tetrahedra are selected.
+        vertices : ndarray, shape (k, 3 or 4, 3)
+            Their vertices, m.
+
+        Returns
+        -------
+        ndarray of bool, shape (k,)
+            True where kept.
+        """
         raise NotImplementedError
 
     def __and__(self, other):
@@ -38,7 +55,7 @@ class _Combined(Selector):
     op: Callable
     symbol: str
 
-    def mask(self, centroids, normals, vertices):
+    def mask(self, centroids: np.ndarray, normals: np.ndarray | None, vertices: np.ndarray) -> np.ndarray:
         return self.op(self.left.mask(centroids, normals, vertices),
                        self.right.mask(centroids, normals, vertices))
 
@@ -50,7 +67,7 @@ class _Combined(Selector):
 class _Not(Selector):
     inner: Selector
 
-    def mask(self, centroids, normals, vertices):
+    def mask(self, centroids: np.ndarray, normals: np.ndarray | None, vertices: np.ndarray) -> np.ndarray:
         return ~np.asarray(self.inner.mask(centroids, normals, vertices))
 
     def __repr__(self):
@@ -71,13 +88,33 @@ class Plane(Selector):
     outward: bool = False
 
     @classmethod
-    def axis(cls, axis, value, tolerance=1e-6, outward=False, sign=1.0):
-        """Plane ``x_axis = value`` (axis 'x', 'y' or 'z')."""
+    def axis(cls, axis: str, value: float, tolerance: float = 1e-6, outward: bool = False,
+             sign: float = 1.0) -> Plane:
+        """The plane ``x_axis = value``.
+
+        Parameters
+        ----------
+        axis : str
+            ``"x"``, ``"y"`` or ``"z"``.
+        value : float
+            Its coordinate, m.
+        tolerance : float
+            Distance of a facet's vertices from the plane, m.
+        outward : bool
+            Keep only facets whose outward normal points along ``sign`` × the axis.
+        sign : float
+            ±1, the direction of the normal.
+
+        Returns
+        -------
+        Plane
+            The selector.
+        """
         n = np.zeros(3)
         n["xyz".index(axis)] = sign
         return cls(tuple(float(v) for v in n), sign * float(value), tolerance, outward)
 
-    def mask(self, centroids, normals, vertices):
+    def mask(self, centroids: np.ndarray, normals: np.ndarray | None, vertices: np.ndarray) -> np.ndarray:
         n = np.asarray(self.normal, float)
         n = n / np.linalg.norm(n)
         off = self.offset / np.linalg.norm(np.asarray(self.normal, float))
@@ -94,7 +131,7 @@ class Box(Selector):
     lo: tuple
     hi: tuple
 
-    def mask(self, centroids, normals, vertices):
+    def mask(self, centroids: np.ndarray, normals: np.ndarray | None, vertices: np.ndarray) -> np.ndarray:
         lo, hi = np.asarray(self.lo, float), np.asarray(self.hi, float)
         return np.all((centroids >= lo) & (centroids <= hi), axis=1)
 
@@ -106,7 +143,7 @@ class Facing(Selector):
     direction: tuple
     max_angle_deg: float = 10.0
 
-    def mask(self, centroids, normals, vertices):
+    def mask(self, centroids: np.ndarray, normals: np.ndarray | None, vertices: np.ndarray) -> np.ndarray:
         if normals is None:
             return np.ones(len(centroids), bool)
         d = np.asarray(self.direction, float)
@@ -121,7 +158,7 @@ class Predicate(Selector):
     fn: Callable
     label: str = "predicate"
 
-    def mask(self, centroids, normals, vertices):
+    def mask(self, centroids: np.ndarray, normals: np.ndarray | None, vertices: np.ndarray) -> np.ndarray:
         return np.asarray(self.fn(centroids, normals), bool)
 
     def __repr__(self):
@@ -132,5 +169,5 @@ class Predicate(Selector):
 class Everything(Selector):
     """Selects every facet (useful combined with a region filter)."""
 
-    def mask(self, centroids, normals, vertices):
+    def mask(self, centroids: np.ndarray, normals: np.ndarray | None, vertices: np.ndarray) -> np.ndarray:
         return np.ones(len(centroids), bool)

@@ -18,7 +18,9 @@ contracts too slowly.
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
@@ -28,6 +30,11 @@ from .energy import EnergyLedger
 from .errors import FEAInputError, require_finite
 from .inputs import step_means
 from .linsolve import factorize
+
+if TYPE_CHECKING:
+    from .heat import ThermalSystem
+    from .inputs import InputSchedule
+    from .outputs import OutputOperator
 
 #: Absolute change (K) below which the radiation iterations stop.
 NONLINEAR_TOLERANCE_K = 1e-9
@@ -74,11 +81,14 @@ class ThermalSolver:
     Parameters
     ----------
     system : ThermalSystem
-    theta : 1.0 (backward Euler) or 0.5 (Crank–Nicolson), or any value in [½, 1]
-    backend : sparse direct solver backend (see :mod:`fea.linsolve`)
+        The assembled system (M in J/K, A in W/K, B per input unit).
+    theta : float
+        1.0 (backward Euler) or 0.5 (Crank–Nicolson), or any value in [½, 1].
+    backend : str, optional
+        Sparse direct solver backend (see :mod:`fea.linsolve`).
     """
 
-    def __init__(self, system, theta=1.0, backend=None):
+    def __init__(self, system: ThermalSystem, theta: float = 1.0, backend: str | None = None) -> None:
         if not 0.5 <= float(theta) <= 1.0:
             raise FEAInputError(f"theta must lie in [0.5, 1] for an unconditionally stable scheme, got {theta!r}")
         self.system = system
@@ -184,20 +194,48 @@ class ThermalSolver:
             f"(last change {change:.2e} K); use a smaller time step")
 
     # ---------------------------------------------------------------- public API
-    def steady_state(self, u, T_guess=None):
-        """Steady temperature (°C) for the constant input vector ``u``."""
+    def steady_state(self, u: np.ndarray, T_guess: np.ndarray | None = None) -> np.ndarray:
+        """The steady temperature for constant inputs.
+
+        Parameters
+        ----------
+        u : ndarray, shape (n_inputs,)
+            Input values (°C, K/m, W as the inputs are).
+        T_guess : ndarray, optional
+            Start of the Newton iteration with radiation, °C (default: the mean input).
+
+        Returns
+        -------
+        ndarray, shape (n_nodes,)
+            Temperature, °C.
+        """
         u = np.asarray(u, dtype=float)
         factors = self._factors(None)
         rhs = self.system.input_matrix @ u
         T0 = np.full(self.system.n_nodes, float(np.mean(u))) if T_guess is None else T_guess
         return self._solve(factors, rhs, self.system.fixed_values(u), 1.0, u, T0)
 
-    def step(self, T, u_old, u_new, dt, u_mean=None):
-        """Advance the temperature ``T`` (°C) by one step of ``dt`` s.
+    def step(self, T: np.ndarray, u_old: np.ndarray | None, u_new: np.ndarray | None, dt: float,
+             u_mean: np.ndarray | None = None) -> np.ndarray:
+        """Advance the temperature by one θ-scheme step.
 
-        ``u_mean`` is the mean input over the step (default θ u_new + (1 − θ)
-        u_old); ``u_new`` sets fixed temperatures and, with ``u_old``, the
-        ambient of full radiation (both may be None without those).
+        Parameters
+        ----------
+        T : ndarray, shape (n_nodes,)
+            Temperature at the start of the step, °C.
+        u_old, u_new : ndarray or None
+            Inputs at the start and the end of the step; ``u_new`` sets fixed
+            temperatures and, with ``u_old``, the ambient of full radiation
+            (both may be None without those).
+        dt : float
+            Step, s.
+        u_mean : ndarray, optional
+            Mean input over the step (default θ u_new + (1 − θ) u_old).
+
+        Returns
+        -------
+        ndarray, shape (n_nodes,)
+            Temperature at the end of the step, °C.
         """
         factors = self._factors(dt)
         th = self.theta
@@ -237,36 +275,45 @@ class ThermalSolver:
         else:
             self._trail = (dt, [T, T_new])
 
-    def run(self, T0, times_s, schedule, outputs=None, field_times_s=(), max_step_s=None, progress=None,
-            energy=False, substeps=None):
+    def run(self, T0: float | np.ndarray, times_s: np.ndarray, schedule: InputSchedule,
+            outputs: OutputOperator | None = None, field_times_s: Sequence[float] = (),
+            max_step_s: float | None = None, progress: Callable[[int, int], None] | None = None,
+            energy: bool = False, substeps: np.ndarray | int | None = None) -> TransientResult:
         """Integrate from ``times_s[0]`` through ``times_s``; record outputs at each time.
 
         Parameters
         ----------
-        T0 : initial temperature on thermal nodes (°C), or a number for a uniform start
-        times_s : increasing output times, s; the first is the initial time
-        schedule : :class:`~fea.inputs.InputSchedule`, or any object with ``sample(times)`` and
-            optionally ``means(step_times)`` (see :func:`fea.inputs.step_means`)
-        outputs : :class:`~fea.outputs.OutputOperator` evaluated at every output time; rows that
-            are still computed in the background (``build_output_operator(concurrent=True)``)
-            are filled in when they arrive, so the run overlaps with their computation
-        field_times_s : times whose full temperature field is kept
-        max_step_s : split output intervals into equal sub-steps no longer than this
-        progress : optional callable ``progress(done, total)``
-        energy : keep an :class:`~fea.energy.EnergyLedger` of the run (``result.energy``)
-        substeps : number of equal sub-steps of each output interval, instead of ``max_step_s``
+        T0 : float or ndarray
+            Initial temperature on the thermal nodes, °C, or a number for a uniform start.
+        times_s : ndarray
+            Increasing output times, s; the first is the initial time.
+        schedule : InputSchedule
+            Or any object with ``sample(times)`` and optionally ``means(step_times)``
+            (see :func:`fea.inputs.step_means`).
+        outputs : OutputOperator, optional
+            Evaluated at every output time; rows that are still computed in the
+            background (``build_output_operator(concurrent=True)``) are filled in
+            when they arrive, so the run overlaps with their computation.
+        field_times_s : sequence of float
+            Times whose full temperature field is kept, s.
+        max_step_s : float, optional
+            Split output intervals into equal sub-steps no longer than this, s.
+        progress : callable, optional
+            ``progress(done, total)``.
+        energy : bool
+            Keep an :class:`~fea.energy.EnergyLedger` of the run (``result.energy``).
+        substeps : ndarray or int, optional
+            Number of equal sub-steps of each output interval, instead of ``max_step_s``.
+
+        Returns
+        -------
+        TransientResult
+            Output history (the outputs' units), final temperature and kept fields (°C), ledger.
         """
-        times = np.asarray(times_s, dtype=float)
-        if times.ndim != 1 or len(times) < 1:
-            raise FEAInputError("times_s must be a 1-D array with at least the initial time")
-        if np.any(np.diff(times) <= 0):
-            i = int(np.flatnonzero(np.diff(times) <= 0)[0])
-            raise FEAInputError(f"times must increase strictly: t[{i + 1}] = {times[i + 1]} s follows t[{i}] = {times[i]} s")
-        n = self.system.n_nodes
-        T = np.full(n, float(T0)) if np.ndim(T0) == 0 else np.array(T0, dtype=float)
-        if T.shape != (n,):
-            raise FEAInputError(f"initial temperature has shape {T.shape}, the system has {n} nodes")
-        require_finite("initial temperature", T)
+        # Long, and complexity 22 (radon): four optional recorders (outputs, energy ledger, fields, progress)
+        # each tested at the start and at every output time of the one time loop; they share its state.
+        times = _output_times(times_s)
+        T = _initial_field(T0, self.system.n_nodes)
         intervals = np.diff(times)
         step_times, at_output = step_grid(times, max_step_s, substeps)
         substeps = np.diff(at_output)
@@ -310,7 +357,8 @@ class ThermalSolver:
         return TransientResult(times, history, list(outputs.names) if record else [], T, fields,
                                self.factorisations, ledger)
 
-    def step_error(self, T0, times_s, schedule, outputs, fine, max_step_s=None):
+    def step_error(self, T0: float | np.ndarray, times_s: np.ndarray, schedule: InputSchedule,
+                   outputs: OutputOperator, fine: TransientResult, max_step_s: float | None = None) -> StepErrorEstimate:
         """Estimate the time-discretisation error of ``fine`` by step doubling (Richardson extrapolation).
 
         ``fine`` is the :class:`TransientResult` of :meth:`run` with the same
@@ -321,6 +369,18 @@ class ThermalSolver:
         common times is ≈ (y_coarse − y_fine) / (rᵖ − 1).  The estimate is
         asymptotic: it holds while the steps resolve the response, i.e. while
         the error is small, which is when one relies on it.
+
+        Parameters
+        ----------
+        T0, times_s, schedule, outputs, max_step_s
+            As given to :meth:`run` for ``fine``.
+        fine : TransientResult
+            The run whose error is estimated.
+
+        Returns
+        -------
+        StepErrorEstimate
+            The estimated error of ``fine``'s outputs (their units) at the common times (s).
         """
         times = np.asarray(times_s, float)
         _, at_output = step_grid(times, max_step_s)
@@ -348,10 +408,26 @@ class ThermalSolver:
                                  f"step doubling ({scheme}, order {order}, step ratio {ratio:g})")
 
 
-def step_grid(times, max_step_s=None, substeps=None):
-    """The solver's step times for output times ``times`` (s): each interval split into equal sub-steps
-    no longer than ``max_step_s`` (or into ``substeps[i]`` sub-steps).  Returns the step times and, per
-    output time, its index among them."""
+def step_grid(times: np.ndarray, max_step_s: float | None = None,
+              substeps: np.ndarray | int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The solver's step times for output times: each interval split into equal sub-steps.
+
+    Parameters
+    ----------
+    times : ndarray
+        Output times, s.
+    max_step_s : float, optional
+        Longest sub-step, s.
+    substeps : ndarray or int, optional
+        Sub-steps of each interval, instead of ``max_step_s``.
+
+    Returns
+    -------
+    step_times : ndarray
+        Step ends, s, from ``times[0]``.
+    at_output : ndarray of int
+        Per output time, its index in ``step_times``.
+    """
     times = np.asarray(times, float)
     intervals = np.diff(times)
     if substeps is not None:
@@ -407,3 +483,23 @@ class _Recorder:
         if len(self.rows):
             self.outputs.resolve()
             self._flush()
+
+
+def _output_times(times_s):
+    """``times_s`` as a float array, checked to be 1-D, non-empty and strictly increasing (s)."""
+    times = np.asarray(times_s, dtype=float)
+    if times.ndim != 1 or len(times) < 1:
+        raise FEAInputError("times_s must be a 1-D array with at least the initial time")
+    if np.any(np.diff(times) <= 0):
+        i = int(np.flatnonzero(np.diff(times) <= 0)[0])
+        raise FEAInputError(f"times must increase strictly: t[{i + 1}] = {times[i + 1]} s follows t[{i}] = {times[i]} s")
+    return times
+
+
+def _initial_field(T0, n):
+    """The initial temperature (°C) on ``n`` thermal nodes from a number or an array, checked."""
+    T = np.full(n, float(T0)) if np.ndim(T0) == 0 else np.array(T0, dtype=float)
+    if T.shape != (n,):
+        raise FEAInputError(f"initial temperature has shape {T.shape}, the system has {n} nodes")
+    require_finite("initial temperature", T)
+    return T

@@ -7,7 +7,13 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 from xml.sax.saxutils import quoteattr
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from .mesh import TetMesh
 
 
 def _atomic_save(grid, path):
@@ -17,17 +23,47 @@ def _atomic_save(grid, path):
     os.replace(tmp, path)
 
 
-def write_vtu(path, mesh, point_data=None, cell_data=None):
-    """Write the mesh with nodal and cell arrays (names should carry units, e.g. ``temperature_degC``)."""
+def write_vtu(path: str | Path, mesh: TetMesh, point_data: dict[str, np.ndarray] | None = None,
+              cell_data: dict[str, np.ndarray] | None = None) -> Path:
+    """Write the mesh with nodal and cell arrays as ``.vtu``, atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    mesh : TetMesh
+        The mesh (coordinates in m).
+    point_data, cell_data : dict of str to ndarray, optional
+        Arrays by name; names should carry units, e.g. ``temperature_degC``.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     _atomic_save(mesh.to_pyvista(point_data, cell_data), path)
     return Path(path)
 
 
-def write_time_series(path, mesh, frames):
-    """Write a ``.pvd`` collection: ``frames`` maps time (s) to a dict of nodal arrays.
+def write_time_series(path: str | Path, mesh: TetMesh, frames: dict[float, dict[str, np.ndarray]]) -> Path:
+    """Write a ``.pvd`` collection of nodal fields over time.
 
     The ``.vtu`` files go next to the ``.pvd`` in a folder named after it;
     the ``.pvd`` is written last, so it only exists once every frame does.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.pvd`` file.
+    mesh : TetMesh
+        The mesh.
+    frames : dict of float to dict
+        Time (s) → nodal arrays by name (names with units).
+
+    Returns
+    -------
+    Path
+        ``path``.
     """
     path = Path(path)
     folder = path.with_suffix("")

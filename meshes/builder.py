@@ -29,6 +29,7 @@ import time
 from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pyvista as pv
@@ -37,6 +38,9 @@ from fea import TetMesh
 
 from .cachefiles import find_cached, log, user_cache_dir, write_checked
 from .tomlspec import DefinitionError
+
+if TYPE_CHECKING:   # meshes.definition imports this module (BUILDER_VERSION)
+    from .definition import MachineGeometry
 
 BUILDER_VERSION = 2
 
@@ -59,20 +63,59 @@ class MeshInfo:
     digest: str
 
 
-def cache_file_name(geometry, size_m):
-    """File name of a geometry's mesh at ``size_m`` (m): the size and the geometry digest, no machine name."""
+def cache_file_name(geometry: MachineGeometry, size_m: float) -> str:
+    """File name of a geometry's mesh: the size and the geometry digest, no machine name.
+
+    Parameters
+    ----------
+    geometry : MachineGeometry
+        The parts and mesh settings.
+    size_m : float
+        Target tetrahedron edge length, m.
+
+    Returns
+    -------
+    str
+        ``mesh-h<size in mm>mm-<first 16 hex digits of the digest>.vtu``.
+    """
     return f"mesh-h{size_m * 1e3:g}mm-{geometry.digest(size_m)[:16]}.vtu"
 
 
-def meshing_estimate(geometry, size_m):
-    """Rough (tetrahedra, seconds) of meshing a geometry at ``size_m`` (m), from its part volumes."""
+def meshing_estimate(geometry: MachineGeometry, size_m: float) -> tuple[float, float]:
+    """Rough size and duration of meshing a geometry, from its part volumes.
+
+    Parameters
+    ----------
+    geometry : MachineGeometry
+        The parts.
+    size_m : float
+        Target tetrahedron edge length, m.
+
+    Returns
+    -------
+    tetrahedra : float
+        Expected number of tetrahedra.
+    seconds : float
+        Expected wall time on a 2-core machine, s.
+    """
     volume = sum(abs(p.shape.surface(size_m).volume) for p in geometry.parts)
     tets = TETS_PER_CUBED_EDGE * volume / size_m ** 3
     return tets, MESHING_FIXED_S + MESHING_S_PER_TET * tets
 
 
-def duration_text(seconds):
-    """``"40 s"`` / ``"12 min"`` / ``"1.5 h"`` for a rough duration."""
+def duration_text(seconds: float) -> str:
+    """A rough duration as text.
+
+    Parameters
+    ----------
+    seconds : float
+        Duration, s.
+
+    Returns
+    -------
+    str
+        ``"40 s"``, ``"12 min"`` or ``"1.5 h"``.
+    """
     if seconds < 90:
         return f"{seconds:.0f} s"
     if seconds < 5400:
@@ -80,19 +123,30 @@ def duration_text(seconds):
     return f"{seconds / 3600:.1f} h"
 
 
-def build_mesh(geometry, size_m=None, rebuild=False, quiet=True):
+def build_mesh(geometry: MachineGeometry, size_m: float | None = None, rebuild: bool = False,
+               quiet: bool = True) -> tuple[TetMesh, MeshInfo]:
     """The labelled mesh of a :class:`~meshes.definition.MachineGeometry`, from cache when possible.
+
+    A cached mesh that fails its content check is rebuilt (user cache) or
+    refused (shipped cache, :class:`~meshes.cachefiles.CacheFileError`).
 
     Parameters
     ----------
-    size_m : target tetrahedron edge length in m (default: the definition's ``mesh.size_m``)
-    rebuild : mesh again even if a cached mesh exists
-    quiet : send fTetWild's console output to ``<mesh>.log`` beside the mesh (else show it)
+    geometry : MachineGeometry
+        The parts and mesh settings.
+    size_m : float, optional
+        Target tetrahedron edge length, m (default: the definition's ``mesh.size_m``).
+    rebuild : bool
+        Mesh again even if a cached mesh exists.
+    quiet : bool
+        Send fTetWild's console output to ``<mesh>.log`` beside the mesh (else show it).
 
-    Returns ``(TetMesh, MeshInfo)``; region ids are 1… in part order and
-    ``mesh.region_names`` maps them to part names.  A cached mesh that fails
-    its content check is rebuilt (user cache) or refused (shipped cache,
-    :class:`~meshes.cachefiles.CacheFileError`).
+    Returns
+    -------
+    mesh : TetMesh
+        Coordinates in m; region ids are 1… in part order and ``mesh.region_names`` maps them to part names.
+    info : MeshInfo
+        The file, whether it came from the cache, the time taken (s) and the geometry digest.
     """
     size_m = float(size_m or geometry.mesh_size_m)
     if not size_m > 0:
@@ -162,12 +216,31 @@ def _flush_c_stdio():
         pass
 
 
-def tetrahedralize(geometry, size_m, quiet=True):
+def tetrahedralize(geometry: MachineGeometry, size_m: float, quiet: bool = True) -> pv.UnstructuredGrid:
     """Run fTetWild on the CSG union of all parts.
 
     A boolean tree, rather than one merged surface, keeps the winding number
     right where parts touch: two coincident faces of opposite orientation
     (a table on its base) otherwise punch holes into the touching solids.
+
+    Parameters
+    ----------
+    geometry : MachineGeometry
+        The parts and fTetWild settings.
+    size_m : float
+        Target tetrahedron edge length, m.
+    quiet : bool
+        fTetWild's least verbose log level.
+
+    Returns
+    -------
+    pyvista.UnstructuredGrid
+        Unlabelled tetrahedra, coordinates in m.
+
+    Raises
+    ------
+    DefinitionError
+        fTetWild failed or produced no tetrahedra.
     """
     import pytetwild
 
@@ -190,7 +263,9 @@ def tetrahedralize(geometry, size_m, quiet=True):
                                                 edge_length_r=size_m / diagonal, coarsen=False,
                                                 stop_energy=geometry.stop_energy,
                                                 loglevel=6 if quiet else 3)
-        except Exception as exc:  # fTetWild reports failures as generic exceptions
+        # The C++ wrapper turns std::exception into RuntimeError, invalid_argument/length_error into
+        # ValueError, out_of_range into IndexError and bad_alloc into MemoryError.
+        except (RuntimeError, ValueError, IndexError, MemoryError) as exc:
             raise DefinitionError(f"{geometry.source}: meshing failed in pytetwild: {exc}") from exc
         finally:
             os.chdir(cwd)
@@ -199,8 +274,26 @@ def tetrahedralize(geometry, size_m, quiet=True):
     return grid
 
 
-def label_parts(geometry, grid):
-    """Give each tetrahedron the deepest-containing part, later parts winning overlaps."""
+def label_parts(geometry: MachineGeometry, grid: pv.UnstructuredGrid) -> TetMesh:
+    """Give each tetrahedron the deepest-containing part, later parts winning overlaps.
+
+    Parameters
+    ----------
+    geometry : MachineGeometry
+        The parts, in priority order.
+    grid : pyvista.UnstructuredGrid
+        The tetrahedra of :func:`tetrahedralize`.
+
+    Returns
+    -------
+    TetMesh
+        With region ids 1… in part order and their part names.
+
+    Raises
+    ------
+    DefinitionError
+        A part received no tetrahedron (thinner than the mesh size allows).
+    """
     mesh = TetMesh.from_pyvista(grid)
     centroids = mesh.points[mesh.tets].mean(axis=1)
     depth = np.column_stack([p.shape.depth(centroids) for p in geometry.parts])
@@ -218,23 +311,56 @@ def label_parts(geometry, grid):
     return TetMesh(mesh.points, mesh.tets, region.astype(np.int32), names)
 
 
-def write_labelled_mesh(mesh, path, metadata):
-    """Save a mesh with its region names atomically as ``.vtu``, with its SHA-256 sidecar."""
+def write_labelled_mesh(mesh: TetMesh, path: str | Path, metadata: dict) -> None:
+    """Save a mesh with its region names atomically as ``.vtu``, with its SHA-256 sidecar.
+
+    Parameters
+    ----------
+    mesh : TetMesh
+        A labelled mesh.
+    path : str or Path
+        The ``.vtu`` file.
+    metadata : dict
+        JSON-serialisable facts stored in the file's field data (machine, size, digest, mesher).
+    """
     grid = mesh.to_pyvista()
     grid.field_data["region_names"] = [json.dumps({str(k): v for k, v in mesh.region_names.items()})]
     grid.field_data["metadata"] = [json.dumps(metadata)]
     write_checked(path, grid.save)
 
 
-def read_labelled_mesh(path):
-    """The :class:`~fea.TetMesh` with region names of a ``.vtu`` written by :func:`write_labelled_mesh`."""
+def read_labelled_mesh(path: str | Path) -> TetMesh:
+    """Read a mesh written by :func:`write_labelled_mesh`.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.vtu`` file.
+
+    Returns
+    -------
+    TetMesh
+        With its region ids and names.
+    """
     grid = pv.read(path)
     names = {int(k): v for k, v in json.loads(str(grid.field_data["region_names"][0])).items()}
     return TetMesh.from_pyvista(grid, "region", names)
 
 
-def mesh_statistics(mesh):
-    """Counts, volumes per part and shape quality (radius ratio: 1 regular, 0 degenerate)."""
+def mesh_statistics(mesh: TetMesh) -> dict:
+    """Counts, volumes per part and shape quality of a mesh.
+
+    Parameters
+    ----------
+    mesh : TetMesh
+        A labelled mesh.
+
+    Returns
+    -------
+    dict
+        Nodes, tetrahedra, volume (m³) in total and per part, edge lengths
+        (m) and the radius ratio (1 regular, 0 degenerate).
+    """
     X = mesh.points[mesh.tets]
     vol = mesh.volumes
     faces = [np.linalg.norm(np.cross(X[:, b] - X[:, a], X[:, c] - X[:, a]), axis=1) / 2

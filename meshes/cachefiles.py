@@ -27,6 +27,7 @@ import hashlib
 import logging
 import os
 import re
+from collections.abc import Callable
 from pathlib import Path
 
 from .tomlspec import DefinitionError
@@ -42,22 +43,50 @@ class CacheFileError(DefinitionError):
     """A shipped cache file fails its content check (the installation is damaged)."""
 
 
-def user_cache_dir():
-    """Where new meshes and other derived data are cached."""
+def user_cache_dir() -> Path:
+    """Where new meshes and other derived data are cached (created if missing).
+
+    Returns
+    -------
+    Path
+        ``$THERMAL_TWIN_CACHE`` if set, else ``~/.cache/thermal-twin``.
+    """
     root = os.environ.get("THERMAL_TWIN_CACHE")
     path = Path(root) if root else Path.home() / ".cache" / "thermal-twin"
     path.mkdir(parents=True, exist_ok=True)
     return path
 
 
-def sidecar(path):
-    """The checksum file of a cached file: ``<name>.sha256`` beside it."""
+def sidecar(path: str | Path) -> Path:
+    """The checksum file of a cached file.
+
+    Parameters
+    ----------
+    path : str or Path
+        A cached file.
+
+    Returns
+    -------
+    Path
+        ``<name>.sha256`` beside it.
+    """
     path = Path(path)
     return path.with_name(path.name + SIDECAR_SUFFIX)
 
 
-def file_sha256(path):
-    """SHA-256 (hex) of a file's bytes."""
+def file_sha256(path: str | Path) -> str:
+    """SHA-256 of a file's bytes, read in 1 MiB blocks.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+
+    Returns
+    -------
+    str
+        64 hex digits.
+    """
     h = hashlib.sha256()
     with open(path, "rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
@@ -65,8 +94,19 @@ def file_sha256(path):
     return h.hexdigest()
 
 
-def content_problem(path):
-    """Why ``path`` cannot be trusted (one phrase), or ``None`` when its bytes match its sidecar."""
+def content_problem(path: str | Path) -> str | None:
+    """Why a cached file cannot be trusted.
+
+    Parameters
+    ----------
+    path : str or Path
+        A cached file with a ``.sha256`` sidecar.
+
+    Returns
+    -------
+    str or None
+        One phrase (missing or malformed sidecar, hash mismatch), or ``None`` when its bytes match.
+    """
     side = sidecar(path)
     try:
         recorded = side.read_text(encoding="ascii").split()
@@ -81,10 +121,23 @@ def content_problem(path):
     return None
 
 
-def checked(path):
-    """``path`` if its content check passes; ``None`` (after saying so and removing it) for a bad user-cache file.
+def checked(path: str | Path) -> Path | None:
+    """A cached file after its content check.
 
-    A bad shipped file raises :class:`CacheFileError`.
+    Parameters
+    ----------
+    path : str or Path
+        A file in the shipped or the user cache.
+
+    Returns
+    -------
+    Path or None
+        ``path`` if it passes; ``None`` for a bad user-cache file, after saying so and removing it.
+
+    Raises
+    ------
+    CacheFileError
+        A shipped file fails its check.
     """
     path = Path(path)
     problem = content_problem(path)
@@ -99,11 +152,19 @@ def checked(path):
     return None
 
 
-def find_cached(name):
-    """A checked cached file by name (may hold a subfolder): shipped first, then the user cache.
+def find_cached(name: str) -> Path | None:
+    """A checked cached file by name: the shipped cache first, then the user cache.
 
-    ``None`` when absent, or when the user-cache copy failed its check (it is
-    then removed and the caller builds it again).
+    Parameters
+    ----------
+    name : str
+        File name (may hold a subfolder), e.g. ``mesh-h45mm-634edd99568b3d79.vtu``.
+
+    Returns
+    -------
+    Path or None
+        The file; ``None`` when absent, or when the user-cache copy failed its
+        check (it is then removed and the caller builds it again).
     """
     for folder in (SHIPPED_CACHE, user_cache_dir()):
         if (folder / name).exists():
@@ -111,11 +172,23 @@ def find_cached(name):
     return None
 
 
-def write_checked(path, write):
-    """Write ``path`` through ``write(temporary_path)`` and record its SHA-256 in the sidecar; returns ``path``.
+def write_checked(path: str | Path, write: Callable[[Path], object]) -> Path:
+    """Write a cache file atomically with its SHA-256 sidecar.
 
     The temporary name keeps the suffix (numpy and VTK choose the format by it)
     and holds the process id, so concurrent writers of one key do not collide.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write.
+    write : callable
+        ``write(temporary_path)`` writes the content.
+
+    Returns
+    -------
+    Path
+        ``path``, now complete with its sidecar.
     """
     path = Path(path)
     tmp = path.with_name(f".{path.stem}.{os.getpid()}.partial{path.suffix}")

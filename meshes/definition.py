@@ -13,7 +13,7 @@ from pathlib import Path
 
 from .builder import BUILDER_VERSION
 from .shapes import Box, Cylinder, HollowBox, StlPart
-from .tomlspec import DefinitionError, Table, read_toml, resolve_definition
+from .tomlspec import DefinitionError, Table, duplicates, read_toml, resolve_definition
 
 MACHINES_DIR = Path(__file__).resolve().parent / "machines"
 
@@ -46,12 +46,21 @@ class MachineGeometry:
     source: str = ""
     extras: dict = field(default_factory=dict)
 
-    def part_names(self):
+    def part_names(self) -> list[str]:
+        """The part names, in priority order.
+
+        Returns
+        -------
+        list of str
+            One name per part.
+        """
         return [p.name for p in self.parts]
 
-    def digest(self, mesh_size_m):
-        """SHA-256 (hex) of what the labelled mesh is made from: the parts' names, shapes and STL contents,
-        the mesh size and fTetWild settings, and :data:`~meshes.builder.BUILDER_VERSION`.
+    def digest(self, mesh_size_m: float) -> str:
+        """The cache key of the labelled mesh at ``mesh_size_m``: what the mesh is made from.
+
+        That is the parts' names, shapes and STL contents, the mesh size and
+        fTetWild settings, and :data:`~meshes.builder.BUILDER_VERSION`.
 
         Nothing else of a machine enters: not its name, materials, heat sources
         or joints, so a renamed or re-powered copy finds the same mesh.  Part
@@ -59,6 +68,16 @@ class MachineGeometry:
         version does not: a mesh made by an older fTetWild is still a valid
         mesh of the geometry, and the shipped meshes must stay found after an
         upgrade (``twin mesh --rebuild`` meshes again on purpose).
+
+        Parameters
+        ----------
+        mesh_size_m : float
+            Target tetrahedron edge length, m.
+
+        Returns
+        -------
+        str
+            SHA-256, 64 hex digits.
         """
         payload = {
             "parts": [[p.name, type(p.shape).__name__, _shape_state(p.shape)] for p in self.parts],
@@ -77,17 +96,48 @@ def _shape_state(shape):
     return shape.__dict__
 
 
-def machine_path(machine):
-    """Resolve a machine name (e.g. ``vmc_ram``) or a path to its TOML file."""
+def machine_path(machine: str | Path) -> Path:
+    """The TOML file of a machine.
+
+    Parameters
+    ----------
+    machine : str or Path
+        A shipped machine's name (``vmc_ram``) or a path.
+
+    Returns
+    -------
+    Path
+        The machine file.
+    """
     return resolve_definition(machine, MACHINES_DIR, "machine")
 
 
-def available_machines():
+def available_machines() -> list[str]:
+    """The shipped machines.
+
+    Returns
+    -------
+    list of str
+        Names of the TOML files in ``meshes/machines``, sorted.
+    """
     return sorted(p.stem for p in MACHINES_DIR.glob("*.toml"))
 
 
-def parse_part(table: Table, base_dir: Path):
-    """One ``[[parts]]`` entry → :class:`Part`."""
+def parse_part(table: Table, base_dir: Path) -> Part:
+    """One ``[[parts]]`` entry as a :class:`Part`.
+
+    Parameters
+    ----------
+    table : Table
+        The entry.
+    base_dir : Path
+        Folder that a relative STL ``file`` is relative to (the machine file's folder).
+
+    Returns
+    -------
+    Part
+        Name, shape (lengths in m), material name and label.
+    """
     table.check_keys(PART_KEYS)
     name = table.string("name")
     kind = table.string("shape", choices={"box", "hollow_box", "cylinder", "stl"})
@@ -129,17 +179,53 @@ def _bounds(table, key="bounds"):
     return b
 
 
-def load_geometry(machine):
-    """Read the geometry of a machine definition (name or path)."""
+def load_geometry(machine: str | Path) -> MachineGeometry:
+    """Read the geometry of a machine definition.
+
+    Parameters
+    ----------
+    machine : str or Path
+        Name of a shipped machine (``vmc_ram``) or path of a machine TOML file.
+
+    Returns
+    -------
+    MachineGeometry
+        The parts and mesh settings; lengths in m.
+
+    Raises
+    ------
+    DefinitionError
+        The file is missing or malformed, or a field holds a bad value (the message names file, field and value).
+    """
     path = machine_path(machine)
-    root = read_toml(path)
+    return read_geometry(read_toml(path), path)
+
+
+def read_geometry(root: Table, path: Path) -> MachineGeometry:
+    """The geometry (``[machine].name``, ``[mesh]``, ``[[parts]]``) of an already parsed machine file.
+
+    The one reader of a machine file's geometry: :func:`load_geometry` and the
+    twin's full reader (:func:`twin.core.machine_definition.load_machine`) both
+    call it, so the file is parsed once and checked by one set of rules.
+
+    Parameters
+    ----------
+    root : Table
+        The file's top-level table (from :func:`~meshes.tomlspec.read_toml`).
+    path : Path
+        The file; named in errors and kept as :attr:`MachineGeometry.source`.
+
+    Returns
+    -------
+    MachineGeometry
+        The parts in priority order and the mesh settings (m).
+    """
     info = root.table("machine")
-    name = info.string("name", path.stem)
+    name = info.string("name", Path(path).stem)
     mesh = root.table("mesh")
     mesh.check_keys({"size_m", "envelope_epsilon", "stop_energy"})
-    parts = [parse_part(t, path.parent) for t in root.tables("parts", required=True)]
-    names = [p.name for p in parts]
-    dupes = sorted({n for n in names if names.count(n) > 1})
+    parts = [parse_part(t, Path(path).parent) for t in root.tables("parts", required=True)]
+    dupes = duplicates([p.name for p in parts])
     if dupes:
         raise DefinitionError(f"{path}: parts: duplicate part name(s) {dupes}")
     return MachineGeometry(

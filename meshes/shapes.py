@@ -8,6 +8,7 @@ Coordinates are in metres, z up.
 """
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,30 +33,85 @@ def _box_depth(bounds, points):
     return np.minimum(points - b[:, 0], b[:, 1] - points).min(axis=1)
 
 
+class Shape:
+    """The interface of a part shape; the subclasses below implement it (their methods inherit these docstrings)."""
+
+    def surface(self, resolution_m: float) -> pv.PolyData:
+        """The closed, outward-oriented triangle surface of the part.
+
+        Parameters
+        ----------
+        resolution_m : float
+            Target edge length, m (used where the shape is curved).
+
+        Returns
+        -------
+        pyvista.PolyData
+            Triangles, coordinates in m.
+        """
+        raise NotImplementedError
+
+    def csg(self, stem: Path | str, resolution_m: float) -> str | dict:
+        """CSG leaf or tree for fTetWild: STL paths written next to ``stem``, combined by boolean operations.
+
+        Parameters
+        ----------
+        stem : Path or str
+            Path prefix of the STL file(s) to write.
+        resolution_m : float
+            Target edge length of curved surfaces, m.
+
+        Returns
+        -------
+        str or dict
+            An STL path (a leaf) or an fTetWild CSG tree (``operation``, ``left``, ``right``).
+        """
+        raise NotImplementedError
+
+    def depth(self, points: np.ndarray) -> np.ndarray:
+        """Signed depth of points in the part: positive inside, about the distance to the surface.
+
+        Parameters
+        ----------
+        points : ndarray, shape (n, 3)
+            Coordinates, m.
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            Depth, m.
+        """
+        raise NotImplementedError
+
+    @property
+    def volume(self) -> float:
+        """Volume of the solid, m³."""
+        raise NotImplementedError
+
+
 @dataclass(frozen=True)
-class Box:
+class Box(Shape):
     """A solid box, ``bounds = (xmin, xmax, ymin, ymax, zmin, zmax)`` in m."""
 
     bounds: tuple
 
-    def surface(self, resolution_m):
+    def surface(self, resolution_m: float) -> pv.PolyData:
         return _box_surface(self.bounds)
 
-    def csg(self, stem, resolution_m):
-        """CSG leaf or tree (STL paths) for fTetWild, files written next to ``stem``."""
+    def csg(self, stem: Path | str, resolution_m: float) -> str | dict:
         return _save(self.surface(resolution_m), stem)
 
-    def depth(self, points):
+    def depth(self, points: np.ndarray) -> np.ndarray:
         return _box_depth(self.bounds, points)
 
     @property
-    def volume(self):
+    def volume(self) -> float:
         b = np.asarray(self.bounds).reshape(3, 2)
         return float(np.prod(b[:, 1] - b[:, 0]))
 
 
 @dataclass(frozen=True)
-class HollowBox:
+class HollowBox(Shape):
     """A cast box with walls of thickness ``wall`` (m) around a sealed cavity, and optional internal ribs.
 
     ``ribs`` are plates across the cavity, each a box in absolute coordinates
@@ -67,17 +123,18 @@ class HollowBox:
     ribs: tuple = ()
 
     @property
-    def cavity(self):
+    def cavity(self) -> tuple:
+        """Bounds of the sealed cavity, ``(xmin, xmax, ymin, ymax, zmin, zmax)`` in m."""
         b = np.asarray(self.bounds, float).reshape(3, 2)
         return tuple((b + np.array([self.wall, -self.wall])).ravel())
 
-    def surface(self, resolution_m):
+    def surface(self, resolution_m: float) -> pv.PolyData:
         # The cavity surface is flipped inward so the winding number is 0 inside it.
         parts = [_box_surface(self.bounds), _box_surface(self.cavity).flip_faces()]
         parts += [_box_surface(r) for r in self.ribs]
         return pv.merge(parts)
 
-    def csg(self, stem, resolution_m):
+    def csg(self, stem: Path | str, resolution_m: float) -> str | dict:
         outer = _save(_box_surface(self.bounds), f"{stem}_outer")
         tree = {"operation": "difference", "left": outer, "right": _save(_box_surface(self.cavity), f"{stem}_cavity")}
         for i, rib in enumerate(self.ribs):
@@ -85,14 +142,14 @@ class HollowBox:
             tree = {"operation": "union", "left": tree, "right": clipped}
         return tree
 
-    def depth(self, points):
+    def depth(self, points: np.ndarray) -> np.ndarray:
         shell = np.minimum(_box_depth(self.bounds, points), -_box_depth(self.cavity, points))
         for rib in self.ribs:
             shell = np.maximum(shell, np.minimum(_box_depth(rib, points), _box_depth(self.bounds, points)))
         return shell
 
     @property
-    def volume(self):
+    def volume(self) -> float:
         cavity = np.asarray(self.cavity).reshape(3, 2)
         ribs = 0.0
         for rib in self.ribs:
@@ -103,7 +160,7 @@ class HollowBox:
 
 
 @dataclass(frozen=True)
-class Cylinder:
+class Cylinder(Shape):
     """A solid cylinder along ``axis`` from ``base`` (centre of the first end, m) over ``length`` m."""
 
     base: tuple
@@ -111,17 +168,17 @@ class Cylinder:
     radius: float
     length: float
 
-    def surface(self, resolution_m):
+    def surface(self, resolution_m: float) -> pv.PolyData:
         n = max(24, int(np.ceil(2 * np.pi * self.radius / max(resolution_m / 2, 1e-9))))
         direction = np.eye(3)[AXES.index(self.axis)]
         centre = np.asarray(self.base, float) + direction * self.length / 2
         return pv.Cylinder(center=centre, direction=direction, radius=self.radius, height=self.length,
                            resolution=n, capping=True).triangulate().clean()
 
-    def csg(self, stem, resolution_m):
+    def csg(self, stem: Path | str, resolution_m: float) -> str | dict:
         return _save(self.surface(resolution_m), stem)
 
-    def depth(self, points):
+    def depth(self, points: np.ndarray) -> np.ndarray:
         k = AXES.index(self.axis)
         rel = points - np.asarray(self.base, float)
         along = rel[:, k]
@@ -129,12 +186,12 @@ class Cylinder:
         return np.minimum(np.minimum(along, self.length - along), self.radius - radial)
 
     @property
-    def volume(self):
+    def volume(self) -> float:
         return float(np.pi * self.radius**2 * self.length)
 
 
 @dataclass(frozen=True)
-class StlPart:
+class StlPart(Shape):
     """A part read from a closed STL surface, scaled by ``scale`` (e.g. 0.001 for mm) and shifted by ``offset`` m."""
 
     path: str
@@ -146,23 +203,28 @@ class StlPart:
         surf.points = surf.points * self.scale + np.asarray(self.offset)
         return surf
 
-    def surface(self, resolution_m):
+    def surface(self, resolution_m: float) -> pv.PolyData:
         return self._surface()
 
-    def csg(self, stem, resolution_m):
+    def csg(self, stem: Path | str, resolution_m: float) -> str | dict:
         return _save(self._surface(), stem)
 
-    def depth(self, points):
+    def depth(self, points: np.ndarray) -> np.ndarray:
         surf = self._surface()
         cloud = pv.PolyData(np.asarray(points, float))
         # VTK's implicit distance is negative inside a closed outward-oriented surface.
         return -np.asarray(cloud.compute_implicit_distance(surf)["implicit_distance"])
 
     @property
-    def volume(self):
+    def volume(self) -> float:
         return float(self._surface().volume)
 
-    def file_digest(self):
-        import hashlib
+    def file_digest(self) -> str:
+        """The content hash of the STL file, which enters the mesh cache key.
 
+        Returns
+        -------
+        str
+            SHA-256 of the file's bytes, 64 hex digits.
+        """
         return hashlib.sha256(Path(self.path).read_bytes()).hexdigest()

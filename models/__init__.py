@@ -2,7 +2,9 @@
 
 Estimators follow the scikit-learn contract (``fit``/``predict``,
 ``get_params``/``set_params``, seeded ``random_state``). Grey estimators are
-time-series models of zero-referenced series (see :mod:`models.grey`).
+time-series models of zero-referenced series (see :mod:`models.grey`). Every estimator registers
+itself once in :mod:`models.registry` (its command-line names, defaults, time-series trait); persistence
+and ``twin train`` read that registry.
 """
 
 from .ago_anfis import AGOANFISRegressor
@@ -11,9 +13,9 @@ from .fcm import FuzzyCMeans, partition_coefficient, xie_beni_index
 from .gmc import GMCRegressor, convolution_response
 from .gnnmci import GNNMCIRegressor, network_layers, network_output
 from .grey import (
+    GM11,
     GM0NRegressor,
     GM1NRegressor,
-    GM11,
     ago,
     background_values,
     chronological_prediction,
@@ -25,19 +27,20 @@ from .kalman import FilterResult, KalmanFilter, discretize
 from .metrics import improvement_percent, max_abs_residual, nse, pearson_r, rmse
 from .persistence import load_model, save_model
 from .pso import PSOResult, particle_swarm_minimize
+from .registry import model_names, register_model, registered_models
 from .regression import ANNRegressor, MLRRegressor, PCRRegressor, make_ann_pipeline
 from .selection import SensorSelection, select_sensors
 
 __all__ = [
+    "GM11",
     "AGOANFISRegressor",
     "ANFISRegressor",
     "ANNRegressor",
+    "FilterResult",
     "FuzzyCMeans",
     "GM0NRegressor",
-    "GM11",
     "GM1NRegressor",
     "GMCRegressor",
-    "FilterResult",
     "GNNMCIRegressor",
     "KalmanFilter",
     "MLRRegressor",
@@ -56,12 +59,15 @@ __all__ = [
     "load_model",
     "make_ann_pipeline",
     "max_abs_residual",
+    "model_names",
     "network_layers",
     "network_output",
     "nse",
     "particle_swarm_minimize",
     "partition_coefficient",
     "pearson_r",
+    "register_model",
+    "registered_models",
     "rmse",
     "save_model",
     "select_sensors",

@@ -15,8 +15,10 @@ from sklearn.base import clone
 
 from .anfis import ANFISRegressor
 from .grey import GreySeriesRegressor, ago, iago
+from .registry import register_model
 
 
+@register_model({"ago-anfis": {}}, time_series=True)
 class AGOANFISRegressor(GreySeriesRegressor):
     """ANFIS on AGO series (grey time-series convention, see :mod:`models.grey`).
 

@@ -76,8 +76,15 @@ from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
 from ._threads import one_blas_thread
-from ._validation import check_n_features, check_positive_int, require_parameters, validate_x, validate_xy
+from ._validation import (
+    check_n_features,
+    check_positive_int,
+    require_parameters,
+    validate_x,
+    validate_xy,
+)
 from .fcm import FuzzyCMeans
+from .registry import register_model
 
 _SIGMA_FLOOR = 1e-3  # z units; keeps a Gaussian MF from collapsing to a spike
 _GRID_JITTER = 3e-2  # seeded offset of the grid centres, as a fraction of the MF spacing (module doc)
@@ -205,6 +212,9 @@ def _adapt_step(step, errors, increase, decrease):
     return step
 
 
+@register_model({"anfis": {"init": "fcm", "n_rules": 3, "epochs": 50, "random_state": 0},
+                 "anfis-fcm": {"init": "fcm", "n_rules": 3, "epochs": 50, "random_state": 0},
+                 "anfis-grid": {"init": "grid", "n_mfs": 2, "epochs": 50, "random_state": 0}})
 class ANFISRegressor(RegressorMixin, BaseEstimator):
     """First-order Sugeno ANFIS with Gaussian MFs and hybrid learning.
 

@@ -22,6 +22,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from ._threads import one_blas_thread
 from ._validation import check_n_features, check_positive_int, validate_x
+from .registry import register_model
 
 
 def squared_distances(X: np.ndarray, centers: np.ndarray) -> np.ndarray:
@@ -71,6 +72,7 @@ def xie_beni_index(X, membership, centers, m: float = 2.0) -> float:
     return float(compactness / (X.shape[0] * min_sep))
 
 
+@register_model()
 class FuzzyCMeans(ClusterMixin, BaseEstimator):
     """Fuzzy c-means clustering with seeded initialisation.
 

@@ -39,6 +39,7 @@ from scipy.signal import lfilter
 
 from .grey import GreySeriesRegressor, ago, background_values, grey_least_squares, iago
 from .pso import particle_swarm_minimize
+from .registry import register_model
 
 
 def convolution_response(f, development_coefficient: float, rule: str = "trapezoid") -> np.ndarray:
@@ -108,6 +109,7 @@ def run_swarm(estimator, objective, box, start):
     )
 
 
+@register_model({"gmc": {"random_state": 0}}, time_series=True)
 class GMCRegressor(GreySeriesRegressor):
     """GMC(1,N) with delay, calibrated by least squares or PSO.
 

@@ -35,6 +35,7 @@ from scipy.special import expit
 
 from .gmc import convolution_response, pso_search_box, run_swarm, tien_least_squares
 from .grey import GreySeriesRegressor, ago, iago
+from .registry import register_model
 
 
 def network_output(weights, X1) -> np.ndarray:
@@ -71,6 +72,7 @@ def network_layers(weights, X1) -> dict[str, np.ndarray]:
     return {"a": a, "b": b, "c": c, "d": d}
 
 
+@register_model({"gnnmci": {"random_state": 0}}, time_series=True)
 class GNNMCIRegressor(GreySeriesRegressor):
     """GNNMCI(1,N) trained by PSO (thesis Appendix A).
 

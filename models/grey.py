@@ -30,7 +30,14 @@ from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.utils.validation import check_is_fitted
 
 from ._threads import one_blas_thread
-from ._validation import check_n_features, require_parameters, validate_series, validate_x, validate_xy
+from ._validation import (
+    check_n_features,
+    require_parameters,
+    validate_series,
+    validate_x,
+    validate_xy,
+)
+from .registry import register_model
 
 #: the first sample of a grey model gives no equation (its equations are k = 2..n)
 _FIRST_SAMPLE = "the first gives no equation"
@@ -207,6 +214,7 @@ def chronological_prediction(model, X, y, n_train: int) -> np.ndarray:
     return model.predict(X[n_train:])
 
 
+@register_model({"gm0n": {}}, time_series=True)
 class GM0NRegressor(GreySeriesRegressor):
     """GM(0,N) predictor: ``x̂₁¹(k) = Σ_j θ_j x_j¹(k)``, restored by IAGO.
 
@@ -230,6 +238,7 @@ class GM0NRegressor(GreySeriesRegressor):
         return X0 @ self.coef_
 
 
+@register_model({"gm1n": {}}, time_series=True)
 class GM1NRegressor(GreySeriesRegressor):
     """GM(1,N) predictor from the grey difference equation itself.
 

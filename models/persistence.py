@@ -10,7 +10,8 @@ File layout (schema version 1)::
 Arrays are stored as ``{"__ndarray__": {"dtype", "shape", "data"}}`` with
 floats written by ``repr`` (shortest round-trip form), so a loaded model
 reproduces predictions bit for bit. Tuples, dicts and nested estimators
-(e.g. the ANFIS inside AGO-ANFIS) have their own tagged forms. Loading checks
+(e.g. the ANFIS inside AGO-ANFIS) have their own tagged forms. The classes a file may name are those
+of :mod:`models.registry`. Loading checks
 the format, version and class first and raises ``ValueError`` naming the
 file, the field and the offending value.
 """
@@ -23,32 +24,10 @@ from pathlib import Path
 import numpy as np
 from sklearn.base import BaseEstimator
 
-from .ago_anfis import AGOANFISRegressor
-from .anfis import ANFISRegressor
-from .fcm import FuzzyCMeans
-from .gmc import GMCRegressor
-from .gnnmci import GNNMCIRegressor
-from .grey import GM0NRegressor, GM1NRegressor
-from .regression import ANNRegressor, MLRRegressor, PCRRegressor
+from .registry import estimator_classes
 
 FORMAT = "thermal-twin-model"
 VERSION = 1
-ESTIMATORS = {
-    cls.__name__: cls
-    for cls in (
-        FuzzyCMeans,
-        ANFISRegressor,
-        GM0NRegressor,
-        GM1NRegressor,
-        GMCRegressor,
-        GNNMCIRegressor,
-        AGOANFISRegressor,
-        ANNRegressor,
-        MLRRegressor,
-        PCRRegressor,
-    )
-}
-
 
 def _encode(value):
     if value is None or isinstance(value, (bool, str)):
@@ -95,8 +74,9 @@ def _decode(value, path):
 
 def _model_document(estimator) -> dict:
     cls = type(estimator).__name__
-    if cls not in ESTIMATORS:
-        raise ValueError(f"cannot save {cls}: known classes are {sorted(ESTIMATORS)}.")
+    known = estimator_classes()
+    if known.get(cls) is not type(estimator):
+        raise ValueError(f"cannot save {cls}: known classes are {sorted(known)} (see models.registry).")
     learned = {
         k: _encode(v) for k, v in vars(estimator).items() if k.endswith("_") and not k.startswith("_")
     }
@@ -117,13 +97,14 @@ def _build(document, path):
                 f"this version of models reads {field} {expected!r}."
             )
     cls_name = document.get("class")
-    if cls_name not in ESTIMATORS:
+    known = estimator_classes()
+    if cls_name not in known:
         raise ValueError(
             f"{path}: field 'class' has value {cls_name!r}, which is not a known estimator "
-            f"({', '.join(sorted(ESTIMATORS))})."
+            f"({', '.join(sorted(known))})."
         )
     params = {name: _decode(value, path) for name, value in document.get("params", {}).items()}
-    estimator = ESTIMATORS[cls_name](**params)
+    estimator = known[cls_name](**params)
     for name, value in document.get("learned", {}).items():
         setattr(estimator, name, _decode(value, path))
     return estimator

@@ -25,7 +25,14 @@ from sklearn.preprocessing import StandardScaler
 from sklearn.utils.validation import check_is_fitted
 
 from ._threads import one_blas_thread
-from ._validation import check_n_features, require_parameters, require_samples, validate_x, validate_xy
+from ._validation import (
+    check_n_features,
+    require_parameters,
+    require_samples,
+    validate_x,
+    validate_xy,
+)
+from .registry import register_model
 
 
 def make_ann_pipeline(hidden_layer_sizes=(10,), alpha=1e-4, max_iter=2000, random_state=None):
@@ -61,6 +68,7 @@ class _LinearPredictor(RegressorMixin, BaseEstimator):
         return X @ self.coef_ + self.intercept_
 
 
+@register_model({"mlr": {}})
 class MLRRegressor(_LinearPredictor):
     """Multiple linear regression ``y = Σ β_j x_j + β₀``.
 
@@ -89,6 +97,7 @@ class MLRRegressor(_LinearPredictor):
         return self
 
 
+@register_model({"pcr": {}})
 class PCRRegressor(_LinearPredictor):
     """Principal component regression with variance-threshold component selection.
 
@@ -142,6 +151,7 @@ class PCRRegressor(_LinearPredictor):
         return self
 
 
+@register_model({"ann": {"random_state": 0}})
 class ANNRegressor(RegressorMixin, BaseEstimator):
     """Feed-forward ANN of thesis §6.3.1 (default one hidden layer of 10 tanh units).
 

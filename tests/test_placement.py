@@ -6,8 +6,9 @@ import pytest
 
 from twin.cli import main
 from twin.core.scenario import load_scenario
-from twin.placement.study import (CandidateSpec, MachineSpec, RecordTask, ResponseTask, candidate_locations,
-                                  elementary_inputs, perturbed_definition)
+from twin.core.variants import MachineSpec, perturbed_definition
+from twin.placement.candidates import CandidateSpec, candidate_locations
+from twin.placement.records import RecordTask, ResponseTask, elementary_inputs
 
 HEAT = """
 [scenario]
@@ -30,13 +31,15 @@ spindle_rpm = 0
 
 
 def short_scenarios(folder):
-    """Three short training records and one held-out (another duty cycle and a drifting ambient)."""
+    """Three short training records, one validation and one test record (other duty cycles and ambients)."""
     specs = {
         "p_heat": dict(ambient_kind="constant", ambient="temperature_C = 20.0", h1=2, rpm1=9000, h2=1, rpm2=0),
         "p_steps": dict(ambient_kind="constant", ambient="temperature_C = 20.0", h1=1, rpm1=4000, h2=1.5,
                         rpm2=8000),
         "p_room": dict(ambient_kind="piecewise", ambient="times_h = [0, 4]\nvalues_C = [20.0, 22.0]", h1=1,
                        rpm1=3000, h2=1, rpm2=0),
+        "p_val": dict(ambient_kind="piecewise", ambient="times_h = [0, 4]\nvalues_C = [20.0, 21.0]", h1=1,
+                      rpm1=7000, h2=1, rpm2=2000),
         "p_test": dict(ambient_kind="piecewise", ambient="times_h = [0, 4]\nvalues_C = [20.0, 19.0]", h1=1.5,
                        rpm1=6000, h2=0.5, rpm2=10000),
     }
@@ -116,13 +119,14 @@ def test_cli_place_writes_the_report(machine, tmp_path, capsys):
     sc = short_scenarios(tmp_path)
     out = tmp_path / "place"
     code = main(["place", "--parts", "ram,carrier,column,spindle_motor", "--candidates", "120",
-                 "--train", f"{sc['p_heat']},{sc['p_steps']},{sc['p_room']}", "--test", sc["p_test"],
+                 "--train", f"{sc['p_heat']},{sc['p_steps']},{sc['p_room']}", "--validation", sc["p_val"],
+                 "--test", sc["p_test"],
                  "--k-max", "3", "--record-interval", "300", "--response-horizon", "4", "--scheduler", "serial",
                  "--no-cache", "--out", str(out)])
     assert code == 0, capsys.readouterr().err
     text = capsys.readouterr().out
-    assert "## Z: held-out max |residual|" in text and "| K | gra+fcm |" in text
-    assert "## Chosen locations (best method, K = 1–3)" in text and "4–5" not in text   # the K studied
+    assert "## Z: validation max |residual|" in text and "| K | gra+fcm |" in text
+    assert "## Chosen locations (method and K = 1–3 chosen on validation)" in text and "4–5" not in text
     for name in ("placement.md", "placement.json", "k_method_table.csv", "candidate_scores.csv",
                  "chosen_sensors.csv", "chosen_sensors.png", "k_curves.png"):
         assert (out / name).exists(), name
@@ -135,6 +139,13 @@ def test_cli_place_writes_the_report(machine, tmp_path, capsys):
     physics = {axis: [r["sensors"] for r in rows if r["axis"] == axis and r["method"] == "greedy-physics"]
                for axis in ("Z", "Y")}
     assert physics["Z"] == physics["Y"]                             # one sensor set for both axes
+    assert all(list(r["per_scenario"]) == ["p_val"] for r in rows)  # the K × method table: validation only
+    for axis in ("Z", "Y"):                                         # the choice: the validation minimum
+        val = [r for r in rows if r["axis"] == axis]
+        best = min(val, key=lambda r: r["max_residual"])
+        assert (report["test"]["best"][axis]["method"], report["test"]["best"][axis]["K"]) == (best["method"],
+                                                                                               best["K"])
+        assert list(report["test"]["best"][axis]["per_scenario"]) == ["p_test"]
     for axis in ("Z", "Y"):
         peak = report["uncompensated"][axis][0]
         greedy = [r for r in rows if r["axis"] == axis and r["method"] == "greedy-loso"]
@@ -148,14 +159,40 @@ def test_cli_place_writes_the_report(machine, tmp_path, capsys):
     chosen = pd.read_csv(out / "chosen_sensors.csv")
     z_sensors = ",".join(chosen[chosen.axis == "Z"].name)
     data = out / "datasets"
-    assert sorted(p.name for p in data.glob("*.csv")) == ["p_heat.csv", "p_room.csv", "p_steps.csv", "p_test.csv"]
+    assert sorted(p.name for p in data.glob("*.csv")) == ["p_heat.csv", "p_room.csv", "p_steps.csv", "p_test.csv",
+                                                                  "p_val.csv"]
     assert main(["train", str(data / "p_heat.csv"), str(data / "p_steps.csv"), str(data / "p_room.csv"),
                  "--inputs", z_sensors, "--target", "Z", "--model", "mlr", "--out", str(tmp_path / "z.json")]) == 0
     assert main(["evaluate", str(tmp_path / "z.json"), str(data / "p_test.csv")]) == 0
     table = capsys.readouterr().out
-    z_row = next(r for r in rows if r["axis"] == "Z" and r["method"] == report["chosen"][0]["method"]
-                 and r["K"] == report["chosen"][0]["K"])
+    z_row = report["test"]["best"]["Z"]                               # the chosen set, scored on the test
+    assert (z_row["method"], z_row["K"]) == (report["chosen"][0]["method"], report["chosen"][0]["K"])
     assert f"| p_test | {len(load_scenario(sc['p_test']).times())} | {z_row['rmse']:.3g} |" in table
     # a bad method name is one clear line
     assert main(["place", "--methods", "random", "--scheduler", "serial", "--out", str(tmp_path / "x")]) == 2
     assert "unknown placement method(s) ['random']" in capsys.readouterr().err
+
+
+def test_a_scenario_in_two_roles_is_refused(tmp_path):
+    from twin.errors import TwinInputError
+    from twin.placement.study import placement_study
+
+    sc = short_scenarios(tmp_path)
+    with pytest.raises(TwinInputError, match="both a training and a test scenario"):
+        placement_study(train=(sc["p_heat"], sc["p_steps"]), validation=(sc["p_val"],), test=(sc["p_heat"],),
+                        scheduler="serial", log=None)
+
+
+def test_noise_seed_follows_the_scenario_name_in_every_process():
+    """Not Python's salted hash(): the same name gives the same seed under any PYTHONHASHSEED."""
+    import os
+    import subprocess
+    import sys
+
+    from twin.placement.records import scenario_seed
+
+    code = "from twin.placement.records import scenario_seed; print(scenario_seed('etve_summer'))"
+    seeds = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                            env={**os.environ, "PYTHONHASHSEED": h}).stdout.strip() for h in ("1", "2")}
+    assert seeds == {str(scenario_seed("etve_summer"))}
+    assert scenario_seed("etve_summer") != scenario_seed("etve_5K") and 0 <= scenario_seed("x") < 2 ** 31

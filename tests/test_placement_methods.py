@@ -3,8 +3,14 @@ import numpy as np
 import pytest
 
 from models import select_sensors
-from models.selection import SEED_METHODS, SeedSelector, greedy_loso, qr_drift, seed_scores
-from twin.placement.study import farthest_point_sample
+from models.selection import (
+    SEED_METHODS,
+    SeedSelector,
+    greedy_loso,
+    qr_drift,
+    seed_scores,
+)
+from twin.placement.candidates import farthest_point_sample
 
 
 def _blocks(seed=0, n_blocks=4, p=30, n=60):

@@ -10,12 +10,17 @@ class TwinInputError(ValueError):
 _LOWER_LAYER_ERRORS = (("fea.errors", "FEAInputError"), ("meshes.tomlspec", "DefinitionError"))
 
 
-def user_errors():
+def user_errors() -> tuple[type[Exception], ...]:
     """Everything that means "the user gave something wrong", not "the program is broken".
 
     Looked up in ``sys.modules`` rather than imported: importing ``fea`` pulls in
     scipy (seconds of start-up), and an error class whose module was never
     loaded cannot have been raised.
+
+    Returns
+    -------
+    tuple of type
+        :class:`TwinInputError` and the loaded lower layers' input errors.
     """
     found = [TwinInputError]
     for module, name in _LOWER_LAYER_ERRORS:

@@ -19,6 +19,7 @@ import io
 import json
 import os
 from dataclasses import asdict, dataclass
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 import numpy as np
@@ -39,12 +40,17 @@ KIND_OF_UNIT = {"degC": "temperature", "um": "displacement", "ue": "strain", "rp
 NAN_POLICIES = ("error", "interpolate", "drop", "keep")
 
 
-def project_version():
-    try:
-        from importlib.metadata import version
+def project_version() -> str:
+    """The installed version of the ``thermal-twin`` distribution.
 
+    Returns
+    -------
+    str
+        E.g. ``"0.1.0"``, or ``"unknown"`` when it is not installed.
+    """
+    try:
         return version("thermal-twin")
-    except Exception:  # not installed (e.g. run from a source tree)
+    except PackageNotFoundError:  # run from a source tree without ``pip install -e .``
         return "unknown"
 
 
@@ -59,7 +65,8 @@ class ChannelInfo:
     position: tuple | None = None
 
     @property
-    def column(self):
+    def column(self) -> str:
+        """The CSV column name, ``<name>_<unit>`` (e.g. ``T01_degC``)."""
         return f"{self.name}_{self.unit}"
 
 
@@ -70,8 +77,19 @@ def _atomic_write_text(path, text):
     os.replace(tmp, path)
 
 
-def split_column(column):
-    """``T01_degC`` → (``T01``, ``degC``); the longest matching unit suffix wins."""
+def split_column(column: str) -> tuple[str, str] | None:
+    """Split a column name into channel name and unit token; the longest matching unit suffix wins.
+
+    Parameters
+    ----------
+    column : str
+        E.g. ``T01_degC``.
+
+    Returns
+    -------
+    tuple of str or None
+        ``("T01", "degC")``, or ``None`` when the name ends in no known unit (:data:`UNITS`).
+    """
     for unit in sorted(UNITS, key=len, reverse=True):
         if column.endswith("_" + unit) and len(column) > len(unit) + 1:
             return column[: -len(unit) - 1], unit
@@ -83,13 +101,18 @@ class Dataset:
 
     Parameters
     ----------
-    time_s : (n,) strictly increasing times in s
-    values : (n, n_channels) values in the channels' units
-    channels : list of :class:`ChannelInfo`
-    metadata : JSON-serialisable dict
+    time_s : ndarray, shape (n,)
+        Strictly increasing times, s.
+    values : ndarray, shape (n, n_channels)
+        Values in the channels' units (°C, µm, µε, rpm, mm/min, W, …).
+    channels : list of ChannelInfo
+        One per column of ``values``.
+    metadata : dict, optional
+        JSON-serialisable facts (source, machine, scenario, seed, …).
     """
 
-    def __init__(self, time_s, values, channels, metadata=None):
+    def __init__(self, time_s: np.ndarray, values: np.ndarray, channels: list[ChannelInfo],
+                 metadata: dict | None = None) -> None:
         self.time_s = np.asarray(time_s, dtype=float)
         self.values = np.asarray(values, dtype=float).reshape(len(self.time_s), -1)
         self.channels = list(channels)
@@ -105,16 +128,46 @@ class Dataset:
 
     # ---------------------------------------------------------------- access
     @property
-    def names(self):
+    def names(self) -> list[str]:
+        """The channel names, in column order."""
         return [c.name for c in self.channels]
 
-    def index(self, name):
+    def index(self, name: str) -> int:
+        """The column of a channel.
+
+        Parameters
+        ----------
+        name : str
+            Channel name.
+
+        Returns
+        -------
+        int
+            Its column in :attr:`values`.
+
+        Raises
+        ------
+        TwinInputError
+            Unknown name (the message lists the channels).
+        """
         names = self.names
         if name in names:
             return names.index(name)
         raise TwinInputError(f"unknown channel {name!r}; available: {names}")
 
-    def info(self, name):
+    def info(self, name: str) -> ChannelInfo:
+        """The description (unit, kind, label, position) of a channel.
+
+        Parameters
+        ----------
+        name : str
+            Channel name.
+
+        Returns
+        -------
+        ChannelInfo
+            Its description.
+        """
         return self.channels[self.index(name)]
 
     def __getitem__(self, name):
@@ -127,26 +180,82 @@ class Dataset:
     def __len__(self):
         return len(self.time_s)
 
-    def matrix(self, names):
-        """Values of several channels (n, k), in the order given."""
+    def matrix(self, names: list[str]) -> np.ndarray:
+        """Values of several channels.
+
+        Parameters
+        ----------
+        names : list of str
+            Channel names.
+
+        Returns
+        -------
+        ndarray, shape (n, k)
+            Their values in their units, in the order given.
+        """
         return self.values[:, [self.index(n) for n in names]]
 
-    def names_of_kind(self, *kinds):
+    def names_of_kind(self, *kinds: str) -> list[str]:
+        """The channels of some kinds.
+
+        Parameters
+        ----------
+        *kinds : str
+            Channel kinds, e.g. ``"temperature"``, ``"displacement"``.
+
+        Returns
+        -------
+        list of str
+            Their names, in column order.
+        """
         return [c.name for c in self.channels if c.kind in kinds]
 
-    def select(self, names):
-        """A dataset with only the named channels."""
+    def select(self, names: list[str]) -> Dataset:
+        """A dataset with only some channels.
+
+        Parameters
+        ----------
+        names : list of str
+            Channel names, in the order wanted.
+
+        Returns
+        -------
+        Dataset
+            Same times and metadata.
+        """
         idx = [self.index(n) for n in names]
         return Dataset(self.time_s, self.values[:, idx], [self.channels[i] for i in idx], self.metadata)
 
-    def between(self, start_s=-np.inf, end_s=np.inf):
-        """Rows with start_s ≤ t ≤ end_s."""
+    def between(self, start_s: float = -np.inf, end_s: float = np.inf) -> Dataset:
+        """The rows of a time window.
+
+        Parameters
+        ----------
+        start_s, end_s : float
+            Window, s (inclusive).
+
+        Returns
+        -------
+        Dataset
+            Rows with ``start_s ≤ t ≤ end_s``.
+        """
         keep = (self.time_s >= start_s) & (self.time_s <= end_s)
         return Dataset(self.time_s[keep], self.values[keep], self.channels, self.metadata)
 
     # ---------------------------------------------------------------- files
-    def write(self, path):
-        """Write ``path`` (CSV) and ``path.json`` (sidecar), atomically."""
+    def write(self, path: str | Path) -> Path:
+        """Write the CSV and its JSON sidecar (channels, metadata, the CSV's SHA-256), each atomically.
+
+        Parameters
+        ----------
+        path : str or Path
+            The CSV; the sidecar is ``<path>.json``.
+
+        Returns
+        -------
+        Path
+            ``path``.
+        """
         path = Path(path)
         buffer = io.StringIO()
         header = ["time_s"] + [c.column for c in self.channels]
@@ -165,8 +274,26 @@ class Dataset:
         return path
 
     @classmethod
-    def read(cls, path):
-        """Read a dataset written by :meth:`write` (CSV + sidecar), checking they belong together."""
+    def read(cls, path: str | Path) -> Dataset:
+        """Read a dataset written by :meth:`write`, checking that CSV and sidecar belong together.
+
+        A CSV without a sidecar is imported as measured data (:meth:`from_measured_csv`).
+
+        Parameters
+        ----------
+        path : str or Path
+            The CSV.
+
+        Returns
+        -------
+        Dataset
+            The data with its channels and metadata.
+
+        Raises
+        ------
+        TwinInputError
+            Malformed sidecar, other format version, or a CSV that does not match its sidecar.
+        """
         path = Path(path)
         side = sidecar_path(path)
         if not side.exists():
@@ -191,24 +318,37 @@ class Dataset:
         return cls(data[:, 0], data[:, 1:], channels, meta.get("metadata", {}))
 
     @classmethod
-    def from_measured_csv(cls, path, column_map=None, time_column="time_s", nan_policy="error",
-                          channel_kinds=None):
+    def from_measured_csv(cls, path: str | Path, column_map: dict[str, str] | None = None,
+                          time_column: str = "time_s", nan_policy: str = "error",
+                          channel_kinds: dict[str, str] | None = None) -> Dataset:
         """Import measured data from a CSV, validating it.
 
         Parameters
         ----------
-        column_map : optional dict ``csv column → "<name>_<unit>"`` (e.g.
-            ``{"t1": "T01_degC"}``); unmapped columns must already be named
-            ``<name>_<unit>`` with a unit from :data:`UNITS`
-        time_column : name of the time column, in s
-        nan_policy : ``error`` (default), ``interpolate`` (linear in time,
-            per channel; leading/trailing NaNs are held) or ``drop`` (rows
-            with any NaN) or ``keep`` (leave them; the caller masks them, as the gap
-            diagnosis does)
-        channel_kinds : optional dict name → kind overriding the unit-based default
+        path : str or Path
+            The CSV file: a header row, then one row per sample.
+        column_map : dict of str to str, optional
+            ``csv column → "<name>_<unit>"`` (e.g. ``{"t1": "T01_degC"}``);
+            unmapped columns must already be named ``<name>_<unit>`` with a
+            unit from :data:`UNITS`.
+        time_column : str
+            Name of the time column, in s.
+        nan_policy : str
+            ``error`` (default), ``interpolate`` (linear in time, per channel;
+            leading/trailing NaNs are held), ``drop`` (rows with any NaN) or
+            ``keep`` (leave them; the caller masks them, as the gap diagnosis does).
+        channel_kinds : dict of str to str, optional
+            Channel name → kind, overriding the unit-based default.
 
-        The import report (gaps, NaN counts, policy) is stored in
-        ``metadata["import"]``.
+        Returns
+        -------
+        Dataset
+            The data; the import report (gaps, NaN counts, policy) is in ``metadata["import"]``.
+
+        Raises
+        ------
+        TwinInputError
+            One line naming the file, the column and the row of the first bad value.
         """
         path = Path(path)
         if nan_policy not in NAN_POLICIES:
@@ -222,20 +362,7 @@ class Dataset:
         if time_column not in header:
             raise TwinInputError(f"{path}: no time column {time_column!r}; columns: {header}")
         t_index = header.index(time_column)
-        channels, cols = [], []
-        for j, col in enumerate(header):
-            if j == t_index:
-                continue
-            target = column_map.get(col, col)
-            parts = split_column(target)
-            if parts is None:
-                raise TwinInputError(
-                    f"{path}: column {col!r} is not named <name>_<unit> with a known unit "
-                    f"{sorted(UNITS)}; give a column map, e.g. {{{col!r}: 'T01_degC'}}")
-            name, unit = parts
-            kind = (channel_kinds or {}).get(name, KIND_OF_UNIT[unit])
-            channels.append(ChannelInfo(name, unit, kind))
-            cols.append(j)
+        channels, cols = _measured_channels(path, header, t_index, column_map, channel_kinds or {})
         time_s = data[:, t_index]
         values = data[:, cols]
         if np.isnan(time_s).any():
@@ -246,32 +373,8 @@ class Dataset:
         nan_counts = {c.name: int(np.isnan(values[:, k]).sum()) for k, c in enumerate(channels)}
         report["nan_counts"] = {k: v for k, v in nan_counts.items() if v}
         if report["nan_counts"]:
-            if nan_policy == "error":
-                first = next(iter(report["nan_counts"]))
-                k = [c.name for c in channels].index(first)
-                row = int(np.flatnonzero(np.isnan(values[:, k]))[0])
-                raise TwinInputError(
-                    f"{path}: column {channels[k].column!r} is NaN/empty at t = {time_s[row]} s (data row "
-                    f"{row + 1}); {sum(report['nan_counts'].values())} NaNs in {len(report['nan_counts'])} "
-                    "column(s); choose nan_policy='interpolate' or 'drop'")
-            if nan_policy == "drop":
-                keep = ~np.isnan(values).any(axis=1)
-                report["dropped_rows"] = int((~keep).sum())
-                time_s, values = time_s[keep], values[keep]
-            elif nan_policy == "interpolate":
-                for k in range(values.shape[1]):
-                    bad = np.isnan(values[:, k])
-                    if bad.all():
-                        raise TwinInputError(f"{path}: column {channels[k].column!r} holds no value at all")
-                    if bad.any():
-                        values[bad, k] = np.interp(time_s[bad], time_s[~bad], values[~bad, k])
-        steps = np.diff(time_s)
-        if len(steps):
-            typical = float(np.median(steps))
-            gaps = np.flatnonzero(steps > 1.5 * typical)
-            report["sampling_interval_s"] = typical
-            report["gaps"] = [{"after_s": float(time_s[g]), "length_s": float(steps[g])} for g in gaps[:100]]
-            report["n_gaps"] = int(len(gaps))
+            time_s, values = _apply_nan_policy(path, time_s, values, channels, nan_policy, report)
+        report.update(_sampling_report(time_s))
         return cls(time_s, values, channels, {"source": str(path), "kind": "measured", "import": report})
 
     def __repr__(self):
@@ -279,16 +382,91 @@ class Dataset:
         return f"Dataset({len(self)} rows, {span}, channels {self.names[:8]}{'…' if len(self.names) > 8 else ''})"
 
 
-def sidecar_path(path):
+def _measured_channels(path, header, t_index, column_map, channel_kinds):
+    """The channels of a measured CSV's value columns and their column indices, from the names or the map."""
+    channels, cols = [], []
+    for j, col in enumerate(header):
+        if j == t_index:
+            continue
+        parts = split_column(column_map.get(col, col))
+        if parts is None:
+            raise TwinInputError(
+                f"{path}: column {col!r} is not named <name>_<unit> with a known unit "
+                f"{sorted(UNITS)}; give a column map, e.g. {{{col!r}: 'T01_degC'}}")
+        name, unit = parts
+        channels.append(ChannelInfo(name, unit, channel_kinds.get(name, KIND_OF_UNIT[unit])))
+        cols.append(j)
+    return channels, cols
+
+
+def _apply_nan_policy(path, time_s, values, channels, nan_policy, report):
+    """(time_s, values) after the NaN policy (``values`` is changed in place by ``interpolate``); notes it in ``report``."""
+    if nan_policy == "error":
+        first = next(iter(report["nan_counts"]))
+        k = [c.name for c in channels].index(first)
+        row = int(np.flatnonzero(np.isnan(values[:, k]))[0])
+        raise TwinInputError(
+            f"{path}: column {channels[k].column!r} is NaN/empty at t = {time_s[row]} s (data row "
+            f"{row + 1}); {sum(report['nan_counts'].values())} NaNs in {len(report['nan_counts'])} "
+            "column(s); choose nan_policy='interpolate' or 'drop'")
+    if nan_policy == "drop":
+        keep = ~np.isnan(values).any(axis=1)
+        report["dropped_rows"] = int((~keep).sum())
+        return time_s[keep], values[keep]
+    if nan_policy == "interpolate":
+        for k in range(values.shape[1]):
+            bad = np.isnan(values[:, k])
+            if bad.all():
+                raise TwinInputError(f"{path}: column {channels[k].column!r} holds no value at all")
+            if bad.any():
+                values[bad, k] = np.interp(time_s[bad], time_s[~bad], values[~bad, k])
+    return time_s, values
+
+
+def _sampling_report(time_s):
+    """Typical sampling interval (s, the median step) and the gaps longer than 1.5 of it (first 100 listed)."""
+    steps = np.diff(time_s)
+    if not len(steps):
+        return {}
+    typical = float(np.median(steps))
+    gaps = np.flatnonzero(steps > 1.5 * typical)
+    return {"sampling_interval_s": typical,
+            "gaps": [{"after_s": float(time_s[g]), "length_s": float(steps[g])} for g in gaps[:100]],
+            "n_gaps": int(len(gaps))}
+
+
+def sidecar_path(path: str | Path) -> Path:
+    """The JSON sidecar of a dataset CSV.
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV.
+
+    Returns
+    -------
+    Path
+        ``<path>.json``.
+    """
     path = Path(path)
     return path.with_name(path.name + ".json")
 
 
-def json_default(value):
+def json_default(value: object) -> object:
     """``json.dumps`` fallback for numpy arrays and scalars (as lists and Python numbers) and paths (as text).
 
     Anything else raises ``TypeError``, as ``json`` itself would: metadata
     that cannot be written faithfully is an error, not a string.
+
+    Parameters
+    ----------
+    value : object
+        What ``json`` could not serialise.
+
+    Returns
+    -------
+    object
+        A list, a Python number or a string.
     """
     if isinstance(value, np.ndarray):
         return value.tolist()

@@ -56,11 +56,35 @@ OUTPUT_CACHE_VERSION = 1
 GRADIENT_INPUT = "ambient_gradient"
 
 
-def ambient_input(zone):
+def ambient_input(zone: str) -> str:
+    """The thermal-system input name of a zone's ambient temperature (°C).
+
+    Parameters
+    ----------
+    zone : str
+        Convection zone.
+
+    Returns
+    -------
+    str
+        ``ambient:<zone>``.
+    """
     return f"ambient:{zone}"
 
 
-def power_input(source):
+def power_input(source: str) -> str:
+    """The thermal-system input name of a heat source's power (W).
+
+    Parameters
+    ----------
+    source : str
+        Heat-source name.
+
+    Returns
+    -------
+    str
+        ``power:<source>``.
+    """
     return f"power:{source}"
 
 
@@ -92,14 +116,33 @@ class Machine:
     operator_path: Path
 
     @property
-    def name(self):
+    def name(self) -> str:
+        """The machine's name."""
         return self.definition.name
 
     @property
-    def zones(self):
+    def zones(self) -> list[str]:
+        """The convection zones, sorted; each has an ambient input."""
         return self.definition.zones
 
-    def channel(self, name):
+    def channel(self, name: str) -> Channel:
+        """A recorded channel by name.
+
+        Parameters
+        ----------
+        name : str
+            Channel name (sensor, drift axis, strain line or camera spot).
+
+        Returns
+        -------
+        Channel
+            Its kind, unit, scale from SI and position (m).
+
+        Raises
+        ------
+        DefinitionError
+            Unknown name (the message lists the channels).
+        """
         for c in self.channels:
             if c.name == name:
                 return c
@@ -107,14 +150,31 @@ class Machine:
                               f"channels: {[c.name for c in self.channels if c.kind != 'camera']} "
                               f"and {sum(c.kind == 'camera' for c in self.channels)} camera spots")
 
-    def input_matrix(self, spindle_rpm, feed_mm_min, ambient_C, gradient_K_per_m=0.0,
-                     source_scale=None, source_exponent=None, extra_power_W=None):
-        """Input values (n_times, n_inputs) from operating conditions on a time grid.
+    def input_matrix(self, spindle_rpm: np.ndarray, feed_mm_min: dict[str, np.ndarray],
+                     ambient_C: dict[str, np.ndarray], gradient_K_per_m: float | np.ndarray = 0.0,
+                     source_scale: dict[str, float] | None = None, source_exponent: dict[str, float] | None = None,
+                     extra_power_W: dict[str, np.ndarray] | None = None) -> np.ndarray:
+        """Input values of the thermal system from operating conditions on a time grid.
 
-        ``spindle_rpm`` (n,), ``feed_mm_min`` dict axis → (n,), ``ambient_C`` dict
-        zone → (n,), ``gradient_K_per_m`` scalar or (n,).  ``source_scale`` /
-        ``source_exponent`` (dicts by source name) perturb the power models;
-        ``extra_power_W`` dict input name → (n,) adds power to named inputs.
+        Parameters
+        ----------
+        spindle_rpm : ndarray, shape (n,)
+            Spindle speed, rpm.
+        feed_mm_min : dict of str to ndarray
+            Axis (``x``, ``y``, ``z``) → feed, mm/min.
+        ambient_C : dict of str to ndarray
+            Zone → ambient temperature, °C (every zone is required).
+        gradient_K_per_m : float or ndarray
+            Vertical ambient gradient, K/m.
+        source_scale, source_exponent : dict of str to float, optional
+            Per source name: factor on its power and replacement of its speed exponent.
+        extra_power_W : dict of str to ndarray, optional
+            Input name → power added to it, W.
+
+        Returns
+        -------
+        ndarray, shape (n, n_inputs)
+            In the order of ``thermal.input_names`` (°C, K/m, W).
         """
         names = self.thermal.input_names
         n = len(np.atleast_1d(spindle_rpm))
@@ -132,8 +192,21 @@ class Machine:
             U[:, self.thermal.input_index(name)] += values
         return U
 
-    def channel_values(self, fe_outputs, inputs):
-        """Channel values in edge units from FE outputs (k, p_fe) in SI and inputs (k, m) → (k, p)."""
+    def channel_values(self, fe_outputs: np.ndarray, inputs: np.ndarray) -> np.ndarray:
+        """Channel values in edge units from FE outputs and inputs.
+
+        Parameters
+        ----------
+        fe_outputs : ndarray, shape (k, p_fe)
+            FE outputs in SI (°C, m, strain).
+        inputs : ndarray, shape (k, n_inputs)
+            Thermal-system inputs (feed the air sensors).
+
+        Returns
+        -------
+        ndarray, shape (k, p)
+            Every channel in its unit (°C, µm, µε).
+        """
         air = np.atleast_2d(inputs) @ self.feedthrough.T
         values = np.concatenate([np.atleast_2d(fe_outputs), air], axis=1)
         return values * np.array([c.scale for c in self.channels])
@@ -167,8 +240,21 @@ def _facet_groups(definition, mesh):
     return groups, float(area[~claimed].sum())
 
 
-def materials_by_region(definition, mesh):
-    """Material of each mesh region (region id → :class:`fea.Material`), from its part."""
+def materials_by_region(definition: MachineDefinition, mesh: fea.TetMesh) -> dict[int, fea.Material]:
+    """The material of each mesh region, from its part.
+
+    Parameters
+    ----------
+    definition : MachineDefinition
+        The machine.
+    mesh : fea.TetMesh
+        Its labelled mesh (region names are part names).
+
+    Returns
+    -------
+    dict of int to fea.Material
+        Region id → material.
+    """
     return {rid: definition.part_material(name) for rid, name in mesh.region_names.items()}
 
 
@@ -220,8 +306,23 @@ def _output_specs(definition):
     return specs, channels
 
 
-def operator_cache_key(definition, mesh, specs):
-    """SHA-256 (16 hex) of what the output operator is computed from (see the module docstring)."""
+def operator_cache_key(definition: MachineDefinition, mesh: fea.TetMesh, specs: list) -> str:
+    """The cache key of the output operator: a hash of what it is computed from (see the module docstring).
+
+    Parameters
+    ----------
+    definition : MachineDefinition
+        The machine (elastic properties, supports, joint pairs, snap distance).
+    mesh : fea.TetMesh
+        Its mesh (hashed by content).
+    specs : list
+        The output specifications (``fea.PointTemperature``, ``fea.RelativeDisplacement``, …).
+
+    Returns
+    -------
+    str
+        First 16 hex digits of a SHA-256.
+    """
     d = definition
     elastic = [[name, *_elastic_properties(d.part_material(name))] for _, name in sorted(mesh.region_names.items())]
     payload = {
@@ -239,8 +340,19 @@ def _elastic_properties(material):
     return [None if v is None else float(v) for v in values]
 
 
-def mesh_content_digest(mesh):
-    """Hash of the mesh itself (fTetWild is not reproducible, so the definition's hash is not enough)."""
+def mesh_content_digest(mesh: fea.TetMesh) -> str:
+    """Hash of the mesh itself (fTetWild is not reproducible, so the definition's hash is not enough).
+
+    Parameters
+    ----------
+    mesh : fea.TetMesh
+        Points, tetrahedra, regions and region names are hashed.
+
+    Returns
+    -------
+    str
+        SHA-256, 64 hex digits.
+    """
     h = hashlib.sha256()
     for array in (mesh.points, mesh.tets, mesh.regions):
         h.update(np.ascontiguousarray(array).tobytes())
@@ -274,9 +386,24 @@ def _build_outputs(definition, mesh, thermal, materials):
     return operator, channels, cache
 
 
-def elastic_problem(definition, mesh, materials=None):
-    """The machine's thermo-elastic problem: its parts' materials (default :func:`materials_by_region`),
-    elastic degree, stress-free reference temperature and 3-2-1 mount on the support points (5 mm tolerance)."""
+def elastic_problem(definition: MachineDefinition, mesh: fea.TetMesh,
+                    materials: dict[int, fea.Material] | None = None) -> fea.ElasticProblem:
+    """The machine's thermo-elastic problem.
+
+    Parameters
+    ----------
+    definition : MachineDefinition
+        Elastic degree, stress-free reference temperature (°C) and support points (m).
+    mesh : fea.TetMesh
+        Its mesh.
+    materials : dict of int to fea.Material, optional
+        Region id → material (default :func:`materials_by_region`).
+
+    Returns
+    -------
+    fea.ElasticProblem
+        With the 3-2-1 kinematic mount on the support points (5 mm tolerance).
+    """
     materials = materials or materials_by_region(definition, mesh)
     if definition.elastic_degree not in (1, 2):
         raise DefinitionError(f"{definition.source}: machine.elastic_degree must be 1 or 2, "
@@ -320,14 +447,23 @@ def _air_feedthrough(definition, thermal):
     return feedthrough, air
 
 
-def build_machine(machine="vmc_ram", mesh_size_m=None, definition=None):
+def build_machine(machine: str | Path = "vmc_ram", mesh_size_m: float | None = None,
+                  definition: MachineDefinition | None = None) -> Machine:
     """Build (or load from caches) the twin of a machine definition.
 
     Parameters
     ----------
-    machine : machine name or path to its TOML file
-    mesh_size_m : target tetrahedron edge length in m (default: the definition's)
-    definition : an already-loaded :class:`MachineDefinition` (skips reading the file)
+    machine : str or Path
+        Machine name or path to its TOML file.
+    mesh_size_m : float, optional
+        Target tetrahedron edge length, m (default: the definition's).
+    definition : MachineDefinition, optional
+        An already-loaded definition (skips reading the file).
+
+    Returns
+    -------
+    Machine
+        Mesh, thermal system, output operator and channels, with the meshing and operator times (s).
     """
     definition = definition or load_machine(machine)
     mesh, info = build_mesh(definition.geometry, mesh_size_m)
@@ -341,7 +477,7 @@ def build_machine(machine="vmc_ram", mesh_size_m=None, definition=None):
                    time.perf_counter() - start, info.path, operator_path)
 
 
-def reassemble(machine, definition):
+def reassemble(machine: Machine, definition: MachineDefinition) -> Machine:
     """The machine with its thermal system reassembled for a changed definition; mesh and output operator reused.
 
     For definitions that differ from ``machine.definition`` in convection
@@ -350,6 +486,23 @@ def reassemble(machine, definition):
     so the output operator's rows over thermal nodes stay valid and no
     elastic solve is needed (about 1 s instead of minutes).  Used by the gap
     diagnosis to switch candidate effects on.
+
+    Parameters
+    ----------
+    machine : Machine
+        The built machine.
+    definition : MachineDefinition
+        The changed definition.
+
+    Returns
+    -------
+    Machine
+        A new machine sharing mesh and output operator.
+
+    Raises
+    ------
+    DefinitionError
+        The joint pairs or the thermal numbering differ.
     """
     pairs = [(a, b) for a, b, _ in definition.joints]
     if pairs != [(a, b) for a, b, _ in machine.definition.joints]:
@@ -364,8 +517,21 @@ def reassemble(machine, definition):
                    machine.mesh_seconds, machine.operator_seconds, machine.mesh_path, machine.operator_path)
 
 
-def convection_summary(machine):
-    """Area (m²), coefficient and zone of each convection group, and the adiabatic remainder."""
+def convection_summary(machine: Machine) -> tuple[list[tuple[str, float, float, str]], float]:
+    """Area, coefficient and zone of each convection group, and the adiabatic remainder.
+
+    Parameters
+    ----------
+    machine : Machine
+        A built machine.
+
+    Returns
+    -------
+    rows : list of tuple
+        ``(group, area m², coefficient W/(m² K), zone)`` per group.
+    adiabatic_m2 : float
+        Boundary area in no group, m².
+    """
     groups, adiabatic = _facet_groups(machine.definition, machine.mesh)
     rows = [(name, machine.mesh.facet_group_area(name), rule.coefficient, rule.zone)
             for name, rule in groups.items()]

@@ -1,18 +1,21 @@
 """Reading a machine definition (TOML under ``meshes/machines``): materials, joints, convection,
 heat sources, supports, sensors, camera and tool-centre point.
 
-The geometry (parts, mesh settings) is read by :mod:`meshes.definition`; this
-module reads everything the twin adds on top, validating every field.
+The file is parsed once: its geometry (parts, mesh settings) is read by
+:func:`meshes.definition.read_geometry` (which the mesher uses too, as
+``meshes`` must not import ``twin``); this module reads everything the twin
+adds on top, validating every field.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from fea import Material
-from meshes.definition import load_geometry, machine_path
-from meshes.tomlspec import DefinitionError, Table, read_toml
+from meshes.definition import machine_path, read_geometry
+from meshes.tomlspec import DefinitionError, Table, duplicates, read_toml
 
 DRIVERS = {"spindle", "feed_x", "feed_y", "feed_z", "feed_xy", "feed_xyz", "constant"}
 SENSOR_KINDS = {"temperature", "air", "strain"}
@@ -38,8 +41,26 @@ class HeatSource:
     reference: float
     exponent: float
 
-    def power_W(self, spindle_rpm, feed_mm_min, scale=1.0, exponent=None):
-        """Power in W for arrays of spindle speed (rpm) and feeds (dict axis → mm/min)."""
+    def power_W(self, spindle_rpm: np.ndarray, feed_mm_min: dict[str, np.ndarray], scale: float = 1.0,
+                exponent: float | None = None) -> np.ndarray:
+        """The source's power for operating conditions.
+
+        Parameters
+        ----------
+        spindle_rpm : ndarray
+            Spindle speed, rpm.
+        feed_mm_min : dict of str to ndarray
+            Axis → feed, mm/min (unused by spindle and constant sources).
+        scale : float
+            Factor on the power.
+        exponent : float, optional
+            Replaces the source's speed exponent.
+
+        Returns
+        -------
+        ndarray
+            Power, W, shape of ``spindle_rpm`` (or of the feeds).
+        """
         b = self.exponent if exponent is None else exponent
         if self.driver == "constant":
             n = np.ones_like(np.asarray(spindle_rpm, float))
@@ -92,8 +113,14 @@ class Camera:
     grid: tuple
     position: tuple
 
-    def spots(self):
-        """Spot coordinates (n_u · n_v, 3) in m, row-major over v then u."""
+    def spots(self) -> np.ndarray:
+        """The camera spots on the face.
+
+        Returns
+        -------
+        ndarray, shape (n_u · n_v, 3)
+            Coordinates, m, row-major over v then u.
+        """
         k = "xyz".index(self.face_axis)
         others = [i for i in range(3) if i != k]
         u = np.linspace(*self.u_range, self.grid[0])
@@ -133,128 +160,101 @@ class MachineDefinition:
     zones: list = field(default_factory=list)
     zone_lags_s: dict = field(default_factory=dict)
 
-    def sensor(self, name):
+    def sensor(self, name: str) -> Sensor:
+        """A sensor by name.
+
+        Parameters
+        ----------
+        name : str
+            Sensor name.
+
+        Returns
+        -------
+        Sensor
+            Its kind, position (m) or line ends (m), zone.
+
+        Raises
+        ------
+        DefinitionError
+            Unknown name (the message lists the sensors).
+        """
         for s in self.sensors:
             if s.name == name:
                 return s
         raise DefinitionError(f"{self.source}: unknown sensor {name!r}; sensors: {[s.name for s in self.sensors]}")
 
-    def part_material(self, part_name):
+    def part_material(self, part_name: str) -> Material:
+        """The material of a part.
+
+        Parameters
+        ----------
+        part_name : str
+            Part name.
+
+        Returns
+        -------
+        Material
+            Its conductivity, density, heat capacity and elastic properties (SI).
+        """
         for p in self.geometry.parts:
             if p.name == part_name:
                 return self.materials[p.material]
         raise DefinitionError(f"{self.source}: unknown part {part_name!r}")
 
 
-def load_machine(machine):
-    """Read and validate a machine definition by name (``vmc_ram``) or path."""
+TOP_LEVEL_KEYS = {"machine", "mesh", "materials", "parts", "joints", "convection", "sources", "supports", "tcp",
+                  "sensors", "camera", "zones"}
+MACHINE_KEYS = {"name", "description", "max_spindle_rpm", "max_feed_mm_min", "reference_temperature_C",
+                "elastic_degree", "snap_distance_m", "ambient_reference_height_m"}
+
+
+def load_machine(machine: str | Path) -> MachineDefinition:
+    """Read and validate a machine definition: geometry and physics, from one parse of the file.
+
+    The geometry (``[mesh]``, ``[[parts]]``) is read by
+    :func:`meshes.definition.read_geometry`, the same reader the mesher uses,
+    so the mesh cache keys do not depend on which package read the file.
+
+    Parameters
+    ----------
+    machine : str or Path
+        Name of a shipped machine (``vmc_ram``) or path of a machine TOML file.
+
+    Returns
+    -------
+    MachineDefinition
+        Everything the file says, in SI units (m, W, W/(m² K), s).
+
+    Raises
+    ------
+    DefinitionError
+        One line naming the file, the field and the bad value.
+    """
     path = machine_path(machine)
-    geometry = load_geometry(path)
     root = read_toml(path)
-    root.check_keys({"machine", "mesh", "materials", "parts", "joints", "convection", "sources",
-                     "supports", "tcp", "sensors", "camera", "zones"})
+    geometry = read_geometry(root, path)
+    root.check_keys(TOP_LEVEL_KEYS)
     info = root.table("machine")
-    info.check_keys({"name", "description", "max_spindle_rpm", "max_feed_mm_min", "reference_temperature_C",
-                     "elastic_degree", "snap_distance_m", "ambient_reference_height_m"})
-    part_names = set(geometry.part_names())
-
-    def check_part(table, key, name):
-        if name not in part_names:
-            raise table.error(key, f"names an unknown part; parts: {sorted(part_names)}", name)
-        return name
-
-    materials = {}
-    mats = root.table("materials")
-    for key in mats.keys():
-        m = mats.table(key)
-        m.check_keys({"conductivity", "density", "specific_heat", "youngs_modulus", "poisson_ratio", "expansion"})
-        values = {k: m.number(k, minimum=0.0, strict_minimum=True)
-                  for k in ("conductivity", "density", "specific_heat", "youngs_modulus", "expansion")}
-        materials[key] = Material(values["conductivity"], values["density"], values["specific_heat"],
-                                  values["youngs_modulus"], m.number("poisson_ratio", minimum=0.0, maximum=0.49),
-                                  values["expansion"], key)
+    info.check_keys(MACHINE_KEYS)
+    parts = _PartNames(geometry.part_names())
+    materials = _read_materials(root.table("materials"))
     for i, part in enumerate(geometry.parts):
         if part.material not in materials:
             raise DefinitionError(f"{path}: parts[{i}].material names an unknown material {part.material!r}; "
                                   f"materials: {sorted(materials)}")
-
-    joints = []
-    for t in root.tables("joints"):
-        t.check_keys({"parts", "conductance"})
-        pair = t.strings("parts")
-        if len(pair) != 2:
-            raise t.error("parts", "must name exactly two parts", pair)
-        for name in pair:
-            check_part(t, "parts", name)
-        joints.append((pair[0], pair[1], t.number("conductance", minimum=0.0, strict_minimum=True)))
-
-    convection = []
-    for t in root.tables("convection", required=True):
-        t.check_keys({"name", "parts", "coefficient", "zone", "facing", "inside"})
-        parts = t.strings("parts")
-        for name in parts:
-            check_part(t, "parts", name)
-        convection.append(ConvectionRule(t.string("name"), tuple(parts),
-                                         t.number("coefficient", minimum=0.0, strict_minimum=True),
-                                         t.string("zone", "room"), t.vector("facing", 3, None),
-                                         t.boolean("inside", False)))
+    joints = _read_joints(root.tables("joints"), parts)
+    convection = _read_convection(root.tables("convection", required=True), parts)
     _check_unique(path, "convection", [r.name for r in convection])
     zones = sorted({r.zone for r in convection})
-    zone_lags_s = {}
-    for t in root.tables("zones"):
-        t.check_keys({"name", "lag_h", "label"})
-        name = t.string("name")
-        if name not in zones:
-            raise t.error("name", f"is not a convection zone; zones: {zones}", name)
-        zone_lags_s[name] = t.number("lag_h", minimum=0.0, strict_minimum=True) * 3600.0
-
-    sources = []
-    for t in root.tables("sources"):
-        t.check_keys({"name", "label", "part", "box", "driver", "coefficient_W", "reference", "exponent"})
-        sources.append(HeatSource(t.string("name"), t.string("label", ""), check_part(t, "part", t.string("part")),
-                                  t.vector("box", 6, None), t.string("driver", choices=DRIVERS),
-                                  t.number("coefficient_W", minimum=0.0), t.number("reference", 1.0,
-                                                                                    minimum=0.0, strict_minimum=True),
-                                  t.number("exponent", 1.0, minimum=0.0)))
+    zone_lags_s = _read_zone_lags(root.tables("zones"), zones)
+    sources = _read_sources(root.tables("sources"), parts)
     _check_unique(path, "sources", [s.name for s in sources])
-
-    sensors = []
-    for t in root.tables("sensors"):
-        t.check_keys({"name", "kind", "label", "position", "start", "end", "zone"})
-        kind = t.string("kind", choices=SENSOR_KINDS)
-        if kind == "strain":
-            sensor = Sensor(t.string("name"), kind, t.string("label", ""), start=t.vector("start", 3),
-                            end=t.vector("end", 3))
-        else:
-            zone = t.string("zone", "room") if kind == "air" else None
-            if zone is not None and zone not in zones:
-                raise t.error("zone", f"is not a convection zone; zones: {zones}", zone)
-            sensor = Sensor(t.string("name"), kind, t.string("label", ""), position=t.vector("position", 3),
-                            zone=zone)
-        sensors.append(sensor)
+    sensors = [_read_sensor(t, zones) for t in root.tables("sensors")]
     _check_unique(path, "sensors", [s.name for s in sensors])
-
-    camera = None
-    if "camera" in root:
-        c = root.table("camera")
-        c.check_keys({"part", "face_axis", "face_value", "u_range", "v_range", "grid", "position"})
-        grid = c.raw("grid")
-        if not (isinstance(grid, list) and len(grid) == 2 and all(isinstance(g, int) and g > 0 for g in grid)):
-            raise c.error("grid", "must be two positive integers [n_u, n_v]", grid)
-        camera = Camera(check_part(c, "part", c.string("part")), c.string("face_axis", choices=set("xyz")),
-                        c.number("face_value"), c.vector("u_range", 2), c.vector("v_range", 2), tuple(grid),
-                        c.vector("position", 3))
-
+    camera = _read_camera(root.table("camera"), parts) if "camera" in root else None
     tcp = root.table("tcp")
     tcp.check_keys({"tool_point", "workpiece_point", "tilt_probe_offset"})
-    supports = root.table("supports")
-    supports.check_keys({"kind", "points"})
-    supports.string("kind", choices={"kinematic"})
-    points = supports.raw("points")
-    if not (isinstance(points, list) and len(points) == 3):
-        raise supports.error("points", "must list three [x, y, z] points for the 3-2-1 mount", points)
-    support_points = [Table({f"points[{i}]": p}, supports.file, "supports").vector(f"points[{i}]", 3)
-                      for i, p in enumerate(points)]
+    support_points = _read_supports(root.table("supports"))
     elastic_degree = info.integer("elastic_degree", 1, minimum=1)
     if elastic_degree not in (1, 2):
         raise info.error("elastic_degree", "must be 1 or 2 (P1 or P2 displacements)", elastic_degree)
@@ -285,12 +285,131 @@ def load_machine(machine):
     )
 
 
+class _PartNames:
+    """The machine's part names, to check a field that names a part."""
+
+    def __init__(self, names):
+        self.names = set(names)
+
+    def check(self, table, key, name):
+        """``name`` if it is a part; else a :class:`DefinitionError` naming ``table.key`` and the value."""
+        if name not in self.names:
+            raise table.error(key, f"names an unknown part; parts: {sorted(self.names)}", name)
+        return name
+
+
+def _read_materials(mats):
+    materials = {}
+    for key in mats.keys():  # noqa: SIM118 - Table is not iterable
+        m = mats.table(key)
+        m.check_keys({"conductivity", "density", "specific_heat", "youngs_modulus", "poisson_ratio", "expansion"})
+        values = {k: m.number(k, minimum=0.0, strict_minimum=True)
+                  for k in ("conductivity", "density", "specific_heat", "youngs_modulus", "expansion")}
+        materials[key] = Material(values["conductivity"], values["density"], values["specific_heat"],
+                                  values["youngs_modulus"], m.number("poisson_ratio", minimum=0.0, maximum=0.49),
+                                  values["expansion"], key)
+    return materials
+
+
+def _read_joints(tables, parts):
+    joints = []
+    for t in tables:
+        t.check_keys({"parts", "conductance"})
+        pair = t.strings("parts")
+        if len(pair) != 2:
+            raise t.error("parts", "must name exactly two parts", pair)
+        for name in pair:
+            parts.check(t, "parts", name)
+        joints.append((pair[0], pair[1], t.number("conductance", minimum=0.0, strict_minimum=True)))
+    return joints
+
+
+def _read_convection(tables, parts):
+    convection = []
+    for t in tables:
+        t.check_keys({"name", "parts", "coefficient", "zone", "facing", "inside"})
+        names = t.strings("parts")
+        for name in names:
+            parts.check(t, "parts", name)
+        convection.append(ConvectionRule(t.string("name"), tuple(names),
+                                         t.number("coefficient", minimum=0.0, strict_minimum=True),
+                                         t.string("zone", "room"), t.vector("facing", 3, None),
+                                         t.boolean("inside", False)))
+    return convection
+
+
+def _read_zone_lags(tables, zones):
+    zone_lags_s = {}
+    for t in tables:
+        t.check_keys({"name", "lag_h", "label"})
+        name = t.string("name")
+        if name not in zones:
+            raise t.error("name", f"is not a convection zone; zones: {zones}", name)
+        zone_lags_s[name] = t.number("lag_h", minimum=0.0, strict_minimum=True) * 3600.0
+    return zone_lags_s
+
+
+def _read_sources(tables, parts):
+    sources = []
+    for t in tables:
+        t.check_keys({"name", "label", "part", "box", "driver", "coefficient_W", "reference", "exponent"})
+        sources.append(HeatSource(t.string("name"), t.string("label", ""), parts.check(t, "part", t.string("part")),
+                                  t.vector("box", 6, None), t.string("driver", choices=DRIVERS),
+                                  t.number("coefficient_W", minimum=0.0), t.number("reference", 1.0,
+                                                                                    minimum=0.0, strict_minimum=True),
+                                  t.number("exponent", 1.0, minimum=0.0)))
+    return sources
+
+
+def _read_sensor(t, zones):
+    t.check_keys({"name", "kind", "label", "position", "start", "end", "zone"})
+    kind = t.string("kind", choices=SENSOR_KINDS)
+    if kind == "strain":
+        return Sensor(t.string("name"), kind, t.string("label", ""), start=t.vector("start", 3),
+                      end=t.vector("end", 3))
+    zone = t.string("zone", "room") if kind == "air" else None
+    if zone is not None and zone not in zones:
+        raise t.error("zone", f"is not a convection zone; zones: {zones}", zone)
+    return Sensor(t.string("name"), kind, t.string("label", ""), position=t.vector("position", 3), zone=zone)
+
+
+def _read_camera(c, parts):
+    c.check_keys({"part", "face_axis", "face_value", "u_range", "v_range", "grid", "position"})
+    grid = c.raw("grid")
+    if not (isinstance(grid, list) and len(grid) == 2 and all(isinstance(g, int) and g > 0 for g in grid)):
+        raise c.error("grid", "must be two positive integers [n_u, n_v]", grid)
+    return Camera(parts.check(c, "part", c.string("part")), c.string("face_axis", choices=set("xyz")),
+                  c.number("face_value"), c.vector("u_range", 2), c.vector("v_range", 2), tuple(grid),
+                  c.vector("position", 3))
+
+
+def _read_supports(supports):
+    supports.check_keys({"kind", "points"})
+    supports.string("kind", choices={"kinematic"})
+    points = supports.raw("points")
+    if not (isinstance(points, list) and len(points) == 3):
+        raise supports.error("points", "must list three [x, y, z] points for the 3-2-1 mount", points)
+    return [Table({f"points[{i}]": p}, supports.file, "supports").vector(f"points[{i}]", 3)
+            for i, p in enumerate(points)]
+
+
 def _check_unique(path, table, names):
-    dupes = sorted({n for n in names if names.count(n) > 1})
+    dupes = duplicates(names)
     if dupes:
         raise DefinitionError(f"{path}: {table}: duplicate names {dupes}")
 
 
-def room_zone(zones):
-    """The zone whose ambient is "the room" (the scenario's ambient): ``room`` if there is one, else the first."""
+def room_zone(zones: list[str]) -> str:
+    """The zone whose ambient is "the room" (the scenario's ambient).
+
+    Parameters
+    ----------
+    zones : list of str
+        A machine's convection zones, sorted.
+
+    Returns
+    -------
+    str
+        ``room`` if there is one, else the first.
+    """
     return "room" if "room" in zones else zones[0]

@@ -24,11 +24,27 @@ KIND_SETTING = {"temperature": "temperature", "air": "temperature", "displacemen
                 "strain": "strain", "camera": "camera"}
 
 
-def apply_noise(values, kinds, settings, seed):
-    """Return noisy copies of ``values`` (n_times, n_channels); ``kinds`` per channel.
+def apply_noise(values: np.ndarray, kinds: list[str], settings: dict[str, str], seed: int) -> np.ndarray:
+    """Noisy copies of sensor values: per-sensor and common offsets, white noise, resolution.
 
     The same seed gives the same offsets and noise; channels of kinds whose
     setting is ``none`` are returned unchanged.
+
+    Parameters
+    ----------
+    values : ndarray, shape (n_times, n_channels)
+        Exact values in the channels' units (°C, µm, µε).
+    kinds : list of str
+        Kind of each channel (``temperature``, ``air``, ``displacement``, ``strain``, ``camera``).
+    settings : dict of str to str
+        The scenario's ``[noise]`` table: setting → sensor model name (see :data:`MODELS`).
+    seed : int
+        Seed of the random generator.
+
+    Returns
+    -------
+    ndarray, shape (n_times, n_channels)
+        The noisy values.
     """
     rng = np.random.default_rng(seed)
     out = np.array(values, dtype=float, copy=True)

@@ -14,12 +14,17 @@ injects exactly its energy whether or not its ends fall on the step grid.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from meshes.tomlspec import DefinitionError, Table, plain_value, read_toml, resolve_definition
+
+if TYPE_CHECKING:   # for annotations only: a scenario is read without its machine
+    from .machine_definition import MachineDefinition
 
 SCENARIOS_DIR = Path(__file__).resolve().parents[2] / "scenarios"
 HOUR = 3600.0
@@ -67,7 +72,19 @@ class DoorOpening:
     recovery_s: float
     zones: tuple | None
 
-    def offset(self, t):
+    def offset(self, t: np.ndarray) -> np.ndarray:
+        """The change of the ambient the opening causes.
+
+        Parameters
+        ----------
+        t : ndarray
+            Times, s.
+
+        Returns
+        -------
+        ndarray
+            Offset, K (≤ 0), same shape as ``t``.
+        """
         t = np.asarray(t, float)
         s = t - self.start_s
         falling = np.clip(s / self.duration_s, 0.0, 1.0) * self.drop_K
@@ -122,17 +139,33 @@ class Scenario:
     camera_image_times_s: list = field(default_factory=list)
     iso_test: str | None = None
 
-    def times(self):
-        """Output (sampling) times, s, from 0 to the duration inclusive."""
+    def times(self) -> np.ndarray:
+        """The output (sampling) times.
+
+        Returns
+        -------
+        ndarray
+            From 0 to the duration inclusive, s.
+        """
         n = int(round(self.duration_s / self.sample_interval_s))
         return np.arange(n + 1) * self.sample_interval_s
 
-    def breakpoints_s(self, lags_s=None):
-        """Times (s) where the conditions jump or kink between samples, for exact step means.
+    def breakpoints_s(self, lags_s: dict[str, float] | None = None) -> np.ndarray:
+        """Times where the conditions jump or kink between samples, for exact step means.
 
         Segment ends (speeds and feeds jump), the knots of a piecewise or CSV
         ambient, the start and end of a door's fall, and the grid on which a
-        lagged zone's air is computed (``lags_s``: zone → lag in s).
+        lagged zone's air is computed.
+
+        Parameters
+        ----------
+        lags_s : dict of str to float, optional
+            Zone → air lag, s.
+
+        Returns
+        -------
+        ndarray
+            Sorted unique times, s.
         """
         cuts = [[s.start_s for s in self.segments], [s.end_s for s in self.segments]]
         if self.ambient.kind in ("piecewise", "csv"):
@@ -144,8 +177,21 @@ class Scenario:
                 cuts.append(np.arange(0.0, self.duration_s + step, step))
         return np.unique(np.concatenate([np.asarray(c, float).ravel() for c in cuts]))
 
-    def operating(self, t):
-        """Spindle speed (rpm) and feeds (dict axis → mm/min) at times ``t`` (left limits; 0 after the cycle)."""
+    def operating(self, t: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Spindle speed and feeds at some times (left limits at segment ends; 0 after the cycle).
+
+        Parameters
+        ----------
+        t : ndarray
+            Times, s.
+
+        Returns
+        -------
+        spindle_rpm : ndarray
+            Spindle speed, rpm.
+        feed_mm_min : dict of str to ndarray
+            Axis (``x``, ``y``, ``z``) → feed, mm/min.
+        """
         t = np.atleast_1d(np.asarray(t, float))
         if not self.segments:
             return np.zeros(t.shape), {a: np.zeros(t.shape) for a in "xyz"}
@@ -159,13 +205,27 @@ class Scenario:
         feeds = {a: np.where(inside, feed[k, i], 0.0) for i, a in enumerate("xyz")}
         return rpm, feeds
 
-    def zone_ambient(self, t, zones, lags_s=None):
-        """Ambient (°C) of each zone at times ``t``.
+    def zone_ambient(self, t: np.ndarray, zones: list[str],
+                     lags_s: dict[str, float] | None = None) -> dict[str, np.ndarray]:
+        """The ambient of each zone at some times.
 
         A zone sees the room plus the events that reach it.  A zone with a
-        lag (``lags_s[zone]`` in s, e.g. the air inside a machine enclosure)
-        sees the room and the room's events through a first-order lag,
-        starting in equilibrium at t = 0.
+        lag (e.g. the air inside a machine enclosure) sees the room and the
+        room's events through a first-order lag, starting in equilibrium at t = 0.
+
+        Parameters
+        ----------
+        t : ndarray
+            Times, s.
+        zones : list of str
+            The machine's convection zones.
+        lags_s : dict of str to float, optional
+            Zone → air lag, s.
+
+        Returns
+        -------
+        dict of str to ndarray
+            Zone → ambient, °C.
         """
         t = np.atleast_1d(np.asarray(t, float))
         lags_s = lags_s or {}
@@ -183,8 +243,19 @@ class Scenario:
             out[zone] = first_order_lag(raw, t, tau) if tau > 0 else raw(t)
         return out
 
-    def check_machine(self, definition):
-        """Validate the scenario against a machine: speeds and feeds within limits, event zones known."""
+    def check_machine(self, definition: MachineDefinition) -> None:
+        """Validate the scenario against a machine: speeds and feeds within limits, event zones known.
+
+        Parameters
+        ----------
+        definition : MachineDefinition
+            The machine it runs on.
+
+        Raises
+        ------
+        DefinitionError
+            Naming the scenario file, the segment or event and the machine's limit.
+        """
         for i, s in enumerate(self.segments):
             where = s.origin or f"segment {i}"
             if s.spindle_rpm > definition.max_spindle_rpm:
@@ -201,11 +272,25 @@ class Scenario:
                                           f"zones of {definition.name!r}: {definition.zones}")
 
 
-def first_order_lag(signal, t, tau_s):
-    """Response at times ``t`` of ``dy/dt = (signal − y)/τ`` with y(0) = signal(0).
+def first_order_lag(signal: Callable[[np.ndarray], np.ndarray], t: np.ndarray, tau_s: float) -> np.ndarray:
+    """Response of ``dy/dt = (signal − y)/τ`` with y(0) = signal(0).
 
     Integrated exactly for a signal that is linear between the points of a
     fine grid (step ≤ τ/20 and ≤ 60 s).
+
+    Parameters
+    ----------
+    signal : callable
+        ``signal(times_s)`` → values (e.g. °C).
+    t : ndarray
+        Times of the response, s.
+    tau_s : float
+        Time constant, s.
+
+    Returns
+    -------
+    ndarray
+        The response at ``t``, in the signal's unit.
     """
     t = np.asarray(t, float)
     end = max(float(t.max()), 0.0)
@@ -221,15 +306,38 @@ def first_order_lag(signal, t, tau_s):
     return np.interp(t, grid, y)
 
 
-def lag_step_s(tau_s):
-    """The grid step (s) on which :func:`first_order_lag` integrates a lag of ``tau_s``."""
+def lag_step_s(tau_s: float) -> float:
+    """The grid step on which :func:`first_order_lag` integrates a lag.
+
+    Parameters
+    ----------
+    tau_s : float
+        Time constant, s.
+
+    Returns
+    -------
+    float
+        τ/20, at most 60 s.
+    """
     return min(tau_s / 20.0, 60.0)
 
 
-def check_ambient_C(values, where, hint=""):
-    """Raise unless every temperature (°C) in ``values`` is a plausible room ambient (:data:`AMBIENT_RANGE_C`).
+def check_ambient_C(values: float | np.ndarray, where: str, hint: str | Callable[[int], str] = "") -> None:
+    """Refuse a temperature that is not a plausible room ambient (:data:`AMBIENT_RANGE_C`).
 
-    ``where`` names the file and field; ``hint`` says where in it (e.g. a row).
+    Parameters
+    ----------
+    values : float or ndarray
+        Temperatures, °C.
+    where : str
+        The file and field, starting the message.
+    hint : str or callable
+        Where in it (e.g. a row); a callable gets the index of the first bad value.
+
+    Raises
+    ------
+    DefinitionError
+        The first bad value, saying when it looks like kelvin.
     """
     values = np.atleast_1d(np.asarray(values, float))
     low, high = AMBIENT_RANGE_C
@@ -248,8 +356,19 @@ def check_ambient_C(values, where, hint=""):
     raise DefinitionError(f"{where}{at}: {value:g} {why}")
 
 
-def scenario_path(scenario):
-    """Resolve a scenario name (e.g. ``heat_cool_9000``) or a path to its TOML file."""
+def scenario_path(scenario: str | Path) -> Path:
+    """The TOML file of a scenario.
+
+    Parameters
+    ----------
+    scenario : str or Path
+        A shipped scenario's name (``heat_cool_9000``) or a path.
+
+    Returns
+    -------
+    Path
+        The scenario file.
+    """
     return resolve_definition(scenario, SCENARIOS_DIR, "scenario")
 
 
@@ -336,7 +455,7 @@ def _ambient_csv(a: Table, base_dir: Path):
         raise a.error("file", "names a file that does not exist", str(path))
     try:
         frame = pd.read_csv(path)
-    except Exception as exc:
+    except (OSError, ValueError) as exc:  # pandas' ParserError, EmptyDataError and UnicodeDecodeError are ValueErrors
         raise a.error("file", f"could not be read as CSV ({exc})", str(path)) from None
     for col in (time_col, value_col):
         if col not in frame.columns:
@@ -380,8 +499,24 @@ def _check_size(head: Table, duration, sample, step):
                          f"(and raise time_step_s) or split the scenario", sample)
 
 
-def load_scenario(scenario):
-    """Read and validate a scenario by name (``iso230_3_spindle_short``) or path."""
+def load_scenario(scenario: str | Path) -> Scenario:
+    """Read and validate a scenario.
+
+    Parameters
+    ----------
+    scenario : str or Path
+        Name of a shipped scenario (``iso230_3_spindle_short``) or path of a scenario TOML file.
+
+    Returns
+    -------
+    Scenario
+        The validated scenario; times in s, temperatures in °C.
+
+    Raises
+    ------
+    DefinitionError
+        One line naming the file, the field and the bad value.
+    """
     path = scenario_path(scenario)
     root = read_toml(path)
     root.check_keys(TOP_KEYS)
@@ -389,6 +524,39 @@ def load_scenario(scenario):
     head.check_keys({"name", "description", "machine", "duration_s", "duration_min", "duration_h",
                      "sample_interval_s", "time_step_s", "scheme", "seed"})
     segments, cycle_end = _segments(root)
+    duration, sample, step = _time_grid(head, cycle_end)
+    scheme = head.string("scheme", "backward_euler", choices={"backward_euler", "crank_nicolson"})
+    events = [_door_opening(ev, duration) for ev in root.tables("events")]
+    initial = _initial(root.table("initial"))
+    noise_spec = _noise(root.table("noise"))
+    out = root.table("outputs")
+    out.check_keys({"camera", "fields_at_h", "camera_images_at_h"})
+    iso = root.table("iso230_3")
+    iso.check_keys({"test"})
+    return Scenario(
+        name=head.string("name", path.stem),
+        description=head.string("description", ""),
+        source=str(path),
+        machine=head.string("machine", "vmc_ram"),
+        duration_s=duration,
+        sample_interval_s=sample,
+        time_step_s=step,
+        theta=1.0 if scheme == "backward_euler" else 0.5,
+        segments=segments,
+        ambient=_ambient(root, path.parent),
+        events=events,
+        initial=initial,
+        noise=noise_spec,
+        seed=head.integer("seed", 0, minimum=0),
+        record_camera=out.boolean("camera", False),
+        field_times_s=_times_h(out, "fields_at_h", duration),
+        camera_image_times_s=_times_h(out, "camera_images_at_h", duration),
+        iso_test=iso.string("test", None, choices={"spindle", "etve"}) if "test" in iso else None,
+    )
+
+
+def _time_grid(head: Table, cycle_end: float):
+    """(duration, sample interval, integration step) in s from ``[scenario]``, checked against each other."""
     duration = _duration_s(head, required=False) or cycle_end
     if not duration:
         raise head.error("duration_h", "is required when there are no segments")
@@ -403,23 +571,25 @@ def load_scenario(scenario):
                          sample)
     step = head.number("time_step_s", min(sample, 60.0), minimum=0.0, strict_minimum=True)
     _check_size(head, duration, sample, min(step, sample))
-    scheme = head.string("scheme", "backward_euler", choices={"backward_euler", "crank_nicolson"})
+    return duration, sample, min(step, sample)
 
-    events = []
-    for ev in root.tables("events"):
-        ev.check_keys({"kind", "start_s", "start_min", "start_h", "duration_s", "duration_min", "duration_h",
-                       "drop_K", "recovery_h", "zones"})
-        ev.string("kind", choices={"door_opening"})
-        start = _duration_s(ev, required=False, prefix="start", strict=False) or 0.0
-        if start >= duration:
-            key = next(k for k in ("start_s", "start_min", "start_h") if k in ev)
-            raise ev.error(key, f"is not within the scenario (0–{duration / HOUR:g} h)", ev.raw(key))
-        events.append(DoorOpening(start, _duration_s(ev),
-                                  ev.number("drop_K"), ev.number("recovery_h", 1.0, minimum=0.0,
-                                                                 strict_minimum=True) * HOUR,
-                                  tuple(ev.strings("zones")) if "zones" in ev else None))
 
-    init = root.table("initial")
+def _door_opening(ev: Table, duration: float):
+    """One ``[[events]]`` entry (a door opening) within a scenario of ``duration`` s."""
+    ev.check_keys({"kind", "start_s", "start_min", "start_h", "duration_s", "duration_min", "duration_h",
+                   "drop_K", "recovery_h", "zones"})
+    ev.string("kind", choices={"door_opening"})
+    start = _duration_s(ev, required=False, prefix="start", strict=False) or 0.0
+    if start >= duration:
+        key = next(k for k in ("start_s", "start_min", "start_h") if k in ev)
+        raise ev.error(key, f"is not within the scenario (0–{duration / HOUR:g} h)", ev.raw(key))
+    return DoorOpening(start, _duration_s(ev),
+                       ev.number("drop_K"), ev.number("recovery_h", 1.0, minimum=0.0, strict_minimum=True) * HOUR,
+                       tuple(ev.strings("zones")) if "zones" in ev else None)
+
+
+def _initial(init: Table):
+    """The ``[initial]`` state: uniform temperature (°C) or steady state at a speed (rpm) and ambient (°C)."""
     initial = {"kind": init.string("kind", "uniform", choices={"uniform", "steady"})}
     if initial["kind"] == "uniform":
         init.check_keys({"kind", "temperature_C"})
@@ -431,47 +601,33 @@ def load_scenario(scenario):
     for key in ("temperature_C", "ambient_C"):
         if initial.get(key) is not None:
             check_ambient_C(initial[key], init.where(key))
+    return initial
 
-    noise = root.table("noise")
+
+def _noise(noise: Table):
+    """The ``[noise]`` table: sensor model name per channel kind (``none`` for exact values)."""
     noise.check_keys({"temperature", "displacement", "strain", "camera"})
-    noise_spec = {"temperature": noise.string("temperature", "none", choices={"none", "DS18S20"}),
-                  "displacement": noise.string("displacement", "none", choices={"none", "NCDT"}),
-                  "strain": noise.string("strain", "none", choices={"none", "FBG"}),
-                  "camera": noise.string("camera", "none", choices={"none", "S65"})}
-
-    out = root.table("outputs")
-    out.check_keys({"camera", "fields_at_h", "camera_images_at_h"})
-    iso = root.table("iso230_3")
-    iso.check_keys({"test"})
-
-    def times_h(key):
-        values = out.vector(key, default=[])
-        bad = [v for v in values if not 0 <= v * HOUR <= duration]
-        if bad:
-            raise out.error(key, f"must lie within the scenario (0–{duration / HOUR:g} h)", list(values))
-        return [v * HOUR for v in values]
-
-    return Scenario(
-        name=head.string("name", path.stem),
-        description=head.string("description", ""),
-        source=str(path),
-        machine=head.string("machine", "vmc_ram"),
-        duration_s=duration,
-        sample_interval_s=sample,
-        time_step_s=min(step, sample),
-        theta=1.0 if scheme == "backward_euler" else 0.5,
-        segments=segments,
-        ambient=_ambient(root, path.parent),
-        events=events,
-        initial=initial,
-        noise=noise_spec,
-        seed=head.integer("seed", 0, minimum=0),
-        record_camera=out.boolean("camera", False),
-        field_times_s=times_h("fields_at_h"),
-        camera_image_times_s=times_h("camera_images_at_h"),
-        iso_test=iso.string("test", None, choices={"spindle", "etve"}) if "test" in iso else None,
-    )
+    return {"temperature": noise.string("temperature", "none", choices={"none", "DS18S20"}),
+            "displacement": noise.string("displacement", "none", choices={"none", "NCDT"}),
+            "strain": noise.string("strain", "none", choices={"none", "FBG"}),
+            "camera": noise.string("camera", "none", choices={"none", "S65"})}
 
 
-def available_scenarios():
+def _times_h(out: Table, key: str, duration: float):
+    """Times given in h under ``[outputs].key``, checked to lie in the scenario, as s."""
+    values = out.vector(key, default=[])
+    bad = [v for v in values if not 0 <= v * HOUR <= duration]
+    if bad:
+        raise out.error(key, f"must lie within the scenario (0–{duration / HOUR:g} h)", list(values))
+    return [v * HOUR for v in values]
+
+
+def available_scenarios() -> list[str]:
+    """The shipped scenarios.
+
+    Returns
+    -------
+    list of str
+        Names of the TOML files in ``scenarios/``, sorted.
+    """
     return sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))

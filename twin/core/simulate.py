@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -20,8 +22,8 @@ import fea
 from fea.inputs import interval_means
 
 from .dataset import ChannelInfo, Dataset, project_version
-from .machine import Machine, build_machine, power_input
-from .machine_definition import room_zone
+from .machine import Channel, Machine, build_machine, power_input
+from .machine_definition import MachineDefinition, room_zone
 from .noise import apply_noise
 from .scenario import Scenario, load_scenario
 
@@ -50,13 +52,34 @@ class ScenarioInputs:
     the part of the step it runs.  ``modify`` is an optional hook
     ``modify(conditions) -> inputs`` used to perturb the physics; it must act
     pointwise in time (it is evaluated at the quadrature points).
+
+    Parameters
+    ----------
+    machine : Machine
+        The built machine.
+    scenario : Scenario
+        The scenario.
+    modify : callable, optional
+        ``modify(conditions) -> inputs``.
     """
 
-    def __init__(self, machine: Machine, scenario: Scenario, modify=None):
+    def __init__(self, machine: Machine, scenario: Scenario, modify: Callable | None = None) -> None:
         self.machine, self.scenario, self.modify = machine, scenario, modify
         self.breakpoints_s = scenario.breakpoints_s(machine.definition.zone_lags_s)
 
-    def conditions(self, times_s):
+    def conditions(self, times_s: np.ndarray) -> Conditions:
+        """The operating conditions and inputs at some times.
+
+        Parameters
+        ----------
+        times_s : ndarray
+            Times, s.
+
+        Returns
+        -------
+        Conditions
+            Speeds (rpm), feeds (mm/min), zone ambients (°C), gradient (K/m) and the inputs (after ``modify``).
+        """
         t = np.atleast_1d(np.asarray(times_s, float))
         rpm, feeds = self.scenario.operating(t)
         ambient = self.scenario.zone_ambient(t, self.machine.zones, self.machine.definition.zone_lags_s)
@@ -67,16 +90,42 @@ class ScenarioInputs:
             cond.inputs = self.modify(cond)
         return cond
 
-    def sample(self, times_s):
+    def sample(self, times_s: np.ndarray) -> np.ndarray:
+        """The thermal inputs at some times.
+
+        Parameters
+        ----------
+        times_s : ndarray, shape (n,)
+            Times, s.
+
+        Returns
+        -------
+        ndarray, shape (n, n_inputs)
+            Inputs (°C, K/m, W).
+        """
         return self.conditions(times_s).inputs
 
-    def means(self, step_times_s):
-        """Mean inputs over each step between ``step_times_s`` (see :func:`fea.inputs.interval_means`)."""
+    def means(self, step_times_s: np.ndarray) -> np.ndarray:
+        """Exact mean inputs over each step (see :func:`fea.inputs.interval_means`).
+
+        Parameters
+        ----------
+        step_times_s : ndarray, shape (k + 1,)
+            Step ends, s.
+
+        Returns
+        -------
+        ndarray, shape (k, n_inputs)
+            Mean inputs (°C, K/m, W) over each step.
+        """
         return interval_means(self.sample, step_times_s, self.breakpoints_s)
 
 
 @dataclass
 class SimulationResult:
+    """What :func:`simulate` returns: the dataset, the machine and scenario, kept fields (°C by time in s),
+    the wall time (s) and the energy-balance error (relative to the energy throughput)."""
+
     dataset: Dataset
     machine: Machine
     scenario: Scenario
@@ -85,13 +134,25 @@ class SimulationResult:
     energy_balance_relative_error: float | None = None
 
 
-def requested_source_energy_J(scenario, definition):
-    """Energy (J) each heat source of ``definition`` must inject over ``scenario``, by source name.
+def requested_source_energy_J(scenario: Scenario, definition: MachineDefinition) -> dict[str, float]:
+    """The energy each heat source must inject over a scenario.
 
     Segment by segment: the source's power model at the segment's speed and
     feeds times the segment's length, plus the idle machine after the last
     segment.  It uses no time grid, so it is an independent check on what
     the solver injected.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Its segments (speeds, feeds, lengths).
+    definition : MachineDefinition
+        Its heat sources' power models.
+
+    Returns
+    -------
+    dict of str to float
+        Source name → energy, J.
     """
     segments = scenario.segments
     idle_s = scenario.duration_s - (segments[-1].end_s if segments else 0.0)
@@ -101,14 +162,32 @@ def requested_source_energy_J(scenario, definition):
     return {src.name: float(np.sum(src.power_W(rpm, feeds) * length)) for src in definition.sources}
 
 
-def energy_balance(ledger, machine, scenario, modified=False):
-    """The run's energy balance as a dict (see the keys below); ``ok`` is False when heat was lost or created.
+def energy_balance(ledger: fea.energy.EnergyLedger, machine: Machine, scenario: Scenario,
+                   modified: bool = False) -> dict:
+    """The run's energy balance; ``ok`` is False when heat was lost or created.
 
     ``stored_vs_loads``: max |ΔE_stored − Σ energy through the loads| over the
     run; ``sources_vs_scenario``: max over the heat sources of |energy
     injected − energy the scenario asks for| (None when ``modified``: the
     inputs were changed on purpose); both relative to ``throughput_J``, the
     gross energy through all loads (at least 1 µK of the whole machine).
+
+    Parameters
+    ----------
+    ledger : fea.energy.EnergyLedger
+        The run's energy ledger.
+    machine : Machine
+        The machine run.
+    scenario : Scenario
+        The scenario run.
+    modified : bool
+        The inputs were changed on purpose (no check against the scenario).
+
+    Returns
+    -------
+    dict
+        ``relative_error``, ``stored_vs_loads``, ``sources_vs_scenario``,
+        ``throughput_J``, ``sources_injected_J``, ``sources_requested_J``, ``tolerance``, ``ok``.
     """
     scale = ledger.scale_J()
     injected = {src.name: float(ledger.energy_of(power_input(src.name))[-1]) for src in machine.definition.sources}
@@ -123,13 +202,39 @@ def energy_balance(ledger, machine, scenario, modified=False):
             "tolerance": ENERGY_TOLERANCE, "ok": bool(worst <= ENERGY_TOLERANCE)}
 
 
-def recorded_channels(machine, scenario):
-    """Indices of the machine's channels a run of ``scenario`` records (camera spots only when asked)."""
+def recorded_channels(machine: Machine, scenario: Scenario) -> list[int]:
+    """The machine's channels a run records (camera spots only when the scenario asks).
+
+    Parameters
+    ----------
+    machine : Machine
+        The machine.
+    scenario : Scenario
+        The scenario.
+
+    Returns
+    -------
+    list of int
+        Indices into ``machine.channels``.
+    """
     return [j for j, c in enumerate(machine.channels) if c.kind != "camera" or scenario.record_camera]
 
 
-def step_error_summary(estimate, channels):
-    """Largest estimated time-step error per channel kind, in edge units (K, µm, µε), and the method."""
+def step_error_summary(estimate: fea.transient.StepErrorEstimate, channels: list[Channel]) -> dict:
+    """The largest estimated time-step error per channel kind.
+
+    Parameters
+    ----------
+    estimate : fea.transient.StepErrorEstimate
+        Of the recorded FE channels, in SI.
+    channels : list of Channel
+        Those channels.
+
+    Returns
+    -------
+    dict
+        ``method`` and ``temperature_K``, ``displacement_um``, ``strain_ue`` where present.
+    """
     out = {"method": estimate.method}
     for kind, key in (("temperature", "temperature_K"), ("camera", "temperature_K"),
                       ("displacement", "displacement_um"), ("strain", "strain_ue")):
@@ -141,8 +246,25 @@ def step_error_summary(estimate, channels):
     return out
 
 
-def initial_temperature(machine, scenario, schedule):
-    """Uniform start, or the steady state for the conditions at t = 0 (or those the scenario names)."""
+def initial_temperature(machine: Machine, scenario: Scenario, schedule: ScenarioInputs) -> float | np.ndarray:
+    """The start temperature of a run.
+
+    Parameters
+    ----------
+    machine : Machine
+        The machine.
+    scenario : Scenario
+        Its ``initial`` table: uniform, or steady state.
+    schedule : ScenarioInputs
+        The scenario's inputs (the conditions at t = 0).
+
+    Returns
+    -------
+    float or ndarray
+        A uniform temperature (°C; the room ambient unless given), or the
+        steady state (°C on the thermal nodes) for the conditions at t = 0
+        (or those the scenario names).
+    """
     init = scenario.initial
     if init["kind"] == "uniform":
         value = init.get("temperature_C")
@@ -158,22 +280,41 @@ def initial_temperature(machine, scenario, schedule):
     return fea.ThermalSolver(machine.thermal).steady_state(u)
 
 
-def simulate(scenario, machine=None, mesh_size_m=None, fields=False, progress=None, modify=None,
-             noise=True, seed=None, step_error=False):
-    """Run ``scenario`` (name, path or :class:`Scenario`) and return a :class:`SimulationResult`.
+def simulate(scenario: str | Path | Scenario, machine: Machine | None = None, mesh_size_m: float | None = None,
+             fields: bool | Sequence[float] = False, progress: Callable[[int, int], None] | None = None,
+             modify: Callable | None = None, noise: bool = True, seed: int | None = None,
+             step_error: bool = False) -> SimulationResult:
+    """Run a scenario on a machine: the FE transient, then the virtual sensors.
 
     Parameters
     ----------
-    machine : a built :class:`Machine` (default: build the scenario's machine)
-    mesh_size_m : mesh size when the machine is built here
-    fields : keep full temperature fields at the scenario's ``fields_at_h`` and
-        ``camera_images_at_h`` times (``True``), or at an explicit list of times in s
-    progress : optional callable ``progress(done, total)``
-    modify : optional input hook, see :class:`ScenarioInputs`
-    noise : apply the scenario's sensor-noise models
-    seed : overrides the scenario's seed
-    step_error : also estimate the time-step error of the recorded channels by step doubling
-        (about half a run more); the largest per kind goes into the metadata (``time_step_error``)
+    scenario : str, Path or Scenario
+        Scenario name, TOML path or a loaded :class:`Scenario`.
+    machine : Machine, optional
+        A built :class:`Machine` (default: build the scenario's machine).
+    mesh_size_m : float, optional
+        Target tetrahedron edge length (m) when the machine is built here.
+    fields : bool or sequence of float
+        Keep full temperature fields at the scenario's ``fields_at_h`` and
+        ``camera_images_at_h`` times (``True``), or at these times in s.
+    progress : callable, optional
+        ``progress(done, total)``, called as the integration advances.
+    modify : callable, optional
+        Input hook, see :class:`ScenarioInputs`.
+    noise : bool
+        Apply the scenario's sensor-noise models.
+    seed : int, optional
+        Overrides the scenario's seed.
+    step_error : bool
+        Also estimate the time-step error of the recorded channels by step
+        doubling (about half a run more); the largest per kind goes into the
+        metadata (``time_step_error``).
+
+    Returns
+    -------
+    SimulationResult
+        The dataset (°C, µm, µε, rpm, mm/min, W), the machine, the kept fields
+        (°C) and the wall time (s).
     """
     scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     machine = machine or build_machine(scenario.machine, mesh_size_m)
@@ -181,14 +322,10 @@ def simulate(scenario, machine=None, mesh_size_m=None, fields=False, progress=No
     start = time.perf_counter()
     schedule = ScenarioInputs(machine, scenario, modify)
     times = scenario.times()
-    if fields is True:
-        field_times = sorted(set(scenario.field_times_s) | set(scenario.camera_image_times_s))
-    else:
-        field_times = list(fields) if fields else list(scenario.camera_image_times_s)
+    field_times = _field_times(scenario, fields)
     fe = machine.outputs
     keep = recorded_channels(machine, scenario)
-    keep_fe = [j for j in keep if j < fe.n_outputs]
-    keep_air = [j - fe.n_outputs for j in keep if j >= fe.n_outputs]
+    keep_fe, keep_air = _split_by_source(keep, fe.n_outputs)
     operator = fe.subset([fe.names[j] for j in keep_fe])
     T0 = initial_temperature(machine, scenario, schedule)
     solver = fea.ThermalSolver(machine.thermal, theta=scenario.theta)
@@ -210,18 +347,38 @@ def simulate(scenario, machine=None, mesh_size_m=None, fields=False, progress=No
         step_errors = step_error_summary(estimate, channels[:len(keep_fe)])
 
     columns_info, columns = machine_condition_channels(machine, cond)
+    seed = scenario.seed if seed is None else seed
     if noise:
-        sensors = apply_noise(sensors, [c.kind for c in channels], scenario.noise,
-                              scenario.seed if seed is None else seed)
+        sensors = apply_noise(sensors, [c.kind for c in channels], scenario.noise, seed)
     for j, c in enumerate(channels):
         columns_info.append(ChannelInfo(c.name, c.unit, c.kind, c.label, c.position))
         columns.append(sensors[:, j])
-    metadata = {
+    metadata = _run_metadata(machine, scenario, seed, noise, balance, step_errors)
+    dataset = Dataset(times, np.column_stack(columns), columns_info, metadata)
+    return SimulationResult(dataset, machine, scenario, run.fields, time.perf_counter() - start,
+                            balance["relative_error"])
+
+
+def _split_by_source(keep, n_fe):
+    """Recorded channel indices → (rows of the FE output operator, rows of the air feedthrough)."""
+    return [j for j in keep if j < n_fe], [j - n_fe for j in keep if j >= n_fe]
+
+
+def _field_times(scenario, fields):
+    """Times (s) at which :func:`simulate` keeps full temperature fields (see its ``fields``)."""
+    if fields is True:
+        return sorted(set(scenario.field_times_s) | set(scenario.camera_image_times_s))
+    return list(fields) if fields else list(scenario.camera_image_times_s)
+
+
+def _run_metadata(machine, scenario, seed, noise, balance, step_errors):
+    """The metadata of a synthetic dataset: what was run, on which mesh, and the checks of the integration."""
+    return {
         "kind": "synthetic",
         "machine": machine.name,
         "scenario": scenario.name,
         "scenario_file": scenario.source,
-        "seed": scenario.seed if seed is None else seed,
+        "seed": seed,
         "noise": scenario.noise if noise else "none",
         "effects": [],
         "mesh": {"nodes": machine.mesh.n_nodes, "tetrahedra": machine.mesh.n_tets, "file": str(machine.mesh_path)},
@@ -232,17 +389,31 @@ def simulate(scenario, machine=None, mesh_size_m=None, fields=False, progress=No
         "time_step_error": step_errors,
         "project_version": project_version(),
     }
-    dataset = Dataset(times, np.column_stack(columns), columns_info, metadata)
-    return SimulationResult(dataset, machine, scenario, run.fields, time.perf_counter() - start,
-                            balance["relative_error"])
 
 
-def condition_channels(cond, zones, sources, input_names, inputs):
+def condition_channels(cond: Conditions, zones: list[str], sources: list[tuple[str, str]],
+                       input_names: list[str], inputs: np.ndarray) -> tuple[list[ChannelInfo], list[np.ndarray]]:
     """Dataset channels and columns of the operating conditions.
 
-    ``cond`` has ``spindle_rpm``, ``feed_mm_min``, ``ambient_C`` and
-    ``gradient_K_per_m``; ``sources`` lists ``(name, label)`` of the heat
-    sources whose powers are read from ``inputs`` (n, len(input_names)).
+    Parameters
+    ----------
+    cond : Conditions
+        Has ``spindle_rpm``, ``feed_mm_min``, ``ambient_C`` and ``gradient_K_per_m``.
+    zones : list of str
+        Convection zones (one ambient column each).
+    sources : list of tuple of str
+        ``(name, label)`` of the heat sources.
+    input_names : list of str
+        The columns of ``inputs``.
+    inputs : ndarray, shape (n, len(input_names))
+        Where the source powers (W) are read.
+
+    Returns
+    -------
+    channels : list of ChannelInfo
+        Spindle (rpm), feeds (mm/min), ambients (°C), gradient (K/m), powers (W).
+    columns : list of ndarray
+        Their values.
     """
     channels = [ChannelInfo("spindle", "rpm", "spindle_speed", "spindle speed")]
     columns = [cond.spindle_rpm]
@@ -260,7 +431,23 @@ def condition_channels(cond, zones, sources, input_names, inputs):
     return channels, columns
 
 
-def machine_condition_channels(machine, cond):
-    """:func:`condition_channels` for a built machine."""
+def machine_condition_channels(machine: Machine,
+                               cond: Conditions) -> tuple[list[ChannelInfo], list[np.ndarray]]:
+    """:func:`condition_channels` for a built machine.
+
+    Parameters
+    ----------
+    machine : Machine
+        Gives the zones, heat sources and input names.
+    cond : Conditions
+        The conditions on a time grid.
+
+    Returns
+    -------
+    channels : list of ChannelInfo
+        As :func:`condition_channels`.
+    columns : list of ndarray
+        Their values.
+    """
     return condition_channels(cond, machine.zones, [(s.name, s.label) for s in machine.definition.sources],
                               machine.thermal.input_names, cond.inputs)

@@ -1,6 +1,7 @@
 """Options, checks and option-value parsers that several ``twin`` commands share (light: the parser imports it)."""
 from __future__ import annotations
 
+import argparse
 import json
 import zipfile
 from pathlib import Path
@@ -15,13 +16,37 @@ _OVERWRITE_HELP = {
 }
 
 
-def add_overwrite(parser, output="folder"):
-    """Add ``--overwrite`` for a command whose ``--out`` is a ``"folder"`` or a ``"file"``."""
+def add_overwrite(parser: argparse.ArgumentParser, output: str = "folder") -> None:
+    """Add ``--overwrite`` to a command.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+        The command's parser.
+    output : str
+        What its ``--out`` is: ``"folder"`` or ``"file"`` (chooses the help text).
+    """
     parser.add_argument("--overwrite", action="store_true", help=_OVERWRITE_HELP[output])
 
 
-def existing_fmu(path):
-    """``path`` if it names an FMU archive; a one-line :class:`TwinInputError` otherwise."""
+def existing_fmu(path: str | Path) -> Path:
+    """An argument that must name an FMU archive (an ``argparse`` type).
+
+    Parameters
+    ----------
+    path : str or Path
+        The argument.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    TwinInputError
+        The file is missing or not a zip archive.
+    """
     path = Path(path)
     if not path.is_file():
         raise TwinInputError(f"{path}: FMU file not found")
@@ -30,22 +55,47 @@ def existing_fmu(path):
     return path
 
 
-def add_cluster_options(parser):
-    """Add ``--machine``, ``--mesh-size`` and ``--scheduler`` for a command that sweeps scenarios on Dask."""
+def add_cluster_options(parser: argparse.ArgumentParser) -> None:
+    """Add ``--machine``, ``--mesh-size`` (m) and ``--scheduler`` for a command that sweeps scenarios on Dask.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+        The command's parser.
+    """
     parser.add_argument("--machine", default="vmc_ram", help="machine name or TOML path")
     parser.add_argument("--mesh-size", type=float, help="target tetrahedron edge length, m")
     parser.add_argument("--scheduler", default="local", help="'local' (a local Dask cluster, default), 'serial', "
                                                               "or tcp://HOST:8786 for an existing one")
 
 
-def check_out_file(args, inputs=()):
-    """Check ``args.out`` (a file, if given) before any work; ``args.overwrite`` allows replacing it."""
+def check_out_file(args: argparse.Namespace, inputs: tuple = ()) -> None:
+    """Check ``args.out`` (a file, if given) before any work; ``args.overwrite`` allows replacing it.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        With ``out`` and ``overwrite``.
+    inputs : tuple of str or Path
+        The command's input files, which the output must not be.
+    """
     if args.out is not None:
         check_output_file(args.out, args.overwrite, inputs)
 
 
-def read_column_map(value):
-    """A column map from a JSON file path or inline JSON (``{"t1": "T01_degC"}``), or None."""
+def read_column_map(value: str | None) -> dict[str, str] | None:
+    """A column map from a JSON file path or inline JSON.
+
+    Parameters
+    ----------
+    value : str or None
+        A path, or inline JSON such as ``{"t1": "T01_degC"}``.
+
+    Returns
+    -------
+    dict of str to str or None
+        CSV column → ``<name>_<unit>``; None without a value.
+    """
     if value is None:
         return None
     path = Path(value)
@@ -59,8 +109,19 @@ def read_column_map(value):
     return out
 
 
-def split_names(value):
-    """``"T01,T05"`` or ``["T01", "T05"]`` → ``["T01", "T05"]``."""
+def split_names(value: str | list[str] | None) -> list[str]:
+    """Channel names from a comma-separated string or a list of them.
+
+    Parameters
+    ----------
+    value : str or list of str or None
+        ``"T01,T05"`` or ``["T01", "T05"]`` (items may hold commas too).
+
+    Returns
+    -------
+    list of str
+        ``["T01", "T05"]``; empty for None.
+    """
     if value is None:
         return []
     if isinstance(value, str):

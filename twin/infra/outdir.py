@@ -29,6 +29,7 @@ import shlex
 import shutil
 import sys
 import tempfile
+from collections.abc import Iterator
 from contextlib import contextmanager
 from datetime import datetime, timezone
 from pathlib import Path, PurePosixPath
@@ -75,12 +76,29 @@ def _require_writable(path, folder):
         raise TwinInputError(f"{path}: cannot write in {existing} ({exc.strerror})") from None
 
 
-def check_output_folder(path, overwrite=False, inputs=()):
-    """Check an output folder before the work; return it resolved (``None`` for no folder).
+def check_output_folder(path: str | Path | None, overwrite: bool = False, inputs: tuple = ()) -> Path | None:
+    """Check an output folder before the work.
 
-    Raises :class:`TwinInputError` (one line naming the path) if ``path`` is
-    a file, is or holds one of ``inputs``, cannot be created or written, or is
-    a non-empty folder that is not a twin output and ``overwrite`` is false.
+    Parameters
+    ----------
+    path : str or Path or None
+        The folder (None: no folder).
+    overwrite : bool
+        Accept a non-empty folder that is not a twin output (its files are kept).
+    inputs : tuple of str or Path
+        The command's inputs, which the folder must not be or hold.
+
+    Returns
+    -------
+    Path or None
+        The folder, resolved.
+
+    Raises
+    ------
+    TwinInputError
+        One line naming the path: it is a file, is or holds an input, cannot be
+        created or written, or is a non-empty folder that is not a twin output
+        and ``overwrite`` is false.
     """
     if path is None:
         return None
@@ -97,11 +115,28 @@ def check_output_folder(path, overwrite=False, inputs=()):
     return out
 
 
-def check_output_file(path, overwrite=False, inputs=()):
-    """Check an output file before the work; return it resolved.
+def check_output_file(path: str | Path, overwrite: bool = False, inputs: tuple = ()) -> Path:
+    """Check an output file before the work.
 
-    Raises :class:`TwinInputError` if ``path`` is a folder, is one of
-    ``inputs``, cannot be created, or exists and ``overwrite`` is false.
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    overwrite : bool
+        Accept an existing file (it is replaced).
+    inputs : tuple of str or Path
+        The command's inputs, which the file must not be.
+
+    Returns
+    -------
+    Path
+        The file, resolved.
+
+    Raises
+    ------
+    TwinInputError
+        ``path`` is a folder, is one of ``inputs``, cannot be created, or
+        exists and ``overwrite`` is false.
     """
     out = Path(path).expanduser().resolve()
     if out.is_dir():
@@ -223,7 +258,8 @@ def _alive(pid):
 
 
 @contextmanager
-def atomic_directory(path, overwrite=False, inputs=(), command=None):
+def atomic_directory(path: str | Path, overwrite: bool = False, inputs: tuple = (),
+                     command: str | None = None) -> Iterator[Path]:
     """Yield a staging folder; on success its files are committed into the output folder ``path``.
 
     ``path`` is checked as :func:`check_output_folder` does. On success the
@@ -232,6 +268,20 @@ def atomic_directory(path, overwrite=False, inputs=(), command=None):
     touched. On an exception (or Ctrl-C) the staging folder is removed and
     the output folder is left as it was. ``command`` is recorded in the
     marker (default: this process's command line).
+
+    Parameters
+    ----------
+    path : str or Path
+        The output folder.
+    overwrite, inputs
+        As :func:`check_output_folder`.
+    command : str, optional
+        Recorded in the marker.
+
+    Yields
+    ------
+    Path
+        The staging folder to write into.
     """
     out = check_output_folder(path, overwrite, inputs)
     created = not out.exists()

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import matplotlib
 
@@ -9,15 +10,31 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ..core.dataset import UNITS  # noqa: E402
+from ..core.dataset import UNITS, Dataset  # noqa: E402
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 
 def _hours(dataset):
     return dataset.time_s / 3600.0
 
 
-def save_figure(fig, path):
-    """Save a Matplotlib figure to ``path`` (PNG) atomically and close it; returns the path."""
+def save_figure(fig: Figure, path: str | Path) -> Path:
+    """Save a Matplotlib figure as PNG atomically and close it.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure.
+    path : str or Path
+        The PNG file (written atomically).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     path = Path(path)
     fig.tight_layout()
     tmp = path.with_name(f".{path.stem}.partial.png")
@@ -42,13 +59,25 @@ def _chunks(names, size):
     return [list(part) for part in np.array_split(np.array(names, dtype=object), n)] if names else []
 
 
-def temperature_panels(dataset, max_lines=PANEL_LINES):
+def temperature_panels(dataset: Dataset, max_lines: int = PANEL_LINES) -> list[tuple[str, list[str]]]:
     """Panels of the temperature figure as ``(title, [channel names])``; every thermometer is in exactly one.
 
     Surface thermometers whose labels share a stem (``carrier strip 1 (B1)``,
     ``(B2)`` …) get panels of their own; the others share "other
     thermometers" panels; air thermometers come last.  No panel holds more
     than ``max_lines`` lines.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The data.
+    max_lines : int
+        Most lines in one panel.
+
+    Returns
+    -------
+    list of tuple
+        ``(panel title, channel names)``.
     """
     surface = dataset.names_of_kind("temperature")
     stems = {}
@@ -72,8 +101,21 @@ def _legend_label(dataset, name, panel_title):
     return f"{name} {label}".strip()
 
 
-def temperature_figure(dataset, max_lines=PANEL_LINES):
-    """Every surface and air thermometer (°C) over time (h), grouped in panels with a legend each (None without)."""
+def temperature_figure(dataset: Dataset, max_lines: int = PANEL_LINES) -> Figure | None:
+    """Every surface and air thermometer (°C) over time (h), grouped in panels with a legend each.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The data.
+    max_lines : int
+        Most lines in one panel.
+
+    Returns
+    -------
+    matplotlib.figure.Figure or None
+        None without thermometers.
+    """
     panels = temperature_panels(dataset, max_lines)
     if not panels:
         return None
@@ -91,8 +133,23 @@ def temperature_figure(dataset, max_lines=PANEL_LINES):
     return fig
 
 
-def plot_temperatures(dataset, path, max_lines=PANEL_LINES):
-    """:func:`temperature_figure` saved as PNG at ``path`` (None, and no file, without thermometers)."""
+def plot_temperatures(dataset: Dataset, path: str | Path, max_lines: int = PANEL_LINES) -> Path | None:
+    """:func:`temperature_figure` saved as PNG.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The data.
+    path : str or Path
+        The PNG file (written atomically).
+    max_lines : int
+        Most lines in one panel.
+
+    Returns
+    -------
+    Path or None
+        ``path``; None, and no file, without thermometers.
+    """
     fig = temperature_figure(dataset, max_lines)
     return None if fig is None else save_figure(fig, path)
 
@@ -106,8 +163,19 @@ def _ambient_channels(dataset):
     return [room] + [n for n in ambients if n != room and not np.allclose(dataset[n], dataset[room])]
 
 
-def drift_figure(dataset):
-    """TCP drift (µm) with the ambient temperature (°C) on a second axis, and the spindle speed (rpm) below."""
+def drift_figure(dataset: Dataset) -> Figure:
+    """TCP drift (µm) with the ambient temperature (°C) on a second axis, and the spindle speed (rpm) below.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        With displacement channels.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Time in h.
+    """
     speed = "spindle" in dataset and np.ptp(dataset["spindle"]) > 0
     fig, axes = plt.subplots(2 if speed else 1, 1, figsize=(9, 6.5 if speed else 5), sharex=True, squeeze=False,
                              gridspec_kw={"height_ratios": [3, 1] if speed else [1]})
@@ -139,13 +207,39 @@ def drift_figure(dataset):
     return fig
 
 
-def plot_drift(dataset, path):
-    """:func:`drift_figure` saved as PNG at ``path``."""
+def plot_drift(dataset: Dataset, path: str | Path) -> Path:
+    """:func:`drift_figure` saved as PNG.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        With displacement channels.
+    path : str or Path
+        The PNG file (written atomically).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     return save_figure(drift_figure(dataset), path)
 
 
-def plot_strains(dataset, path):
-    """FBG-like mean axial strains in µε."""
+def plot_strains(dataset: Dataset, path: str | Path) -> Path | None:
+    """FBG-like mean axial strains (µε) over time (h), saved as PNG.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The data.
+    path : str or Path
+        The PNG file (written atomically).
+
+    Returns
+    -------
+    Path or None
+        ``path``; None, and no file, without strain channels.
+    """
     names = dataset.names_of_kind("strain")
     if not names:
         return None
@@ -159,8 +253,28 @@ def plot_strains(dataset, path):
     return save_figure(fig, path)
 
 
-def plot_measured_vs_predicted(time_s, measured, predicted, unit, title, path):
-    """Measured and predicted series, and their residual, over time in h."""
+def plot_measured_vs_predicted(time_s: np.ndarray, measured: np.ndarray, predicted: np.ndarray, unit: str,
+                               title: str, path: str | Path) -> Path:
+    """Measured and predicted series, and their residual, over time in h, saved as PNG.
+
+    Parameters
+    ----------
+    time_s : ndarray
+        Times, s.
+    measured, predicted : ndarray
+        Values in ``unit``.
+    unit : str
+        Unit token (``um``, ``degC``, …; shown as µm, °C).
+    title : str
+        Figure title.
+    path : str or Path
+        The PNG file (written atomically).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(9, 6), sharex=True, gridspec_kw={"height_ratios": [2, 1]})
     hours = np.asarray(time_s) / 3600.0
     top.plot(hours, measured, lw=1.3, label="measured")

@@ -2,14 +2,27 @@
 from __future__ import annotations
 
 import weakref
+from collections.abc import Callable
 
 _open_bars = weakref.WeakSet()
 
 
-def progress_bar(description, unit):
-    """A ``progress(done, total)`` callback drawing a bar that counts ``unit`` (``"step"``, ``"scenario"``, …).
+def progress_bar(description: str, unit: str) -> Callable[[int, int], None]:
+    """A ``progress(done, total)`` callback drawing a tqdm bar.
 
     The unit is required: the rate shown (e.g. ``scenario/s``) is only right if it names what is counted.
+
+    Parameters
+    ----------
+    description : str
+        Text before the bar.
+    unit : str
+        What is counted (``"step"``, ``"scenario"``, …).
+
+    Returns
+    -------
+    callable
+        ``progress(done, total)``; the bar closes when ``done == total``.
     """
     from tqdm import tqdm
 
@@ -27,7 +40,7 @@ def progress_bar(description, unit):
     return update
 
 
-def close_bars():
+def close_bars() -> None:
     """Close (and so clear) the bars that work stopped by an error or Ctrl-C left open, so that the
     message that follows starts on a line of its own."""
     for bar in list(_open_bars):

@@ -30,6 +30,8 @@ from __future__ import annotations
 
 import os
 import threading
+from collections.abc import Callable, Hashable, Iterable
+from typing import TypeVar
 
 from ..errors import TwinInputError
 
@@ -37,10 +39,24 @@ SERIAL = "serial"
 LOCAL = "local"
 _CACHE = {}
 _CACHE_LOCK = threading.Lock()
+T = TypeVar("T")
 
 
-def cached(key, factory):
-    """Per-process memo: ``factory()`` once per ``key`` in this process (a worker's machine, say)."""
+def cached(key: Hashable, factory: Callable[[], T]) -> T:
+    """Per-process memo: ``factory()`` once per ``key`` in this process (a worker's machine, say).
+
+    Parameters
+    ----------
+    key : hashable
+        What the value is of.
+    factory : callable
+        Makes the value.
+
+    Returns
+    -------
+    object
+        The value made the first time ``key`` was asked for in this process.
+    """
     with _CACHE_LOCK:
         if key in _CACHE:
             return _CACHE[key]
@@ -58,7 +74,19 @@ def _call(task):
         return task()
 
 
-def describe_scheduler(scheduler):
+def describe_scheduler(scheduler: str | object | None) -> str:
+    """Where :func:`run_tasks` runs for a ``scheduler`` argument, in words (for reports).
+
+    Parameters
+    ----------
+    scheduler : str or distributed.Client or None
+        As :func:`run_tasks` takes it.
+
+    Returns
+    -------
+    str
+        E.g. ``"local Dask cluster"``.
+    """
     if scheduler is None or scheduler == LOCAL:
         return "local Dask cluster"
     if scheduler == SERIAL:
@@ -79,16 +107,53 @@ def _check_scheduler(scheduler):
                              f"got {type(scheduler).__name__}")
 
 
-def run_tasks(tasks, scheduler=LOCAL, n_workers=None, progress=None):
-    """Run independent ``tasks`` and return their results in order.
+def _run_serial(tasks, progress):
+    """The results of ``tasks`` run one after the other in this process."""
+    results = []
+    for i, task in enumerate(tasks):
+        results.append(_call(task))
+        if progress is not None:
+            progress(i + 1, len(tasks))
+    return results
+
+
+def _connect(scheduler, n_workers, total):
+    """(Dask client, local cluster or None) for ``scheduler``; a local cluster gets at most one worker per task."""
+    from distributed import Client, LocalCluster
+
+    if scheduler is None or scheduler == LOCAL:
+        workers = max(1, min(int(n_workers or os.cpu_count() or 1), total))
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address="127.0.0.1:0", silence_logs=40)
+        return Client(cluster), cluster
+    if isinstance(scheduler, str):
+        try:
+            return Client(scheduler, timeout="20s"), None
+        except (OSError, TimeoutError) as exc:
+            raise TwinInputError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
+    return scheduler, None
+
+
+def run_tasks(tasks: Iterable[Callable[[], T]], scheduler: str | object | None = LOCAL, n_workers: int | None = None,
+              progress: Callable[[int, int], None] | None = None) -> list[T]:
+    """Run independent tasks, in parallel on Dask or in this process.
 
     Parameters
     ----------
-    tasks : iterable of picklable no-argument callables
-    scheduler : ``"local"`` (default), ``"serial"``, a scheduler address ``tcp://HOST:PORT``,
-        or a ``distributed.Client``
-    n_workers : worker processes of the local cluster (default: cores, at most one per task)
-    progress : optional callable ``progress(done, total)``
+    tasks : iterable of callable
+        Picklable no-argument callables.
+    scheduler : str or distributed.Client
+        ``"local"`` (default), ``"serial"``, a scheduler address ``tcp://HOST:PORT``,
+        or a ``distributed.Client``.
+    n_workers : int, optional
+        Worker processes of the local cluster (default: cores, at most one per task).
+    progress : callable, optional
+        ``progress(done, total)``.
+
+    Returns
+    -------
+    list
+        The tasks' results, in the order of ``tasks``; a task's exception is raised here.
     """
     tasks = list(tasks)
     for i, task in enumerate(tasks):
@@ -99,28 +164,11 @@ def run_tasks(tasks, scheduler=LOCAL, n_workers=None, progress=None):
     if total == 0:
         return []
     if scheduler == SERIAL or ((scheduler is None or scheduler == LOCAL) and total == 1):
-        results = []
-        for i, task in enumerate(tasks):
-            results.append(_call(task))
-            if progress is not None:
-                progress(i + 1, total)
-        return results
+        return _run_serial(tasks, progress)
 
-    from distributed import Client, LocalCluster, as_completed
+    from distributed import as_completed
 
-    cluster = None
-    if scheduler is None or scheduler == LOCAL:
-        workers = max(1, min(int(n_workers or os.cpu_count() or 1), total))
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address="127.0.0.1:0", silence_logs=40)
-        client = Client(cluster)
-    elif isinstance(scheduler, str):
-        try:
-            client = Client(scheduler, timeout="20s")
-        except (OSError, TimeoutError) as exc:
-            raise TwinInputError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
-    else:
-        client = scheduler
+    client, cluster = _connect(scheduler, n_workers, total)
     try:
         futures = [client.submit(_call, task, pure=False) for task in tasks]
         index = {f.key: i for i, f in enumerate(futures)}

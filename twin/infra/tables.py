@@ -2,19 +2,33 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterable, Sequence
 from numbers import Integral, Real
 
 ALIGNMENTS = {None: "---", "left": ":---", "right": "---:", "center": ":---:"}
 MISSING = "–"
 
 
-def format_cell(value, spec=None):
+def format_cell(value: object, spec: str | Callable[[object], str] | None = None) -> str:
     """One cell as text.
 
-    ``spec`` is a format spec (``".2f"``, ``".3g"``) applied to non-integer real numbers (Python or
-    numpy floats), or a callable ``value → text`` applied to every value, or None.  A NaN or infinite
-    float prints as :data:`MISSING`; integers, strings and everything else print as ``str(value)``.
-    A ``|`` in the text is escaped so that it cannot split the cell.
+    A NaN or infinite float prints as :data:`MISSING`; integers, strings and
+    everything else print as ``str(value)``.  A ``|`` in the text is escaped
+    so that it cannot split the cell.
+
+    Parameters
+    ----------
+    value : object
+        The cell's value.
+    spec : str or callable, optional
+        A format spec (``".2f"``, ``".3g"``) applied to non-integer real
+        numbers (Python or numpy floats), or a callable ``value → text``
+        applied to every value.
+
+    Returns
+    -------
+    str
+        The cell's text.
     """
     if callable(spec):
         text = spec(value)
@@ -35,17 +49,27 @@ def _per_column(option, n, name):
     return option
 
 
-def markdown_table(rows, headers, align=None, formats=None):
+def markdown_table(rows: Iterable[Sequence], headers: Sequence[str], align: str | Sequence[str | None] | None = None,
+                   formats: str | Callable | Sequence | None = None) -> str:
     """A GitHub Markdown table, one line per row, without a final newline.
 
     Parameters
     ----------
-    rows : iterable of sequences, one value per column
-    headers : column headers; put the unit in them (``"peak drift (µm)"``)
-    align : ``"left"``, ``"right"``, ``"center"`` or None (GitHub's default) — for every column, or a
-        sequence with one per column
-    formats : a format spec (``".2f"``), a callable or None (see :func:`format_cell`) — for every column,
-        or a sequence with one per column
+    rows : iterable of sequences
+        One value per column.
+    headers : sequence of str
+        Column headers; put the unit in them (``"peak drift (µm)"``).
+    align : str or sequence, optional
+        ``"left"``, ``"right"``, ``"center"`` or None (GitHub's default) — for
+        every column, or a sequence with one per column.
+    formats : str, callable or sequence, optional
+        A format spec (``".2f"``), a callable or None (see :func:`format_cell`)
+        — for every column, or a sequence with one per column.
+
+    Returns
+    -------
+    str
+        The table.
 
     Examples
     --------

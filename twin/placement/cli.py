@@ -8,11 +8,14 @@ from ..infra.progress import progress_bar
 
 
 def cmd_place(args):
-    from .study import DEFAULT_PARTS, DEFAULT_TEST, DEFAULT_TRAIN, METHODS, placement_study
+    from .candidates import DEFAULT_PARTS
+    from .selection import METHODS
+    from .study import DEFAULT_TEST, DEFAULT_TRAIN, DEFAULT_VALIDATION, placement_study
 
     res = placement_study(machine=args.machine, mesh_size_m=args.mesh_size,
                           parts=split_names(args.parts) or DEFAULT_PARTS, n_candidates=args.candidates,
                           camera=not args.no_camera, train=split_names(args.train) or DEFAULT_TRAIN,
+                          validation=split_names(args.validation) or DEFAULT_VALIDATION,
                           test=split_names(args.test) or DEFAULT_TEST, methods=split_names(args.methods) or METHODS,
                           k_max=args.k_max, axes=tuple(split_names(args.axes)), record_interval_s=args.record_interval,
                           scheduler=args.scheduler, use_cache=not args.no_cache, out_dir=args.out,
@@ -29,7 +32,8 @@ def register(sub):
     p.add_argument("--candidates", type=int, default=2000, help="surface candidates after thinning (default 2000)")
     p.add_argument("--no-camera", action="store_true", help="leave the camera spots out of the candidates")
     p.add_argument("--train", help="training scenarios, comma-separated")
-    p.add_argument("--test", help="held-out scenarios, comma-separated")
+    p.add_argument("--validation", help="validation scenarios (choose method and K), comma-separated")
+    p.add_argument("--test", help="test scenarios (score the chosen sets once), comma-separated")
     p.add_argument("--methods", help="selection methods, comma-separated (default: all)")
     p.add_argument("--k-max", type=int, default=8)
     p.add_argument("--axes", default="Z,Y")

@@ -13,19 +13,35 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.dataset import Dataset
+from ..core.machine import Machine
 from ..core.simulate import simulate
 from ..infra.tables import markdown_table
 
 
 @dataclass(frozen=True)
 class Target:
+    """A calibration target: a scenario, a drift quantity of its dataset, and the thesis range (µm)."""
+
     name: str
     scenario: str
     quantity: str
     low: float
     high: float
 
-    def measure(self, dataset):
+    def measure(self, dataset: Dataset) -> float:
+        """The target's quantity in a noise-free dataset of its scenario.
+
+        Parameters
+        ----------
+        dataset : Dataset
+            With the ``Y`` and ``Z`` drift channels (µm).
+
+        Returns
+        -------
+        float
+            The quantity, µm.
+        """
         t = dataset.time_s
         if self.quantity == "|Z| at 2 h":
             return float(abs(dataset["Z"][np.argmin(abs(t - 7200.0))]))
@@ -46,8 +62,19 @@ TARGETS = (
 )
 
 
-def calibration_table(machine):
-    """Rows (target, simulated value in µm, ok) for the machine, from noise-free runs (the range is the target's)."""
+def calibration_table(machine: Machine) -> list[tuple[Target, float, bool]]:
+    """How the machine meets the calibration targets, from noise-free runs.
+
+    Parameters
+    ----------
+    machine : Machine
+        The built machine.
+
+    Returns
+    -------
+    list of tuple
+        ``(target, simulated value in µm, within the target's range)`` per target.
+    """
     datasets = {}
     rows = []
     for target in TARGETS:
@@ -58,8 +85,19 @@ def calibration_table(machine):
     return rows
 
 
-def format_table(rows):
-    """The rows of :func:`calibration_table` as a Markdown table (as in docs/calibration.md)."""
+def format_table(rows: list[tuple[Target, float, bool]]) -> str:
+    """The rows of :func:`calibration_table` as a Markdown table (as in docs/calibration.md).
+
+    Parameters
+    ----------
+    rows : list of tuple
+        From :func:`calibration_table`.
+
+    Returns
+    -------
+    str
+        The table, values in µm.
+    """
     cells = [(target.name, f"{target.low:g}–{target.high:g}" if np.isfinite(target.high) else f"≥ {target.low:g}",
               value, "yes" if ok else "NO", f"`twin run {target.scenario}`") for target, value, ok in rows]
     return markdown_table(cells, ["target", "thesis range (µm)", "simulated (µm)", "met", "command"],

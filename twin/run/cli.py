@@ -1,13 +1,22 @@
 """CLI commands ``twin run``, ``twin mesh`` and ``twin report``: a thin layer over :mod:`twin.run.workflows`."""
 from __future__ import annotations
 
+import argparse
+
 from ..infra.cli_common import add_overwrite, read_column_map
 from ..infra.progress import progress_bar
 
 # Handlers import the library inside them, never up here: start-up time (`twin --help` must not load scipy).
 
 
-def cmd_run(args):
+def cmd_run(args: argparse.Namespace) -> None:
+    """``twin run``: simulate a scenario, write the result folder, print the summary.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+    """
     from .workflows import run_scenario
 
     out = run_scenario(args.scenario, machine=args.machine, mesh_size_m=args.mesh_size, out_dir=args.out,
@@ -19,7 +28,14 @@ def cmd_run(args):
     print(f"results in {out.out_dir}/")
 
 
-def cmd_mesh(args):
+def cmd_mesh(args: argparse.Namespace) -> None:
+    """``twin mesh``: mesh a machine (or read its cached mesh), print its statistics.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+    """
     from .workflows import mesh_machine
 
     stats, out_dir = mesh_machine(args.machine, args.mesh_size, args.out, rebuild=args.rebuild, ship=args.ship,
@@ -42,7 +58,14 @@ def cmd_mesh(args):
     print(f"statistics and render in {out_dir}/")
 
 
-def cmd_report(args):
+def cmd_report(args: argparse.Namespace) -> None:
+    """``twin report``: plots and summary of an existing dataset.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+    """
     from .summary import format_summary
     from .workflows import report_dataset
 
@@ -53,8 +76,14 @@ def cmd_report(args):
     print(f"report in {out_dir}/")
 
 
-def register(sub):
-    """Add the ``run``, ``mesh`` and ``report`` commands."""
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``run``, ``mesh`` and ``report`` commands.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The ``twin`` parser's subparsers.
+    """
     run = sub.add_parser("run", help="simulate a scenario and write dataset, plots and summary")
     run.add_argument("scenario", help="scenario name or path to its TOML file")
     run.add_argument("--machine", help="machine name or TOML path (default: the scenario's)")

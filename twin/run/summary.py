@@ -3,16 +3,49 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.dataset import Dataset
 from ..infra.tables import markdown_table
 
 
-def tilt_urad(dataset, probe_spacing_m):
-    """Tilt in the YZ plane from the two Y probes, µrad (= µm per m)."""
+def tilt_urad(dataset: Dataset, probe_spacing_m: float) -> np.ndarray:
+    """Tilt in the YZ plane from the two Y probes.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        With the ``Y`` and ``Y_top`` drift channels, µm.
+    probe_spacing_m : float
+        Distance between the probes, m.
+
+    Returns
+    -------
+    ndarray
+        Tilt, µrad (= µm per m).
+    """
     return (dataset["Y_top"] - dataset["Y"]) / probe_spacing_m
 
 
-def run_summary(dataset, wall_seconds, probe_spacing_m=0.1, iso_test=None):
-    """Key figures as a dict: peak drift per axis (µm), hottest sensor, run time, ISO 230-3 quantities."""
+def run_summary(dataset: Dataset, wall_seconds: float, probe_spacing_m: float = 0.1,
+                iso_test: str | None = None) -> dict:
+    """The key figures of a run.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The run's (or a measured) dataset.
+    wall_seconds : float
+        Simulation wall time, s (0 for a measured dataset).
+    probe_spacing_m : float
+        Distance of the two Y probes, m (for the tilt).
+    iso_test : str, optional
+        ``"spindle"`` or ``"etve"``: add that ISO 230-3 test's quantities.
+
+    Returns
+    -------
+    dict
+        Peak drift per axis (µm), hottest sensor (°C, K), run time (s),
+        time-integration and energy checks, ISO 230-3 quantities.
+    """
     out = {"scenario": dataset.metadata.get("scenario"), "machine": dataset.metadata.get("machine"),
            "duration_h": float(dataset.time_s[-1] / 3600.0), "samples": len(dataset),
            "run_seconds": float(wall_seconds)}
@@ -29,7 +62,14 @@ def run_summary(dataset, wall_seconds, probe_spacing_m=0.1, iso_test=None):
         hottest = max(surface, key=lambda n: dataset[n].max())
         out["hottest_sensor"] = {"name": hottest, "max_C": float(dataset[hottest].max()),
                                  "rise_K": rise[hottest]}
-    meta = dataset.metadata
+    out.update(_integration_checks(dataset.metadata))
+    out.update(_iso230_3(dataset, drift, iso_test, probe_spacing_m))
+    return out
+
+
+def _integration_checks(meta):
+    """The scheme, time step, step-error estimate and energy balance a run recorded in its metadata."""
+    out = {}
     if meta.get("scheme"):
         out["time_integration"] = {"scheme": meta["scheme"], "time_step_s": meta.get("time_step_s"),
                                    "step_error": meta.get("time_step_error")}
@@ -37,6 +77,12 @@ def run_summary(dataset, wall_seconds, probe_spacing_m=0.1, iso_test=None):
         out["energy_balance_relative_error"] = meta["energy_balance_relative_error"]
     if meta.get("energy_balance"):
         out["energy_balance"] = meta["energy_balance"]
+    return out
+
+
+def _iso230_3(dataset, drift, iso_test, probe_spacing_m):
+    """The ISO 230-3 quantities of an ETVE test (drift and ambient ranges) or a spindle test (drift, tilt)."""
+    out = {}
     axes = [a for a in drift if a in ("X", "Y", "Z")]       # the ISO quantities are of the X/Y/Z drifts
     if iso_test == "etve":
         ambient = [n for n in dataset.names if n.startswith("ambient_") and dataset.info(n).unit == "degC"]
@@ -53,8 +99,19 @@ def run_summary(dataset, wall_seconds, probe_spacing_m=0.1, iso_test=None):
     return out
 
 
-def format_summary(summary):
-    """The summary as Markdown."""
+def format_summary(summary: dict) -> str:
+    """The summary as Markdown.
+
+    Parameters
+    ----------
+    summary : dict
+        From :func:`run_summary`.
+
+    Returns
+    -------
+    str
+        Markdown with units in every line and table header.
+    """
     on = f" on {summary['machine']}" if summary.get("machine") else ""
     lines = [f"# Run summary: {summary['scenario']}{on}", "",
              f"- duration: {summary['duration_h']:.2f} h, {summary['samples']} samples",

@@ -4,6 +4,7 @@ from __future__ import annotations
 import json
 import shutil
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,28 +29,46 @@ from .summary import format_summary, run_summary
 
 @dataclass
 class RunOutput:
+    """What :func:`run_scenario` wrote: the result folder, the run summary and the dataset CSV."""
+
     out_dir: Path
     summary: dict
     dataset_path: Path
 
 
-def run_scenario(scenario, machine=None, mesh_size_m=None, out_dir=None, fields=False, progress=None,
-                 camera=None, overwrite=False, views=True):
+def run_scenario(scenario: str | Path, machine: str | Path | None = None, mesh_size_m: float | None = None,
+                 out_dir: str | Path | None = None, fields: bool = False,
+                 progress: Callable[[int, int], None] | None = None, camera: bool | None = None,
+                 overwrite: bool = False, views: bool = True) -> RunOutput:
     """Simulate a scenario and write the dataset, plots, summary (and fields/images) to ``out_dir``.
 
     Parameters
     ----------
-    scenario : scenario name or path
-    machine : machine name or path overriding the scenario's
-    mesh_size_m : mesh size override, m
-    out_dir : result folder (default ``runs/<scenario>``); checked before the simulation, written
-        atomically (see :mod:`twin.infra.outdir`)
-    fields : also write VTK temperature fields at the scenario's ``fields_at_h`` times
-    progress : callable ``progress(done, total)``
-    camera : record the camera spots in the dataset (default: as the scenario says)
-    overwrite : write into a non-empty folder that is not a twin output (its files are kept)
-    views : at the scenario's ``camera_images_at_h`` times, also render 3-D views of the temperature
-        field and of the deformed shape (one elastic solve per time, set up in a worker during the run)
+    scenario : str or Path
+        Scenario name or path.
+    machine : str or Path, optional
+        Machine name or path overriding the scenario's.
+    mesh_size_m : float, optional
+        Mesh size override, m.
+    out_dir : str or Path, optional
+        Result folder (default ``runs/<scenario>``); checked before the
+        simulation, written atomically (see :mod:`twin.infra.outdir`).
+    fields : bool
+        Also write VTK temperature fields at the scenario's ``fields_at_h`` times.
+    progress : callable, optional
+        ``progress(done, total)``.
+    camera : bool, optional
+        Record the camera spots in the dataset (default: as the scenario says).
+    overwrite : bool
+        Write into a non-empty folder that is not a twin output (its files are kept).
+    views : bool
+        At the scenario's ``camera_images_at_h`` times, also render 3-D views of the temperature
+        field and of the deformed shape (one elastic solve per time, set up in a worker during the run).
+
+    Returns
+    -------
+    RunOutput
+        The folder, the summary (drift in µm, temperatures in °C) and the dataset path.
     """
     sc = load_scenario(scenario)
     if machine is not None:
@@ -99,13 +118,35 @@ def _write_run(sc, model, result, out_dir, overwrite, fields, view_fields, defor
     return summary
 
 
-def report_dataset(path, out_dir=None, column_map=None, nan_policy="error", probe_spacing_m=0.1, iso_test=None,
-                   overwrite=False):
+def report_dataset(path: str | Path, out_dir: str | Path | None = None, column_map: dict[str, str] | None = None,
+                   nan_policy: str = "error", probe_spacing_m: float = 0.1, iso_test: str | None = None,
+                   overwrite: bool = False) -> tuple[dict, Path]:
     """Plots and a readable summary of an existing dataset (a twin run or measured data).
 
-    Measured CSVs without a sidecar go through the validated import
-    (``column_map``, ``nan_policy``); the import report (gaps, NaNs) is
-    written beside the summary. ``overwrite`` as in :func:`run_scenario`.
+    Measured CSVs without a sidecar go through the validated import; the
+    import report (gaps, NaNs) is written beside the summary.
+
+    Parameters
+    ----------
+    path : str or Path
+        The dataset CSV.
+    out_dir : str or Path, optional
+        Result folder (default ``runs/report_<name>``).
+    column_map, nan_policy
+        As :meth:`~twin.core.dataset.Dataset.from_measured_csv`.
+    probe_spacing_m : float
+        Distance of the two Y probes, m (for the tilt).
+    iso_test : str, optional
+        ``"spindle"`` or ``"etve"``.
+    overwrite : bool
+        As in :func:`run_scenario`.
+
+    Returns
+    -------
+    summary : dict
+        From :func:`~twin.run.summary.run_summary`.
+    out_dir : Path
+        The result folder.
     """
     path = Path(path)
     out_dir = Path(out_dir or Path("runs") / f"report_{path.stem}")
@@ -129,13 +170,34 @@ def report_dataset(path, out_dir=None, column_map=None, nan_policy="error", prob
     return summary, out_dir
 
 
-def mesh_machine(machine="vmc_ram", mesh_size_m=None, out_dir=None, rebuild=False, ship=False, overwrite=False):
+def mesh_machine(machine: str | Path = "vmc_ram", mesh_size_m: float | None = None,
+                 out_dir: str | Path | None = None, rebuild: bool = False, ship: bool = False,
+                 overwrite: bool = False) -> tuple[dict, Path]:
     """Build (or load) and describe a machine's mesh; write statistics and an off-screen render.
 
-    ``ship`` copies the mesh and the machine's output operator into the
-    package's shipped cache (``meshes/cache``), for committing with the
-    definition so a fresh clone needs neither meshing nor elastic solves.
-    ``overwrite`` as in :func:`run_scenario`.
+    Parameters
+    ----------
+    machine : str or Path
+        Machine name or path.
+    mesh_size_m : float, optional
+        Target tetrahedron edge length, m (default: the definition's).
+    out_dir : str or Path, optional
+        Folder for statistics and render (default ``runs/mesh_<machine>``).
+    rebuild : bool
+        Mesh again even if cached.
+    ship : bool
+        Copy the mesh and the machine's output operator into the package's
+        shipped cache (``meshes/cache``), for committing with the definition
+        so a fresh clone needs neither meshing nor elastic solves.
+    overwrite : bool
+        As in :func:`run_scenario`.
+
+    Returns
+    -------
+    stats : dict
+        Counts, volumes (m³), edge lengths (m), quality, convection areas (m²), timings (s).
+    out_dir : Path
+        The folder.
     """
     geometry = load_geometry(machine)
     out_dir = Path(out_dir or Path("runs") / f"mesh_{geometry.name}")

@@ -1,0 +1,129 @@
+"""The one registry of estimators: a class registers itself once, with its command-line names and traits.
+
+Usage, in the module that defines the estimator::
+
+    from .registry import register_model
+
+    @register_model({"mlr": {}})                                   # CLI name → default hyperparameters
+    class MLRRegressor(...): ...
+
+    @register_model({"gmc": {"random_state": 0}}, time_series=True)
+    class GMCRegressor(...): ...
+
+    @register_model()                                              # persisted, but not a `twin train` model
+    class FuzzyCMeans(...): ...
+
+Everything that lists models derives from here: :mod:`models.persistence`
+(which classes a model file may name), ``twin train --model`` and
+:mod:`twin.compensation.store` (names, defaults, time-series handling) and
+the tests' parametrisations.  Every module of the ``models`` package is
+imported before the registry is read, so a new module's decorator is all it
+takes.
+
+Persistence contract of a registered class: a scikit-learn estimator whose
+``get_params(deep=False)`` rebuilds it and whose learned state is the public
+attributes ending in ``_``; their values are None, bool, int, float, str,
+ndarrays, tuples, lists, dicts or registered estimators.
+"""
+from __future__ import annotations
+
+import functools
+import importlib
+import pkgutil
+from dataclasses import dataclass, field
+
+
+@dataclass(frozen=True)
+class ModelEntry:
+    """One command-line model name.
+
+    Attributes
+    ----------
+    name : str
+        The name ``twin train --model`` takes (lower case).
+    cls : type
+        The estimator class.
+    defaults : dict
+        Hyperparameters that differ from the class defaults for this name.
+    time_series : bool
+        True for grey time-series models: coefficients per sample, trained on one contiguous, evenly sampled
+        record; ``predict`` returns ``y_reference_`` + the predicted change.
+    """
+
+    name: str
+    cls: type
+    defaults: dict = field(default_factory=dict)
+    time_series: bool = False
+
+    def make(self, **params) -> object:
+        """An unfitted estimator with this name's defaults, overridden by ``params``."""
+        return self.cls(**{**self.defaults, **params})
+
+
+_CLASSES: dict[str, type] = {}
+_MODELS: dict[str, ModelEntry] = {}
+_TIME_SERIES: set[str] = set()
+
+
+def register_model(names: dict[str, dict] | None = None, time_series: bool = False):
+    """Class decorator: register an estimator for persistence and, with ``names``, for ``twin train``.
+
+    Parameters
+    ----------
+    names : dict of str to dict, optional
+        Command-line name → default hyperparameters (several names may share a class, e.g. the ANFIS
+        initialisations).  None: persisted only.
+    time_series : bool
+        The class is a grey time-series model (see :class:`ModelEntry`).
+
+    Raises
+    ------
+    ValueError
+        If a class name or command-line name is registered twice.
+    """
+    def decorate(cls):
+        if _CLASSES.get(cls.__name__, cls) is not cls:
+            raise ValueError(f"estimator class name {cls.__name__!r} is registered twice")
+        entries = [ModelEntry(name.lower(), cls, dict(defaults), time_series) for name, defaults in (names or {}).items()]
+        for e in entries:                    # checked before anything is registered: a refusal leaves no trace
+            if e.name in _MODELS and _MODELS[e.name].cls is not cls:
+                raise ValueError(f"model name {e.name!r} is registered twice ({_MODELS[e.name].cls.__name__}, "
+                                 f"{cls.__name__})")
+        _CLASSES[cls.__name__] = cls
+        if time_series:
+            _TIME_SERIES.add(cls.__name__)
+        _MODELS.update({e.name: e for e in entries})
+        return cls
+    return decorate
+
+
+@functools.cache
+def _load_all() -> None:
+    """Import every module of the ``models`` package, so that every decorator has run."""
+    package = importlib.import_module(__package__)
+    for info in pkgutil.walk_packages(package.__path__, prefix=f"{__package__}."):
+        if not info.name.rpartition(".")[2].startswith("_"):
+            importlib.import_module(info.name)
+
+
+def estimator_classes() -> dict[str, type]:
+    """Class name → class of every registered estimator (what a model file may name)."""
+    _load_all()
+    return dict(_CLASSES)
+
+
+def registered_models() -> dict[str, ModelEntry]:
+    """Command-line name → :class:`ModelEntry` of every ``twin train`` model."""
+    _load_all()
+    return dict(_MODELS)
+
+
+def model_names() -> list[str]:
+    """The sorted command-line model names."""
+    return sorted(registered_models())
+
+
+def is_time_series(estimator: object) -> bool:
+    """True if ``estimator`` is an instance of a registered grey time-series class."""
+    _load_all()
+    return type(estimator).__name__ in _TIME_SERIES
