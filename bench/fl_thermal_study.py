@@ -1,10 +1,10 @@
-"""Measured-data study on FL_THERMAL part 1: every model, then sensor selection.
+"""Measured-data study on FL_THERMAL part 1: every model, sensor selection, regime-blocked selection.
 
-Run from the repository root:
+Run from the repository root (every section, or one with ``--section``):
 
-    python bench/fl_thermal_study.py
+    python bench/fl_thermal_study.py [--section split|loro|selection|timing]
 
-Protocol: chronological split, first 60 % of the rows for training (0–19.3 h:
+``split`` (the first study): chronological split, first 60 % of the rows for training (0–19.3 h:
 the 1250 and 2500 rpm runs, their stops and the start of the 3750 rpm run),
 last 40 % for testing (19.3–32.1 h: the rest of 3750 rpm and the unseen
 5000 rpm run). Nothing is shuffled, nothing is tuned on the test part: every
@@ -14,12 +14,25 @@ time-series models, calibrated on the training part and run over the whole
 series from its first sample (the thesis's "calibrate on the first stage,
 predict the rest"), scored on the test part.
 
+``loro``: leave-one-regime-out, every model family including the grey-box
+RC model: each of the four regime blocks (a run at one speed and the stop
+after it) is held out in turn (:mod:`models.selection_cv`).
+
+``selection``: the selection rule (blocked CV, :func:`models.selection_cv.select_by_blocked_cv`)
+on the first three blocks only, then every candidate trained on those three
+blocks and scored once on the fourth (5000 rpm, a speed the rule never saw);
+the Spearman rank agreement of the rule with that later block, and of the
+old rule (one 60/40 chronological split of the same three blocks).
+
+``timing``: fit time of the grey-box model on the whole of part 1.
+
 The data are read from ``../shared/data/fl_thermal/`` (or the folder in
 ``THERMAL_TWIN_FL_THERMAL``) and never copied.
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import sys
 import time
@@ -46,13 +59,28 @@ from models import (  # noqa: E402
     rmse,
     select_sensors,
 )
+from models.greybox import GreyBoxRegressor  # noqa: E402
 from models.selection import METHODS  # noqa: E402
+from models.selection_cv import (  # noqa: E402
+    Fold,
+    blocked_folds,
+    fold_prediction,
+    rank_agreement,
+    regime_blocks,
+    select_by_blocked_cv,
+)
 
 CHANNELS = [f"ch{i}_um" for i in range(1, 6)]
 TEMPERATURES = [f"t{i}_degC" for i in range(1, 17)]
 TRAIN_FRACTION = 0.6
 N_SELECT = 5
 SEED = 0
+#: X columns of the blocked studies: time_s, spindle_rpm, t1..t16 (t4 = the air, with the HVAC cycling)
+TIME, SPEED, FIRST_T = 0, 1, 2
+T_COLUMNS = tuple(range(FIRST_T, FIRST_T + 16))
+AMBIENT = FIRST_T + 3   # t4
+AIR_2 = FIRST_T + 15    # t16, the noisy air sensor
+SPINDLE = FIRST_T + 4   # t5, the thermometer that follows every run
 
 
 def data_dir() -> Path:
@@ -95,10 +123,107 @@ def table(title, header, rows):
         print("| " + " | ".join(row) + " |")
 
 
-def main() -> None:
-    warnings.simplefilter("ignore")
+def candidates():
+    """Every model family for the blocked studies: name → (unfitted estimator, columns of the study X)."""
+    # the PSO calibrations (GMC PSO, GNNMCI) take 11-12 s per fit on 5,800 rows, about half of all the
+    # fitting here, and in the split study return the LS point wherever LS is stable: left out of the
+    # blocked studies so they run in minutes on a shared 2-core machine
+    slow = {"GMC(1,N) PSO", "GNNMCI(1,N) PSO"}
+    zoo = {name: (model, T_COLUMNS) for name, model in model_zoo().items() if name not in slow}
+    heat_ambient = (TIME, SPEED, AMBIENT)
+    zoo.update({
+        "grey-box 1 pole, rpm + t4": (GreyBoxRegressor(n_poles=1, temperature_inputs=(2,)), heat_ambient),
+        "grey-box 2 poles, rpm + t4": (GreyBoxRegressor(n_poles=2, temperature_inputs=(2,)), heat_ambient),
+        "grey-box 3 poles, rpm + t4": (GreyBoxRegressor(n_poles=3, temperature_inputs=(2,)), heat_ambient),
+        "grey-box 2 poles, rpm + t4 + t16": (
+            GreyBoxRegressor(n_poles=2, temperature_inputs=(2, 3)), (TIME, SPEED, AMBIENT, AIR_2)),
+        "grey-box 2 poles, rpm + t4, observer on t5": (
+            GreyBoxRegressor(n_poles=2, temperature_inputs=(2,), observed=(3,)), (TIME, SPEED, AMBIENT, SPINDLE)),
+    })
+    return zoo
+
+
+def study_arrays(frame):
+    """``X`` = [time_s, spindle_rpm, t1..t16], the targets per channel and the speed."""
+    X = np.column_stack([frame["time_s"], frame["spindle_rpm"], frame[TEMPERATURES]]).astype(float)
+    return X, {ch: frame[ch].to_numpy(float) for ch in CHANNELS}, frame["spindle_rpm"].to_numpy(float)
+
+
+def fold_rmse(estimator, X, y, fold):
+    pred = fold_prediction(estimator, X, y, fold)
+    truth = y[fold.test[0]: fold.test[1]]
+    return rmse(truth, pred) if np.all(np.isfinite(pred)) else np.inf
+
+
+def fmt(value):
+    return f"{value:.2f}" if np.isfinite(value) and value < 1e3 else "diverges"
+
+
+def loro_study(frame):
+    """Leave-one-regime-out: each of the four blocks held out in turn, every family, every channel."""
+    X, Y, speed = study_arrays(frame)
+    blocks = regime_blocks(speed)
+    folds = blocked_folds(blocks, schemes=("leave-one-block-out",))
+    labels = [f"{int(speed[a:b].max())} rpm" for a, b in blocks]
+    print("\nRegime blocks (run + stop): " + ", ".join(
+        f"{lab} rows {a}..{b - 1}" for lab, (a, b) in zip(labels, blocks)))
+    rows, ch3 = [], []
+    for name, (estimator, cols) in candidates().items():
+        Xc = X[:, list(cols)]
+        per = {ch: [fold_rmse(estimator, Xc, Y[ch], f) for f in folds] for ch in CHANNELS}
+        rows.append([name] + [f"{fmt(np.mean(v))} / {fmt(np.max(v))}" for v in per.values()])
+        ch3.append([name] + [fmt(v) for v in per["ch3_um"]])
+    table("Leave one regime block out: mean / worst held-out-block RMSE over the 4 blocks (µm)",
+          ["model"] + CHANNELS, rows)
+    table("Leave one regime block out, ch3_um RMSE per held-out block (µm)",
+          ["model"] + [f"block {i + 1} ({lab})" for i, lab in enumerate(labels)], ch3)
+
+
+def selection_study(frame):
+    """The selection rule on blocks 1-3, judged once on block 4; rank agreement (Spearman)."""
+    X, Y, speed = study_arrays(frame)
+    blocks = regime_blocks(speed)
+    cut = blocks[-1][0]
+    held_out = Fold("later block", len(blocks) - 1, blocks[-1], np.arange(len(X)) < cut)
+    n_old = int(TRAIN_FRACTION * cut)
+    old_split = Fold("60/40", 0, (n_old, cut), np.arange(cut) < n_old)
+    zoo = candidates()
+    rows, agreement = [], []
+    for ch in CHANNELS:
+        chosen = select_by_blocked_cv(zoo, X[:cut], Y[ch][:cut], speed[:cut])
+        later = {name: fold_rmse(est, X[:, list(cols)], Y[ch], held_out) for name, (est, cols) in zoo.items()}
+        old = {name: fold_rmse(est, X[:cut, list(cols)], Y[ch][:cut], old_split) for name, (est, cols) in zoo.items()}
+        old_pick = min(old, key=old.get)
+        rows.append([ch, chosen.best, fmt(later[chosen.best]), old_pick, fmt(later[old_pick]),
+                     fmt(later["MLR (baseline)"]), min(later, key=later.get), fmt(min(later.values()))])
+        agreement.append([ch, f"{rank_agreement(chosen.mean_rmse, later):.2f}", f"{rank_agreement(old, later):.2f}"])
+        print(f"{ch}: {chosen.reason}")
+    table(f"Chosen on blocks 1-3 (rows 0..{cut - 1}), scored once on block 4 (rows {cut}..{len(X) - 1}, "
+          "5000 rpm), RMSE µm",
+          ["channel", "blocked-CV choice", "block 4", "60/40 choice", "block 4 ", "MLR16 block 4",
+           "best in hindsight", "its block 4"], rows)
+    table(f"Rank agreement (Spearman, {len(zoo)} candidates) with block 4",
+          ["channel", "blocked CV (LOBO + rolling origin)", "60/40 split"], agreement)
+
+
+def timing_study(frame, repeats=3):
+    """Fit time of the default-order grey-box model (2 poles, rpm + t4) on all of part 1."""
+    X, Y, _ = study_arrays(frame)
+    Xc = X[:, [TIME, SPEED, AMBIENT]]
+    for ch in ("ch3_um",):
+        times = []
+        for _ in range(repeats):
+            start = time.perf_counter()
+            model = GreyBoxRegressor(n_poles=2, temperature_inputs=(2,)).fit(Xc, Y[ch])
+            times.append(time.perf_counter() - start)
+        print(f"\ngrey-box 2 poles, rpm + t4, fit on all {len(X)} rows of part 1 ({ch}): "
+              f"{min(times):.2f} s best of {repeats} (max {max(times):.2f} s), {model.n_iterations_} residual "
+              f"evaluations in the best start, time constants {np.round(model.time_constants_ / 3600, 2)} h, "
+              f"b = {model.exponent_:.2f}, training RMSE {model.training_rmse_:.2f} µm")
+
+
+def split_study(frame) -> None:
     start = time.perf_counter()
-    frame = pd.read_csv(data_dir() / "fl_thermal_part1.csv")
     n_train = int(TRAIN_FRACTION * len(frame))
     T = frame[TEMPERATURES].to_numpy()
     T_rpm = np.column_stack([T, frame["spindle_rpm"].to_numpy() / 1000.0])  # rpm in thousands
@@ -157,6 +282,22 @@ def main() -> None:
         [["MLR on all 16 (baseline)", "T1-T16"] + [f"{baseline[ch]:.2f}" for ch in CHANNELS] + ["-"]] + rows,
     )
     print(f"\n† development coefficient < 0: an unstable grey model. Total time {time.perf_counter() - start:.0f} s.")
+
+
+SECTIONS = {"split": split_study, "loro": loro_study, "selection": selection_study, "timing": timing_study}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--section", choices=sorted(SECTIONS), action="append",
+                        help="run only this section (repeatable; default: all)")
+    args = parser.parse_args()
+    warnings.simplefilter("ignore")
+    frame = pd.read_csv(data_dir() / "fl_thermal_part1.csv")
+    for name in args.section or SECTIONS:
+        start = time.perf_counter()
+        SECTIONS[name](frame)
+        print(f"\n[{name}: {time.perf_counter() - start:.0f} s]")
 
 
 if __name__ == "__main__":

@@ -7,7 +7,7 @@ import pytest
 from twin.compensation.studies import cross_condition_study, hybrid_study
 from twin.compensation.train import physics_prediction
 from twin.core.simulate import simulate
-from twin.placement.study import MachineSpec
+from twin.core.variants import MachineSpec
 
 RECORD = """
 [scenario]

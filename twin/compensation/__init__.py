@@ -1,8 +1,9 @@
 """twin.compensation: ``twin train``, ``twin evaluate`` and ``twin study`` — thermal-error compensation models.
 
 - :mod:`twin.compensation.store` — :class:`~twin.compensation.store.CompensationModel`: a fitted model with its
-  channels and preprocessing, saved as JSON; :mod:`twin.compensation.model_names` — the model names;
+  channels and preprocessing, saved as JSON; the model names come from :mod:`models.registry`;
 - :mod:`twin.compensation.train` — load datasets, train, evaluate, and the twin as a physics predictor;
 - :mod:`twin.compensation.studies` — cross-condition, thesis-protocol and hybrid studies;
+  :mod:`twin.compensation.study_report` — their Markdown reports, figures and folders;
 - :mod:`twin.compensation.cli` — the commands.
 """

@@ -5,9 +5,15 @@ the results went.
 """
 from __future__ import annotations
 
-from ..infra.cli_common import add_cluster_options, add_overwrite, read_column_map, split_names
+import sys
+
+from ..infra.cli_common import (
+    add_cluster_options,
+    add_overwrite,
+    read_column_map,
+    split_names,
+)
 from ..infra.progress import progress_bar
-from .model_names import MODEL_NAMES
 
 # Handlers import the library inside them, never up here: start-up time (`twin --help` must not load scipy).
 
@@ -23,7 +29,12 @@ def cmd_train(args):
 
     cm = train(args.datasets, args.inputs, args.target, model=args.model, params=parse_params(args.param),
                out=args.out, zero_reference=not args.no_zero_reference, reference_samples=args.reference_samples,
-               column_map=_column_map(args), nan_policy=args.nan_policy, overwrite=args.overwrite)
+               column_map=_column_map(args), nan_policy=args.nan_policy, overwrite=args.overwrite,
+               select=args.select, allow_unstable=args.allow_unstable)
+    if "selection" in cm.metadata:
+        print(f"--select auto {cm.metadata['selection']['reason']}")
+    if "unstable" in cm.metadata:
+        print(f"WARNING: UNSTABLE MODEL SAVED (--allow-unstable): {cm.metadata['unstable']}", file=sys.stderr)
     print(f"trained {cm.describe()}")
     print(f"on {', '.join(t['label'] for t in cm.training)}"
           f"{' (zero-referenced per dataset)' if cm.preprocessing['zero_reference'] else ''}")
@@ -37,7 +48,8 @@ def cmd_evaluate(args):
     from .train import evaluate
 
     ev = evaluate(args.model, args.datasets, out_dir=args.out, column_map=_column_map(args),
-                  nan_policy=args.nan_policy, plots=not args.no_plots, overwrite=args.overwrite)
+                  nan_policy=args.nan_policy, plots=not args.no_plots, overwrite=args.overwrite,
+                  reference=args.reference, history=args.history)
     print(ev.table(), end="")
     if ev.out_dir is not None:
         print(f"table and plots in {ev.out_dir}/")
@@ -82,7 +94,12 @@ def register(sub):
     t.add_argument("datasets", nargs="+", help=_datasets_help())
     t.add_argument("--inputs", required=True, action="append", help="input channels, comma-separated")
     t.add_argument("--target", required=True, help="target channel, e.g. Z")
-    t.add_argument("--model", default="anfis", help=f"model: {', '.join(sorted(MODEL_NAMES))} (default anfis = ANFIS-FCM)")
+    t.add_argument("--model", default="anfis", help="model name, e.g. mlr, pcr, anfis, gm1n (default anfis = ANFIS-FCM); an unknown name lists "
+                   "them all (the registry is read on use: `--help` must not load numpy)")
+    t.add_argument("--select", choices=("auto",), help="choose the model by blocked cross-validation across the "
+                   "record's speed regimes (leave one block out, rolling origin) and print why; overrides --model")
+    t.add_argument("--allow-unstable", action="store_true",
+                   help="save an unstable grey fit (a < 0 or diverging on its training data) instead of refusing it")
     t.add_argument("--param", action="append", metavar="NAME=VALUE", help="model hyperparameter (repeatable)")
     t.add_argument("--out", required=True, help="model file to write (.json)")
     add_overwrite(t, "file")
@@ -98,6 +115,11 @@ def register(sub):
     e.add_argument("datasets", nargs="+", help=_datasets_help())
     e.add_argument("--out", help="folder for the table and plots (default: print the table only)")
     e.add_argument("--no-plots", action="store_true")
+    e.add_argument("--reference", choices=("own", "train"), default="own",
+                   help="zero reference: each record's own start (default) or the training start, for a record that "
+                   "continues the training one (starts warm)")
+    e.add_argument("--history", help="with --reference train: the training record, over which time-series models "
+                   "run before the evaluated one")
     add_overwrite(e)
     _add_data_options(e)
     e.set_defaults(func=cmd_evaluate)

@@ -33,34 +33,36 @@ from pathlib import Path
 
 import numpy as np
 
-import models
 from models.persistence import model_from_document, model_to_document
+from models.registry import is_time_series, registered_models
 
 from ..core.dataset import json_default, project_version
 from ..errors import TwinInputError
-from .model_names import MODEL_NAMES
 
 FORMAT = "thermal-twin-compensation-model"
 FORMAT_VERSION = 1
 
-#: Grey time-series models: coefficients per sample, trained on one contiguous, evenly sampled record.
-TIME_SERIES_MODELS = {"GM0NRegressor", "GM1NRegressor", "GMCRegressor", "GNNMCIRegressor", "AGOANFISRegressor"}
 
+def make_estimator(name: str, params: dict | None = None) -> object:
+    """An unfitted estimator by model name (see :mod:`models.registry`) with hyperparameters overridden.
 
-def make_estimator(name, params=None):
-    """An unfitted estimator by model name (see :data:`MODEL_NAMES`) with hyperparameters overridden."""
+    Raises
+    ------
+    TwinInputError
+        For an unknown model name or a parameter the model does not have; both list what there is.
+    """
     key = str(name).lower()
-    if key not in MODEL_NAMES:
-        raise TwinInputError(f"unknown model {name!r}; available: {sorted(MODEL_NAMES)}")
-    cls_name, defaults = MODEL_NAMES[key]
-    cls = getattr(models, cls_name)
-    merged = {**defaults, **(params or {})}
-    valid = cls().get_params(deep=False)
+    known = registered_models()
+    if key not in known:
+        raise TwinInputError(f"unknown model {name!r}; available: {sorted(known)}")
+    entry = known[key]
+    merged = {**entry.defaults, **(params or {})}
+    valid = entry.cls().get_params(deep=False)
     unknown = sorted(set(merged) - set(valid))
     if unknown:
-        raise TwinInputError(f"model {name!r} ({cls_name}) has no parameter(s) {unknown}; "
+        raise TwinInputError(f"model {name!r} ({entry.cls.__name__}) has no parameter(s) {unknown}; "
                              f"parameters: {sorted(valid)}")
-    return cls(**merged)
+    return entry.cls(**merged)
 
 
 def parse_params(items):
@@ -150,7 +152,7 @@ class CompensationModel:
 
     @property
     def is_time_series(self):
-        return type(self.estimator).__name__ in TIME_SERIES_MODELS
+        return is_time_series(self.estimator)
 
     def describe(self):
         kind = "grey time-series" if self.is_time_series else "static"
@@ -212,28 +214,10 @@ class CompensationModel:
         return path
 
     @classmethod
-    def load(cls, path):
+    def load(cls, path: Path | str) -> CompensationModel:
         """Read a model written by :meth:`save`; a wrong format or version is a clear error."""
         path = Path(path)
-        if not path.exists():
-            raise TwinInputError(f"{path}: model file not found")
-        try:
-            doc = json.loads(path.read_text(encoding="utf-8"))
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise TwinInputError(f"{path}: not a JSON model file ({exc})") from None
-        if not isinstance(doc, dict) or doc.get("format") != FORMAT:
-            got = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
-            hint = " (a bare models.save_model file? train it with `twin train`)" \
-                if isinstance(doc, dict) and doc.get("format") == "thermal-twin-model" else ""
-            raise TwinInputError(f"{path}: format {got!r} is not {FORMAT!r}{hint}")
-        if doc.get("version") != FORMAT_VERSION:
-            raise TwinInputError(f"{path}: compensation-model version {doc.get('version')!r} was written by "
-                                 f"project version {doc.get('project_version', '?')}; this version "
-                                 f"({project_version()}) reads version {FORMAT_VERSION} only — retrain it")
-        missing = [k for k in ("model_name", "inputs", "input_units", "target", "target_unit", "estimator")
-                   if k not in doc]
-        if missing:
-            raise TwinInputError(f"{path}: model file lacks field(s) {missing}")
+        doc = _read_document(path)
         try:
             estimator = model_from_document(doc["estimator"], f"{path} [estimator]")
         except ValueError as exc:
@@ -243,18 +227,32 @@ class CompensationModel:
                    doc.get("sampling_interval_s"), dict(doc.get("metadata") or {}))
 
 
-def fit_compensation_model(datasets, inputs, target, model="anfis", params=None, zero_reference=True,
-                           reference_samples=1):
-    """Fit a :class:`CompensationModel` on one or more datasets.
+def _read_document(path):
+    """The JSON document of a compensation-model file, its format, version and fields checked."""
+    if not path.exists():
+        raise TwinInputError(f"{path}: model file not found")
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise TwinInputError(f"{path}: not a JSON model file ({exc})") from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        got = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
+        hint = " (a bare models.save_model file? train it with `twin train`)" \
+            if isinstance(doc, dict) and doc.get("format") == "thermal-twin-model" else ""
+        raise TwinInputError(f"{path}: format {got!r} is not {FORMAT!r}{hint}")
+    if doc.get("version") != FORMAT_VERSION:
+        raise TwinInputError(f"{path}: compensation-model version {doc.get('version')!r} was written by "
+                             f"project version {doc.get('project_version', '?')}; this version "
+                             f"({project_version()}) reads version {FORMAT_VERSION} only — retrain it")
+    missing = [k for k in ("model_name", "inputs", "input_units", "target", "target_unit", "estimator")
+               if k not in doc]
+    if missing:
+        raise TwinInputError(f"{path}: model file lacks field(s) {missing}")
+    return doc
 
-    Static models (MLR, PCR, ANN, ANFIS) are fitted on the rows of all
-    datasets, each referenced to its own start; grey time-series models take
-    one evenly sampled dataset.
-    """
-    datasets = list(datasets)
-    if not datasets:
-        raise TwinInputError("no training dataset given")
-    inputs = list(inputs)
+
+def _check_channel_choice(inputs, target):
+    """Refuse no inputs, an input given twice, or the target among the inputs."""
     if not inputs:
         raise TwinInputError("no input channel given")
     repeated = sorted({n for n in inputs if inputs.count(n) > 1})
@@ -263,9 +261,10 @@ def fit_compensation_model(datasets, inputs, target, model="anfis", params=None,
                              "channel")
     if target in inputs:
         raise TwinInputError(f"the target {target!r} is also an input")
-    for ds in datasets:
-        check_reference_samples(reference_samples, len(ds), dataset_label(ds))
-    estimator = make_estimator(model, params)
+
+
+def _channel_units(datasets, inputs, target):
+    """Units of the inputs and the target in the first dataset; every other dataset must have the same."""
     first = datasets[0]
     check_channels(first, inputs, role="input")
     check_channels(first, [target], role="target")
@@ -274,6 +273,45 @@ def fit_compensation_model(datasets, inputs, target, model="anfis", params=None,
     for ds in datasets[1:]:
         check_channels(ds, inputs, units, "input")
         check_channels(ds, [target], [target_unit], "target")
+    return units, target_unit
+
+
+def fit_compensation_model(datasets: list, inputs: list[str], target: str, model: str = "anfis",
+                           params: dict | None = None, zero_reference: bool = True,
+                           reference_samples: int = 1) -> CompensationModel:
+    """Fit a :class:`CompensationModel` on one or more datasets.
+
+    Static models (MLR, PCR, ANN, ANFIS) are fitted on the rows of all
+    datasets, each referenced to its own start; grey time-series models take
+    one evenly sampled dataset.
+
+    Parameters
+    ----------
+    datasets : list of Dataset
+        Training records.
+    inputs : list of str
+        Input channels (their units are kept in the model and checked on use).
+    target : str
+        Target channel (µm for a drift axis).
+    model, params
+        Model name (see :mod:`models.registry`) and hyperparameters overriding its defaults.
+    zero_reference, reference_samples
+        Reference inputs and target to the mean of their first ``reference_samples`` rows.
+
+    Raises
+    ------
+    TwinInputError
+        For missing or repeated channels, unit mismatches, an unknown model, or a fit that fails.
+    """
+    datasets = list(datasets)
+    if not datasets:
+        raise TwinInputError("no training dataset given")
+    inputs = list(inputs)
+    _check_channel_choice(inputs, target)
+    for ds in datasets:
+        check_reference_samples(reference_samples, len(ds), dataset_label(ds))
+    estimator = make_estimator(model, params)
+    units, target_unit = _channel_units(datasets, inputs, target)
     prep = {"zero_reference": bool(zero_reference), "reference_samples": int(reference_samples),
             "convention": "inputs and target minus their value at the start of each dataset"
             if zero_reference else "raw values"}
@@ -284,7 +322,9 @@ def fit_compensation_model(datasets, inputs, target, model="anfis", params=None,
             raise TwinInputError(f"model {model!r} is a grey time-series model and trains on one contiguous "
                                  f"record; got {len(datasets)} datasets (use a static model: mlr, pcr, ann, "
                                  "anfis)")
-        dt = sampling_interval(first, strict=True)
+        dt = sampling_interval(datasets[0], strict=True)
+        if "sampling_interval" in estimator.get_params(deep=False):  # the grey-box model's time constants are in s
+            estimator.set_params(sampling_interval=dt)
     X = np.vstack([cm.features(ds) for ds in datasets])
     y = np.concatenate([cm.target_values(ds) for ds in datasets])
     try:
@@ -295,6 +335,10 @@ def fit_compensation_model(datasets, inputs, target, model="anfis", params=None,
         raise TwinInputError(f"cannot fit {model!r} on {X.shape[0]} rows × {X.shape[1]} inputs: {exc}{hint}") \
             from None
     cm.sampling_interval_s = dt
+    # raw values at the training start: `twin evaluate --reference train` continues from them
+    k = int(reference_samples)
+    cm.preprocessing["training_reference"] = {"inputs": datasets[0].matrix(inputs)[:k].mean(axis=0).tolist(),
+                                              "target": float(np.mean(datasets[0][target][:k]))}
     cm.training = [{"label": dataset_label(ds), "rows": len(ds), "source": ds.metadata.get("source"),
                     "scenario": ds.metadata.get("scenario"), "kind": ds.metadata.get("kind"),
                     "duration_h": float((ds.time_s[-1] - ds.time_s[0]) / 3600.0)} for ds in datasets]

@@ -35,6 +35,7 @@ from ..infra.cli_common import split_names
 from ..infra.outdir import atomic_directory, check_output_file, check_output_folder
 from ..infra.tables import markdown_table
 from ..rom.reduction import cached_rom
+from .protocol import auto_select, continued_prediction, stability_problem
 from .store import CompensationModel, dataset_label, fit_compensation_model
 
 METRIC_COLUMNS = ("rmse", "nse", "r", "max_residual", "improvement_percent", "uncompensated_max", "rows")
@@ -114,11 +115,19 @@ class Evaluation:
 
 
 def train(datasets, inputs, target, model="anfis", params=None, out=None, zero_reference=True,
-          reference_samples=1, column_map=None, nan_policy="error", machine=None, overwrite=False):
+          reference_samples=1, column_map=None, nan_policy="error", machine=None, overwrite=False,
+          select=None, allow_unstable=False):
     """Fit a compensation model on datasets (paths, scenario names or :class:`Dataset`) and save it to ``out``.
 
     ``out`` is checked before the work (:func:`twin.infra.outdir.check_output_file`): an existing
     file is replaced only with ``overwrite``, and never a dataset of the training.
+
+    ``select="auto"`` chooses the model by blocked cross-validation across the
+    record's operating regimes (:func:`~twin.compensation.protocol.auto_select`;
+    the reason is in ``model.metadata["selection"]``). An unstable fit
+    (:func:`~twin.compensation.protocol.stability_problem`) is refused with a
+    :class:`TwinInputError` unless ``allow_unstable`` (then it is saved and the
+    problem kept in ``model.metadata["unstable"]``).
 
     Returns the :class:`CompensationModel`; its training metrics are in
     ``model.metadata["training_metrics"]``.
@@ -126,29 +135,51 @@ def train(datasets, inputs, target, model="anfis", params=None, out=None, zero_r
     if out is not None:
         check_output_file(out, overwrite, inputs=_input_files(datasets))
     loaded = [load_dataset(d, column_map, nan_policy, machine) for d in datasets]
+    selection = None
+    if select is not None:
+        if select != "auto":
+            raise TwinInputError(f"--select {select!r}: the only selection rule is 'auto'")
+        model, selection = auto_select(loaded, split_names(inputs), target, zero_reference=zero_reference)
     cm = fit_compensation_model(loaded, split_names(inputs), target, model, params, zero_reference,
                                 reference_samples)
+    if selection is not None:
+        cm.metadata["selection"] = {"reason": selection.reason, "ranking": selection.ranking,
+                                    "mean_rmse": selection.mean_rmse, "folds": selection.folds}
     cm.metadata["training_metrics"] = {dataset_label(ds): score(cm.target_values(ds), cm.predict(ds))
                                        for ds in loaded}
+    problem = stability_problem(cm, loaded)
+    if problem is not None:
+        if not allow_unstable:
+            raise TwinInputError(f"UNSTABLE MODEL REFUSED (not saved): {problem}; pass --allow-unstable to save it "
+                                 "anyway")
+        cm.metadata["unstable"] = problem
     if out is not None:
         cm.save(out)
     return cm
 
 
 def evaluate(model, datasets, out_dir=None, column_map=None, nan_policy="error", machine=None, plots=True,
-             overwrite=False):
+             overwrite=False, reference="own", history=None):
     """Score a model (a :class:`CompensationModel` or a saved model path) on datasets.
 
     Writes (when ``out_dir`` is given) ``evaluation.md``, ``evaluation.csv``,
     ``evaluation.json`` and ``<dataset>_<target>.png`` (measured vs predicted
     change and the residual).  A dataset whose channels do not match the
     model's raises a :class:`TwinInputError` naming them.
+
+    ``reference="train"``: each dataset continues the training record (it may
+    start warm), so it is referenced to the training start, and time-series
+    models run over ``history`` (the training record) and then the dataset
+    (:func:`~twin.compensation.protocol.continued_prediction`).
     """
+    if reference not in ("own", "train"):
+        raise TwinInputError(f"--reference {reference!r}: choose 'own' (each record's start) or 'train'")
     check_output_folder(out_dir, overwrite, inputs=_input_files([model, *datasets]))
     cm = model if isinstance(model, CompensationModel) else CompensationModel.load(model)
     loaded = [load_dataset(d, column_map, nan_policy, machine) for d in datasets]
     for ds in loaded:
         cm.check(ds)
+    past = load_dataset(history, column_map, nan_policy, machine) if history is not None else None
     rows, predictions = [], {}
     seen = {}
     for ds in loaded:
@@ -156,8 +187,14 @@ def evaluate(model, datasets, out_dir=None, column_map=None, nan_policy="error",
         seen[label] = seen.get(label, 0) + 1
         if seen[label] > 1:
             label = f"{label}_{seen[label]}"
-        y = cm.target_values(ds)
-        p = cm.predict(ds)
+        try:
+            y, p = continued_prediction(cm, ds, past) if reference == "train" else (cm.target_values(ds),
+                                                                                    cm.predict(ds))
+        except TwinInputError:
+            raise
+        except ValueError as exc:
+            hint = "" if reference == "train" else " (a record that continues the training one: --reference train)"
+            raise TwinInputError(f"{label}: {cm.model_name} cannot predict it: {exc}{hint}") from None
         rows.append({"dataset": label, **score(y, p)})
         predictions[label] = (ds.time_s, y, p)
     out_dir = Path(out_dir) if out_dir is not None else None

@@ -1,0 +1,392 @@
+"""Dynamic grey-box thermal model: a low-order RC network driven by spindle heat and temperatures.
+
+Model (continuous time, modal form of an RC network of order ``n_poles``)::
+
+    P(t)      = (n(t) / speed_reference)^b                  spindle heat, b fitted (P ∝ n^b)
+    u(t)      = [P, ΔT_1 … ΔT_q]                             ΔT_j = T_j(t) − T_j(first row), K
+    ẋ_ij      = −λ_i (x_ij − u_j),   λ_i = exp(−θ_i) > 0     one first-order lag per pole i and input j
+    y(t)      = c₀ + Σ_ij g_ij x_ij + Σ_j d_j ΔT_j           output, e.g. a drift in µm
+
+The poles ``−λ_i = −1/τ_i`` are real and negative by construction (the time
+constants ``τ_i = exp(θ_i)`` are the fitted parameters, kept inside
+``time_constant_bounds``), so every fitted model is stable: a bounded input
+gives a bounded drift. The gains ``g``, feed-throughs ``d`` (temperature
+inputs only: spindle heat does not move the tool instantly) and offset
+``c₀`` enter linearly. They are solved by least squares for given
+``(θ, b)``, and ``(θ, b)`` minimise the **simulation (output) error** over
+the whole record (variable projection, :func:`scipy.optimize.least_squares`):
+the model is run from the first row, never fed back measured outputs, so
+the fit rewards what a compensation running for hours needs.
+
+Layout of ``X`` (one row per sample, time-ordered):
+
+* column 0: time in s, strictly increasing (the sampling may be irregular);
+  with ``sampling_interval`` set there is no time column, the rows are that
+  many seconds apart and every column below moves one to the left;
+* column 1: spindle speed in rpm (≥ 0), held from one sample to the next;
+* columns 2…: temperatures in °C. ``temperature_inputs`` (column indices,
+  default: every column from 2 not in ``observed``) drive the model, e.g. the
+  ambient; ``observed`` columns are *outputs* of the same network (thermometers
+  on the structure): they are fitted jointly with ``y`` (sharing the poles and
+  the exponent), and ``predict`` then runs the observer form
+  (:meth:`GreyBoxRegressor.predict_filtered`, a :class:`~models.kalman.KalmanFilter`)
+  that fuses them while the model runs. They may hold NaN (a missing reading)
+  at prediction.
+
+``predict(X)`` assumes the machine is in thermal equilibrium with the first
+row of ``X`` (every lag state equals its input there; a spindle running at
+the first row counts as having run at that speed for ever): to continue a
+run, pass the whole history from a rest state and read off the tail.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.signal import lfilter
+from sklearn.base import BaseEstimator, RegressorMixin
+from sklearn.utils.validation import check_array, check_is_fitted
+
+from ._threads import one_blas_thread
+from ._validation import check_n_features, check_positive_int, require_parameters
+from .kalman import KalmanFilter, discretize
+from .registry import register_model
+
+#: relative tolerance under which the steps count as uniform (then a fast recursive filter is used)
+_UNIFORM_STEP = 1e-9
+#: smallest ratio of successive time constants: coinciding poles make the gains ill-posed (two huge,
+#: cancelling gains imitate a derivative that extrapolates wildly)
+_MIN_RATIO = 2.0
+#: start values of the time constants, s (machine-tool structures: minutes to hours); one fit per row
+_STARTS = ((1800.0, 7200.0, 21600.0, 64800.0), (600.0, 3600.0, 14400.0, 57600.0), (3600.0, 21600.0, 86400.0, 345600.0))
+
+
+@register_model({"greybox": {"sampling_interval": 1.0}}, time_series=True)
+class GreyBoxRegressor(RegressorMixin, BaseEstimator):
+    """Grey-box RC-network thermal-drift model, fitted by output-error minimisation.
+
+    Parameters
+    ----------
+    n_poles : int, 1–4
+        Order of the RC network (number of distinct real poles).
+    speed_reference : float, rpm
+        Speed at which the heat input P is 1 (it only scales the gains).
+    exponent : float
+        Exponent b of ``P ∝ n^b``: the start value when ``fit_exponent``, else fixed.
+    fit_exponent : bool
+        Fit b within ``exponent_bounds``.
+    exponent_bounds : (float, float)
+    time_constant_bounds : (float, float), s
+        Every time constant stays inside; the poles are −1/τ.
+    temperature_inputs : tuple of int or None
+        Columns of ``X`` (≥ 2) that drive the model; None = every column from 2 not in ``observed``.
+    observed : tuple of int
+        Columns of ``X`` (≥ 2) modelled as outputs and fused by the observer.
+    observed_weight : float
+        Weight of the observed thermometers in the fit, relative to ``y``
+        (every output's residual is divided by its training standard deviation).
+    process_noise : float
+        Observer process noise, as the stationary variance of each state in
+        units of its input's training variance (dimensionless).
+    max_nfev : int
+        Budget of residual evaluations of the nonlinear fit (per start; three deterministic starts).
+    sampling_interval : float or None, s
+        None: column 0 of X is the time. A number: X has no time column and
+        its rows are this far apart (``twin train`` sets it from the record).
+
+    Attributes
+    ----------
+    time_constants_ : (n_poles,) s, ascending; ``poles_`` = −1/τ (1/s)
+    exponent_ : b
+    gains_ : (n_outputs, n_poles, n_inputs) g (output 0 is y, then the observed columns)
+    feedthrough_ : (n_outputs, n_temperature_inputs) d
+    offset_ : (n_outputs,) c₀
+    output_std_ : (n_outputs,) training RMSE of each output (the observer's measurement noise)
+    input_std_ : (n_inputs,) training standard deviation of each input
+    training_rmse_ : simulation RMSE of y on the training rows
+    y_reference_ : the first training target, so ``predict − y_reference_`` is the predicted change of y
+        since the training start, as for the grey time-series models
+    n_features_in_
+    """
+
+    def __init__(self, n_poles=2, speed_reference=1000.0, exponent=1.0, fit_exponent=True,
+                 exponent_bounds=(0.5, 3.0), time_constant_bounds=(60.0, 1e6), temperature_inputs=None,
+                 observed=(), observed_weight=1.0, process_noise=0.01, max_nfev=200, sampling_interval=None):
+        self.n_poles = n_poles
+        self.speed_reference = speed_reference
+        self.exponent = exponent
+        self.fit_exponent = fit_exponent
+        self.exponent_bounds = exponent_bounds
+        self.time_constant_bounds = time_constant_bounds
+        self.temperature_inputs = temperature_inputs
+        self.observed = observed
+        self.observed_weight = observed_weight
+        self.process_noise = process_noise
+        self.max_nfev = max_nfev
+        self.sampling_interval = sampling_interval
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.regressor_tags.poor_score = True  # a time-series model: random rows are not a record
+        tags.input_tags.allow_nan = True       # observed thermometers may miss readings
+        return tags
+
+    # ------------------------------------------------------------ inputs
+    def _layout(self):
+        """``(time column or None, speed column, first temperature column)`` of the caller's X."""
+        if self.sampling_interval is None:
+            return 0, 1, 2
+        if not (isinstance(self.sampling_interval, (int, float)) and 0 < self.sampling_interval < np.inf):
+            raise ValueError(f"GreyBoxRegressor: sampling_interval must be a positive number of s or None, "
+                             f"got {self.sampling_interval!r}.")
+        return None, 0, 1
+
+    def _columns(self, n_features):
+        """``(temperature input columns, observed columns)`` of the caller's X, checked against its width."""
+        time_col, _, first = self._layout()
+        names = "column 0 is time_s, column 1 spindle_rpm" if time_col == 0 else "column 0 is spindle_rpm"
+        if n_features < first:
+            raise ValueError(f"GreyBoxRegressor: X needs at least {first} columns ({names}, then temperatures), "
+                             f"got {n_features}.")
+        observed = tuple(int(c) for c in self.observed)
+        if self.temperature_inputs is None:
+            inputs = tuple(c for c in range(first, n_features) if c not in observed)
+        else:
+            inputs = tuple(int(c) for c in self.temperature_inputs)
+        for name, cols in (("temperature_inputs", inputs), ("observed", observed)):
+            bad = [c for c in cols if not first <= c < n_features]
+            if bad:
+                raise ValueError(f"GreyBoxRegressor: {name} has column {bad[0]}, but temperature columns are "
+                                 f"{first}..{n_features - 1} ({names}).")
+        if set(inputs) & set(observed):
+            raise ValueError(f"GreyBoxRegressor: columns {sorted(set(inputs) & set(observed))} are both inputs and observed.")
+        return inputs, observed
+
+    def _check_x(self, X, inputs, allow_nan_in=()):
+        """``(time s, speed rpm, X)`` with finite time/speed/inputs, strictly increasing time, speed >= 0."""
+        time_col, speed_col, _ = self._layout()
+        must_be_finite = [c for c in (time_col, speed_col) if c is not None] + list(inputs)
+        bad = ~np.isfinite(X[:, must_be_finite])
+        if bad.any():
+            row, col = np.argwhere(bad)[0]
+            raise ValueError(
+                f"GreyBoxRegressor: X row {row}, column {must_be_finite[col]} is {X[row, must_be_finite[col]]}; "
+                "time, speed and temperature inputs must be finite."
+            )
+        others = [c for c in range(X.shape[1]) if c not in must_be_finite and c not in allow_nan_in]
+        if others and not np.all(np.isfinite(X[:, others])):
+            raise ValueError("GreyBoxRegressor: X has NaN or inf in a column the model does not use as an input.")
+        if time_col is None:
+            time = np.arange(len(X)) * float(self.sampling_interval)
+        else:
+            time = X[:, time_col]
+            steps = np.diff(time)
+            if np.any(steps <= 0):
+                k = int(np.argmax(steps <= 0))
+                raise ValueError(f"GreyBoxRegressor: time (column 0) must increase strictly, but row {k + 1} has "
+                                 f"{time[k + 1]} s after {time[k]} s.")
+        speed = X[:, speed_col]
+        if np.any(speed < 0):
+            k = int(np.argmax(speed < 0))
+            raise ValueError(f"GreyBoxRegressor: spindle speed (column {speed_col}) must be >= 0 rpm, row {k} has "
+                             f"{speed[k]}.")
+        return time, speed
+
+    def _inputs(self, X, speed, inputs, exponent):
+        """``u = [P, ΔT…]`` (n, 1 + q): heat from the speed, temperatures referenced to the first row."""
+        heat = (speed / self.speed_reference) ** exponent
+        return np.column_stack([heat, X[:, inputs] - X[0, inputs]])
+
+    # ------------------------------------------------------------ simulation
+    @staticmethod
+    def _states(time, U, lam):
+        """Lag states x_ij (n, n_poles, m) with ZOH inputs, starting in equilibrium x_ij(t₀) = u_j(t₀)."""
+        steps = np.diff(time)
+        n, m = U.shape
+        S = np.empty((n, len(lam), m))
+        if np.ptp(steps) <= _UNIFORM_STEP * steps[0]:
+            for i, rate in enumerate(lam):
+                a = np.exp(-rate * steps[0])
+                S[:, i, :] = lfilter([0.0, 1.0 - a], [1.0, -a], U, axis=0, zi=U[:1])[0]
+            return S
+        decay = np.exp(-np.outer(steps, lam))[:, :, None]  # (n-1, n_poles, 1)
+        S[0] = U[0]
+        for k in range(n - 1):
+            S[k + 1] = decay[k] * S[k] + (1.0 - decay[k]) * U[k]
+        return S
+
+    @staticmethod
+    def _design(S, U):
+        """Regressors ``[1, x_ij…, ΔT_j…]`` for the linear parameters."""
+        return np.column_stack([np.ones(len(U)), S.reshape(len(U), -1), U[:, 1:]])
+
+    def _unpack(self, theta):
+        # θ = [log τ₁, log(τ₂/τ₁), …]: the ratios are kept >= _MIN_RATIO, so no two poles coincide
+        lam = np.exp(-np.cumsum(theta[: self.n_poles]))
+        exponent = theta[self.n_poles] if self.fit_exponent else float(self.exponent)
+        return lam, exponent
+
+    # ------------------------------------------------------------ fit
+    @one_blas_thread
+    def fit(self, X, y, sample_weight=None):
+        """Fit on a time-ordered record; ``sample_weight`` (≥ 0) weights the residuals.
+
+        A weight of 0 leaves a row's target out of the fit while the model
+        still runs through it (its inputs are known): blocked cross-validation
+        holds out a middle block this way.
+        """
+        n_poles = check_positive_int(self.n_poles, "n_poles")
+        if n_poles > 4:
+            raise ValueError(f"GreyBoxRegressor: n_poles must be 1-4, got {n_poles}.")
+        lo, hi = (float(v) for v in self.time_constant_bounds)
+        if not 0 < lo < hi < np.inf:
+            raise ValueError(f"GreyBoxRegressor: time_constant_bounds must be 0 < low < high s, got {self.time_constant_bounds!r}.")
+        X = check_array(X, dtype=np.float64, ensure_all_finite=False, ensure_min_samples=2)
+        inputs, observed = self._columns(X.shape[1])
+        y = check_array(np.asarray(y, float), ensure_2d=False, dtype=np.float64)
+        if y.ndim != 1 or len(y) != len(X):
+            raise ValueError(f"GreyBoxRegressor: y must be 1-D with one value per row of X ({len(X)}), got shape {y.shape}.")
+        w = np.ones(len(y)) if sample_weight is None else np.asarray(sample_weight, float)
+        if w.shape != y.shape or not np.all(np.isfinite(w)) or np.any(w < 0):
+            raise ValueError("GreyBoxRegressor: sample_weight must be finite, >= 0 and one per row of X.")
+        n_outputs, m = 1 + len(observed), 1 + len(inputs)
+        n_linear = 1 + n_poles * m + len(inputs)
+        n_parameters = n_outputs * n_linear + n_poles + int(bool(self.fit_exponent))
+        require_parameters(int(np.count_nonzero(w)), n_parameters, "GreyBoxRegressor",
+                           hint=" Use fewer poles or temperature inputs.")
+        time, speed = self._check_x(X, inputs)
+        outputs = np.column_stack([y, X[:, observed]])
+
+        used = w > 0
+        scale = outputs[used].std(axis=0)
+        scale[scale == 0] = 1.0
+        weights = np.sqrt(w)[:, None] / scale * np.r_[1.0, np.full(n_outputs - 1, float(self.observed_weight))]
+
+        def linear(theta):
+            lam, exponent = self._unpack(theta)
+            U = self._inputs(X, speed, inputs, exponent)
+            Phi = self._design(self._states(time, U, lam), U)
+            norm = np.sqrt(np.sum(Phi[used] ** 2, axis=0))
+            norm[norm == 0] = 1.0
+            coef = np.linalg.lstsq((Phi / norm)[used] * np.sqrt(w[used])[:, None],
+                                   outputs[used] * np.sqrt(w[used])[:, None], rcond=None)[0] / norm[:, None]
+            return coef, Phi, U
+
+        def residuals(theta):
+            coef, Phi, _ = linear(theta)
+            return ((Phi @ coef - outputs) * weights)[used].ravel()
+
+        log_lo, log_hi = np.log(lo), np.log(hi)
+        if n_poles > 1 and log_hi - log_lo <= (n_poles - 1) * np.log(_MIN_RATIO):
+            raise ValueError(f"GreyBoxRegressor: time_constant_bounds {self.time_constant_bounds!r} are too narrow "
+                             f"for {n_poles} poles {_MIN_RATIO:g}x apart.")
+        # τ₁ in [lo, hi]; each further ratio in [_MIN_RATIO, hi/lo] (the largest τ may pass hi: still stable)
+        lower = np.r_[log_lo, np.full(n_poles - 1, np.log(_MIN_RATIO))]
+        upper = np.r_[log_hi, np.full(n_poles - 1, log_hi - log_lo)]
+        if self.fit_exponent:
+            b_lo, b_hi = (float(v) for v in self.exponent_bounds)
+            lower, upper = np.r_[lower, b_lo], np.r_[upper, b_hi]
+        budget = check_positive_int(self.max_nfev, "max_nfev")
+        best = None
+        for taus in _STARTS:  # deterministic restarts: the simulation error has local minima
+            start = np.diff(np.log(taus[:n_poles]), prepend=0.0)
+            if self.fit_exponent:
+                start = np.r_[start, float(self.exponent)]
+            start = np.clip(start, lower + 1e-9, upper - 1e-9)
+            result = least_squares(residuals, start, bounds=(lower, upper), max_nfev=budget)
+            if best is None or result.cost < best.cost:
+                best = result
+        theta = best.x
+        coef, Phi, U = linear(theta)
+        lam, exponent = self._unpack(theta)
+
+        self.time_constants_ = 1.0 / lam
+        self.poles_ = -lam
+        self.exponent_ = float(exponent)
+        self.offset_ = coef[0].copy()
+        self.gains_ = coef[1: 1 + n_poles * m].T.reshape(n_outputs, n_poles, m).copy()
+        self.feedthrough_ = coef[1 + n_poles * m:].T.copy()
+        fitted = Phi @ coef
+        self.output_std_ = np.sqrt(np.average((fitted - outputs) ** 2, axis=0, weights=w))
+        self.input_std_ = U[used].std(axis=0)
+        self.training_rmse_ = float(self.output_std_[0])
+        self.y_reference_ = float(y[0])
+        self.n_features_in_ = X.shape[1]
+        self.n_iterations_ = int(best.nfev)
+        return self
+
+    def _fitted_inputs(self, X, allow_nan_observed=False):
+        check_is_fitted(self, "time_constants_")
+        X = check_array(X, dtype=np.float64, ensure_all_finite=False, ensure_min_samples=2)
+        check_n_features(self, X)
+        inputs, observed = self._columns(X.shape[1])
+        time, speed = self._check_x(X, inputs, allow_nan_in=observed if allow_nan_observed else ())
+        return X, time, observed, self._inputs(X, speed, inputs, self.exponent_)
+
+    def predict_outputs(self, X):
+        """Simulated outputs (n, 1 + n_observed): y, then the observed thermometers (°C)."""
+        _, time, _, U = self._fitted_inputs(X, allow_nan_observed=True)
+        S = self._states(time, U, -self.poles_)
+        return (self.offset_ + np.einsum("kij,nij->nk", self.gains_, S) + U[:, 1:] @ self.feedthrough_.T)
+
+    def predict(self, X):
+        """y from equilibrium at the first row of ``X``: simulated, or observed (see below).
+
+        Without ``observed`` columns this is the pure simulation (no measured
+        output is used); with them it is :meth:`predict_filtered`, which fuses
+        those thermometers as the model runs.
+        """
+        if self.observed:
+            return self.predict_filtered(X)
+        return self.predict_outputs(X)[:, 0]
+
+    # ------------------------------------------------------------ observer
+    def state_space(self):
+        """Continuous ``(A, B, C, D)`` with inputs ``[P, ΔT…, 1]`` and outputs ``[y, observed…]``.
+
+        States are ordered pole-major (x_00, x_01, …); the last input is a
+        constant 1 carrying the offsets.
+        """
+        check_is_fitted(self, "time_constants_")
+        n_outputs, n_poles, m = self.gains_.shape
+        lam = np.repeat(-self.poles_, m)
+        A = np.diag(-lam)
+        B = np.zeros((n_poles * m, m + 1))
+        B[np.arange(n_poles * m), np.tile(np.arange(m), n_poles)] = lam
+        C = self.gains_.reshape(n_outputs, -1)
+        D = np.column_stack([np.zeros(n_outputs), self.feedthrough_, self.offset_])
+        return A, B, C, D
+
+    def predict_filtered(self, X, return_std=False):
+        """y estimated by the Kalman observer that fuses the ``observed`` thermometers (NaN = missing).
+
+        The model runs as in :meth:`predict`; at every row the readings of the
+        observed columns correct the states (measurement noise: their training
+        RMSE; process noise: ``process_noise``). Without observed columns this
+        is the simulation. Returns y, and its standard deviation with ``return_std``.
+        """
+        X, time, observed, U = self._fitted_inputs(X, allow_nan_observed=True)
+        A, B, C, D = self.state_space()
+        _, n_poles, m = self.gains_.shape
+        lam = np.repeat(-self.poles_, m)
+        intensity = np.diag(2.0 * lam * self.process_noise * np.tile(np.maximum(self.input_std_, 1e-12) ** 2, n_poles))
+        U1 = np.column_stack([U, np.ones(len(U))])
+        kf = KalmanFilter(np.eye(len(lam)), B, C[1:], D[1:], np.zeros((len(lam), len(lam))),
+                          np.maximum(self.output_std_[1:], 1e-12) ** 2)
+        x0 = np.repeat(U[:1], n_poles, axis=0).ravel()
+        kf.reset(x0, np.diag(np.diag(intensity) / (2.0 * lam)))
+        steps = np.diff(time)
+        cache = {}
+        mean, std = np.empty(len(X)), np.empty(len(X))
+        for k in range(len(X)):
+            if observed:
+                kf.update(X[k, list(observed)], U1[k])
+            z, s = kf.estimate(C[:1], D[:1], U1[k])
+            mean[k], std[k] = z[0], s[0]
+            if k + 1 < len(X):
+                dt = float(steps[k])
+                if dt not in cache:
+                    cache[dt] = discretize(A, B, dt, intensity)
+                kf.F, kf.G, kf.Q = cache[dt]
+                kf.predict(U1[k])
+        return (mean, std) if return_std else mean

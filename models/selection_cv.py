@@ -1,0 +1,214 @@
+"""Model selection by blocked cross-validation across operating regimes (arrays only).
+
+A compensation model earns its keep on conditions it was not trained on, so
+candidates are scored on whole *regime blocks* they did not see, never on
+shuffled rows or on a tail of the same regime:
+
+* **regime blocks** (:func:`regime_blocks`): a block starts where the spindle
+  starts a run (or changes speed while running) and holds the run and the
+  stop after it; rows before the first run join the first block;
+* **leave one block out**: train on every other block, test on the block;
+* **rolling origin**: train on blocks ``0..k-1``, test on block ``k``
+  (a forecast into the next, unseen regime);
+* the score of a candidate is its mean test RMSE over all folds of both
+  schemes (the worst fold is reported too); the ranking is by that score and
+  a candidate that diverges (non-finite prediction) ranks last.
+
+How a fold is fitted depends on the kind of model (:func:`model_kind`):
+
+* ``"static"`` (MLR, PCR, ANN, ANFIS): fit on the training rows, predict the test rows;
+* ``"series"`` (the grey GM/GMC/GNNMCI/AGO models): fit on the training rows
+  joined in time order (a left-out middle block leaves a seam), then run over
+  the whole history up to the end of the test block and read off the block;
+* ``"weighted"`` (:class:`~models.greybox.GreyBoxRegressor`): run over the
+  whole history with the test block's targets weighted 0, so the simulation
+  passes through the block on its known inputs (speed, ambient) without
+  seeing its drift, and read off the block.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.stats import spearmanr
+from sklearn.base import clone
+
+from .grey import GreySeriesRegressor
+from .greybox import GreyBoxRegressor
+from .metrics import rmse
+
+SCHEMES = ("leave-one-block-out", "rolling-origin")
+
+
+def regime_blocks(speed, min_rows: int = 2) -> list[tuple[int, int]]:
+    """Row ranges ``[start, stop)`` of the operating-regime blocks of a speed record (rpm).
+
+    A block starts at every run start (speed from 0 to > 0, or a new speed
+    while running) and ends where the next one starts. Blocks shorter than
+    ``min_rows`` are merged into the previous one.
+    """
+    speed = np.asarray(speed, float)
+    if speed.ndim != 1 or len(speed) < 2 or not np.all(np.isfinite(speed)):
+        raise ValueError("regime_blocks: speed must be a finite 1-D series of at least 2 samples (rpm).")
+    running = speed > 0
+    change = [int(s) for s in np.flatnonzero((speed[1:] != speed[:-1]) & running[1:]) + 1]
+    if not running[0]:
+        change = change[1:]  # the rows before the first run join the first block
+    edges = [0]
+    for s in change:
+        if s - edges[-1] >= min_rows:
+            edges.append(s)
+    stops = edges[1:] + [len(speed)]
+    return list(zip(edges, stops))
+
+
+@dataclass(frozen=True)
+class Fold:
+    """One held-out block: the rows it tests and the rows that train for it."""
+
+    scheme: str
+    test_block: int
+    test: tuple[int, int]      #: [start, stop) of the test rows
+    train: np.ndarray = field(compare=False)  #: boolean mask of the training rows
+
+    @property
+    def name(self) -> str:
+        return f"{self.scheme} block {self.test_block + 1}"
+
+
+def blocked_folds(blocks, schemes=SCHEMES) -> list[Fold]:
+    """Folds of leave-one-block-out and rolling origin over ``blocks`` (from :func:`regime_blocks`)."""
+    unknown = sorted(set(schemes) - set(SCHEMES))
+    if unknown:
+        raise ValueError(f"blocked_folds: unknown scheme {unknown[0]!r}; known: {', '.join(SCHEMES)}.")
+    if len(blocks) < 2:
+        raise ValueError(f"blocked cross-validation needs at least 2 operating-regime blocks, got {len(blocks)}.")
+    n = blocks[-1][1]
+    folds = []
+    for scheme in schemes:
+        tests = range(len(blocks)) if scheme == "leave-one-block-out" else range(1, len(blocks))
+        for b in tests:
+            train = np.zeros(n, bool)
+            if scheme == "leave-one-block-out":
+                train[:] = True
+                train[blocks[b][0]: blocks[b][1]] = False
+            else:
+                train[: blocks[b][0]] = True
+            folds.append(Fold(scheme, b, blocks[b], train))
+    return folds
+
+
+def model_kind(estimator) -> str:
+    """``"weighted"``, ``"series"`` or ``"static"``: how a fold fits it (see the module docstring)."""
+    if isinstance(estimator, GreyBoxRegressor):
+        return "weighted"
+    if isinstance(estimator, GreySeriesRegressor):
+        return "series"
+    return "static"
+
+
+def fold_prediction(estimator, X, y, fold: Fold) -> np.ndarray:
+    """Fit a clone of ``estimator`` for ``fold`` and return its prediction of the test rows."""
+    model = clone(estimator)
+    start, stop = fold.test
+    kind = model_kind(model)
+    if kind == "static":
+        model.fit(X[fold.train], y[fold.train])
+        return model.predict(X[start:stop])
+    if kind == "series":
+        model.fit(X[fold.train], y[fold.train])
+        return model.predict(X[:stop])[start:]
+    end = max(stop, int(np.flatnonzero(fold.train)[-1]) + 1)
+    model.fit(X[:end], y[:end], sample_weight=fold.train[:end].astype(float))
+    return model.predict(X[:stop])[start:]
+
+
+@dataclass
+class Selection:
+    """Outcome of :func:`select_by_blocked_cv`."""
+
+    ranking: list[str]              #: candidate names, best first
+    mean_rmse: dict[str, float]     #: mean held-out-block RMSE per candidate (inf: diverged somewhere)
+    worst_rmse: dict[str, float]    #: worst fold per candidate
+    fold_rmse: dict[str, list[float]]  #: per fold, in the order of ``folds``
+    folds: list[str]                #: fold names
+    reason: str                     #: one paragraph: what was chosen and why
+
+    @property
+    def best(self) -> str:
+        return self.ranking[0]
+
+
+def _fold_score(y_true, pred) -> float:
+    pred = np.asarray(pred, float)
+    if not np.all(np.isfinite(pred)):
+        return np.inf
+    return rmse(y_true, pred)
+
+
+def select_by_blocked_cv(candidates, X, y, speed, schemes=SCHEMES, unit="µm", min_rows: int = 2) -> Selection:
+    """Rank candidate models by blocked cross-validation across the operating regimes of ``speed``.
+
+    Parameters
+    ----------
+    candidates : dict name → (estimator, columns)
+        Unfitted estimators and the columns of ``X`` each one takes.
+    X : (n, d) time-ordered array holding every candidate's columns
+    y : (n,) target (e.g. a drift in µm)
+    speed : (n,) spindle speed, rpm: it defines the regime blocks
+    unit : unit of ``y`` for the reason text
+    """
+    X = np.asarray(X, float)
+    y = np.asarray(y, float)
+    if X.ndim != 2 or y.shape != (len(X),):
+        raise ValueError(f"select_by_blocked_cv: X must be (n, d) and y (n,), got {X.shape} and {y.shape}.")
+    if len(np.asarray(speed)) != len(X):
+        raise ValueError(f"select_by_blocked_cv: speed has {len(np.asarray(speed))} rows, X has {len(X)}.")
+    if not candidates:
+        raise ValueError("select_by_blocked_cv: no candidate models.")
+    folds = blocked_folds(regime_blocks(speed, min_rows), schemes)
+    scores = {}
+    for name, (estimator, columns) in candidates.items():
+        Xc = X[:, list(columns)]
+        row = []
+        for fold in folds:
+            try:
+                pred = fold_prediction(estimator, Xc, y, fold)
+            except (ValueError, np.linalg.LinAlgError, FloatingPointError):
+                row.append(np.inf)  # e.g. too few training rows for its parameters: cannot be chosen
+                continue
+            row.append(_fold_score(y[fold.test[0]: fold.test[1]], pred))
+        scores[name] = row
+    mean = {k: float(np.mean(v)) for k, v in scores.items()}
+    worst = {k: float(np.max(v)) for k, v in scores.items()}
+    ranking = sorted(scores, key=lambda k: (mean[k], worst[k], k))
+    return Selection(ranking, mean, worst, scores, [f.name for f in folds], _reason(ranking, mean, worst, folds, unit))
+
+
+def _reason(ranking, mean, worst, folds, unit) -> str:
+    n_lobo = sum(f.scheme == "leave-one-block-out" for f in folds)
+    best = ranking[0]
+    text = (
+        f"chose {best}: lowest mean RMSE on operating-regime blocks it did not see, "
+        f"{mean[best]:.2f} {unit} over {len(folds)} folds ({n_lobo} leave-one-block-out, "
+        f"{len(folds) - n_lobo} rolling-origin), worst fold {worst[best]:.2f} {unit}"
+    )
+    if len(ranking) > 1:
+        second = ranking[1]
+        text += f"; runner-up {second} {mean[second]:.2f} {unit}"
+    diverged = [k for k in ranking if not np.isfinite(mean[k])]
+    if diverged:
+        text += f"; failed or diverged on some block: {', '.join(diverged)}"
+    return text + "."
+
+
+def rank_agreement(scores_a: dict, scores_b: dict) -> float:
+    """Spearman rank correlation of two score dicts (lower = better) over their common names."""
+    names = sorted(set(scores_a) & set(scores_b))
+    if len(names) < 3:
+        raise ValueError(f"rank_agreement needs at least 3 common candidates, got {len(names)}.")
+    a = np.array([scores_a[k] for k in names], float)
+    b = np.array([scores_b[k] for k in names], float)
+    big = 1e300  # a diverged model (inf) ranks last, ties among them
+    return float(spearmanr(np.nan_to_num(a, posinf=big), np.nan_to_num(b, posinf=big)).statistic)

@@ -1,0 +1,105 @@
+"""`twin train --model greybox`, `--select auto`, unstable-fit refusal and `twin evaluate --reference train`.
+
+The records come from the two-node RC network of ``tests/test_models_greybox.py``
+(integrated by ``solve_ivp``, independent of the model under test).
+"""
+
+import numpy as np
+import pytest
+from test_models_greybox import ambient, duty, simulate
+
+from twin.cli import main
+from twin.compensation.store import CompensationModel
+from twin.compensation.train import evaluate, train
+from twin.core.dataset import ChannelInfo, Dataset
+from twin.errors import TwinInputError
+
+CHANNELS = [ChannelInfo("spindle", "rpm", "speed"), ChannelInfo("air", "degC", "air"),
+            ChannelInfo("Z", "um", "displacement")]
+
+
+def _dataset(times, speed, label):
+    _, drift = simulate(times, speed)
+    return Dataset(times, np.column_stack([speed, ambient(times), drift]), CHANNELS, {"kind": "synthetic",
+                                                                                      "scenario": label})
+
+
+@pytest.fixture(scope="module")
+def records():
+    """A 44 h record from rest (runs at 1500/3000/4500/6000 rpm), cut in a training part and a warm continuation."""
+    times = np.arange(0.0, 44 * 3600.0, 120.0)
+    whole = _dataset(times, duty(times, [1500.0, 3000.0, 4500.0, 6000.0], 4 * 3600.0), "whole")
+    cut = int(np.searchsorted(times, 20 * 3600.0)) + 30  # the continuation starts an hour into the 4500 rpm run
+    part = lambda rows, label: Dataset(whole.time_s[rows], whole.matrix(whole.names)[rows], CHANNELS,
+                                       {"kind": "synthetic", "scenario": label})
+    return part(slice(0, cut), "train"), part(slice(cut, None), "later"), whole
+
+
+def test_greybox_trains_saves_and_continues_a_warm_record(records, tmp_path):
+    training, later, whole = records
+    cm = train([training], "spindle,air", "Z", model="greybox", out=tmp_path / "gb.json")
+    assert cm.estimator.sampling_interval == 120.0
+    loaded = CompensationModel.load(tmp_path / "gb.json")
+    np.testing.assert_array_equal(loaded.predict(training), cm.predict(training))
+    # the later record starts warm at 4500 rpm: its own start is no reference for the model
+    with pytest.raises(TwinInputError, match=r"later: greybox cannot predict it: .*spindle speed .* "
+                                             r"\(a record that continues the training one: --reference train\)"):
+        evaluate(loaded, [later])
+    with pytest.raises(TwinInputError, match="needs the training record as --history"):
+        evaluate(loaded, [later], reference="train")
+    result = evaluate(loaded, [later], reference="train", history=training)
+    measured = result.predictions["later"][1]
+    truth = whole["Z"][len(training):] - whole["Z"][0]
+    np.testing.assert_allclose(measured, truth)
+    assert result.rows[0]["rmse"] < 0.02 * np.ptp(truth)  # 6000 rpm was never seen in training
+    with pytest.raises(TwinInputError, match="--history does not start like the training record"):
+        evaluate(loaded, [later], reference="train", history=later)
+
+
+def test_static_model_continues_from_the_training_reference(records):
+    training, later, _ = records
+    cm = train([training], "air", "Z", model="mlr")
+    own = evaluate(cm, [later]).predictions["later"][1]
+    continued = evaluate(cm, [later], reference="train").predictions["later"][1]
+    np.testing.assert_allclose(own, later["Z"] - later["Z"][0])
+    np.testing.assert_allclose(continued, later["Z"] - training["Z"][0])
+
+
+def test_select_auto_prefers_the_greybox_on_an_rc_network_and_says_why(records, capsys, tmp_path):
+    training, _, _ = records
+    path = tmp_path / "train.csv"
+    training.write(path)
+    code = main(["train", str(path), "--inputs", "spindle,air", "--target", "Z", "--select", "auto",
+                 "--out", str(tmp_path / "auto.json")])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert "--select auto chose greybox: lowest mean RMSE on operating-regime blocks it did not see" in out
+    assert "trained greybox" in out
+    cm = CompensationModel.load(tmp_path / "auto.json")
+    assert cm.metadata["selection"]["ranking"][0] == "greybox"
+
+
+def _growing(n=300):
+    """A drift that grows exponentially while the temperature oscillates: GM(1,N) identifies a < 0."""
+    t = np.arange(n) * 60.0
+    T = 20 + np.sin(t / 3000.0)
+    Z = np.expm1(t / 9000.0)
+    return Dataset(t, np.column_stack([T, Z]), [ChannelInfo("T1", "degC", "temperature"),
+                                                ChannelInfo("Z", "um", "displacement")],
+                   {"kind": "synthetic", "scenario": "growing"})
+
+
+def test_unstable_grey_fit_is_refused_unless_allowed(tmp_path, capsys):
+    with pytest.raises(TwinInputError, match=r"UNSTABLE MODEL REFUSED \(not saved\): gm1n: development coefficient "
+                                             r"a = -.* < 0.*--allow-unstable"):
+        train([_growing()], "T1", "Z", model="gm1n", out=tmp_path / "gm.json")
+    assert not (tmp_path / "gm.json").exists()
+    cm = train([_growing()], "T1", "Z", model="gm1n", out=tmp_path / "gm.json", allow_unstable=True)
+    assert "development coefficient" in cm.metadata["unstable"]
+    _growing().write(tmp_path / "growing.csv")
+    common = ["train", str(tmp_path / "growing.csv"), "--inputs", "T1", "--target", "Z", "--model", "gm1n",
+              "--out", str(tmp_path / "cli.json")]
+    assert main(common) == 2
+    assert "UNSTABLE MODEL REFUSED" in capsys.readouterr().err
+    assert main(common + ["--allow-unstable"]) == 0
+    assert "WARNING: UNSTABLE MODEL SAVED" in capsys.readouterr().err

@@ -1,0 +1,110 @@
+"""Blocked cross-validation across operating regimes (models.selection_cv)."""
+
+import numpy as np
+import pytest
+
+from models import GM0NRegressor, MLRRegressor
+from models.greybox import GreyBoxRegressor
+from models.selection_cv import (
+    blocked_folds,
+    fold_prediction,
+    model_kind,
+    rank_agreement,
+    regime_blocks,
+    select_by_blocked_cv,
+)
+
+
+def test_regime_blocks_start_at_runs_and_keep_the_stop_after_them():
+    speed = np.r_[np.zeros(3), np.full(5, 1000.0), np.zeros(4), np.full(5, 2000.0), np.full(2, 3000.0), np.zeros(3)]
+    assert regime_blocks(speed) == [(0, 12), (12, 17), (17, 22)]
+    assert regime_blocks(speed, min_rows=6) == [(0, 12), (12, 22)]  # the 2-row 3000 rpm run merges back
+    assert regime_blocks(np.r_[np.full(4, 500.0), np.zeros(4), np.full(4, 900.0)]) == [(0, 8), (8, 12)]
+    with pytest.raises(ValueError, match="finite 1-D"):
+        regime_blocks([0.0, np.nan, 1.0])
+
+
+def test_folds_of_both_schemes():
+    blocks = [(0, 10), (10, 25), (25, 30)]
+    folds = blocked_folds(blocks)
+    assert [f.name for f in folds] == [
+        "leave-one-block-out block 1", "leave-one-block-out block 2", "leave-one-block-out block 3",
+        "rolling-origin block 2", "rolling-origin block 3",
+    ]
+    lobo2, rolling3 = folds[1], folds[4]
+    assert lobo2.test == (10, 25) and lobo2.train.sum() == 15 and not lobo2.train[10:25].any()
+    assert rolling3.test == (25, 30) and rolling3.train[:25].all() and not rolling3.train[25:].any()
+    with pytest.raises(ValueError, match="at least 2 operating-regime blocks"):
+        blocked_folds([(0, 10)])
+    with pytest.raises(ValueError, match="unknown scheme 'random'"):
+        blocked_folds(blocks, schemes=("random",))
+
+
+def _record(seed=0):
+    """Runs at four speeds with stops; a drift that lags the spindle heat (τ = 40 min) plus the ambient."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 32 * 3600.0, 120.0)
+    slot = (t // (4 * 3600.0)).astype(int)
+    speed = np.where(slot % 2 == 1, np.array([1000.0, 2000.0, 3000.0, 4000.0])[(slot // 2) % 4], 0.0)
+    ambient = 20 + np.sin(2 * np.pi * t / 86400.0)
+    heat, drift = (speed / 1000.0) ** 1.5, np.zeros_like(t)
+    for k in range(1, len(t)):
+        a = np.exp(-120.0 / 2400.0)
+        drift[k] = a * drift[k - 1] + (1 - a) * 4.0 * heat[k - 1]
+    y = drift + 3.0 * (ambient - ambient[0]) + 0.05 * rng.standard_normal(len(t))
+    X = np.column_stack([t, speed, ambient, rng.standard_normal(len(t))])  # column 3: an irrelevant sensor
+    return X, y, speed
+
+
+def test_held_out_targets_never_reach_the_fit():
+    X, y, speed = _record()
+    fold = blocked_folds(regime_blocks(speed))[1]  # leave out the second block, in the middle
+    start, stop = fold.test
+    spoiled = y.copy()
+    spoiled[start:stop] += 1e3
+    for model, cols in ((GreyBoxRegressor(n_poles=1, temperature_inputs=(2,)), [0, 1, 2]),
+                        (MLRRegressor(), [2, 3]), (GM0NRegressor(), [2, 3])):
+        clean = fold_prediction(model, X[:, cols], y, fold)
+        np.testing.assert_allclose(fold_prediction(model, X[:, cols], spoiled, fold), clean, atol=1e-9)
+    assert [model_kind(m) for m in (GreyBoxRegressor(), GM0NRegressor(), MLRRegressor())] == [
+        "weighted", "series", "static"]
+
+
+def test_selection_prefers_the_model_of_the_right_structure_and_says_why():
+    X, y, speed = _record()
+    candidates = {
+        "grey-box": (GreyBoxRegressor(n_poles=1, temperature_inputs=(2,)), [0, 1, 2]),
+        "MLR on ambient": (MLRRegressor(), [2]),
+        "MLR on noise": (MLRRegressor(), [3]),
+        "too big": (GreyBoxRegressor(n_poles=1), [0, 1] + [3] * 1),  # fine: fits, but the sensor is noise
+    }
+    chosen = select_by_blocked_cv(candidates, X, y, speed)
+    assert chosen.best == "grey-box"
+    # every held-out block at the noise level (0.05), except rolling origin from the 1000 rpm block
+    # alone: one speed cannot identify the exponent of P ∝ n^b, so 2000 rpm is extrapolated blind
+    scores = dict(zip(chosen.folds, chosen.fold_rmse["grey-box"]))
+    assert max(v for k, v in scores.items() if k != "rolling-origin block 2") < 0.07
+    assert scores["rolling-origin block 2"] > 0.5
+    assert len(chosen.folds) == 4 + 3
+    assert chosen.reason.startswith("chose grey-box: lowest mean RMSE on operating-regime blocks it did not see")
+    assert "7 folds (4 leave-one-block-out, 3 rolling-origin)" in chosen.reason
+
+
+def test_a_candidate_that_cannot_be_fitted_ranks_last():
+    X, y, speed = _record()
+    candidates = {
+        "MLR": (MLRRegressor(), [2]),
+        "MLR 2": (MLRRegressor(), [2, 3]),
+        "grey-box 4 poles on 300 columns": (GreyBoxRegressor(n_poles=4), [0, 1] + [2] * 300),
+    }
+    chosen = select_by_blocked_cv(candidates, X, y, speed)
+    assert chosen.ranking[-1] == "grey-box 4 poles on 300 columns"
+    assert "failed or diverged on some block: grey-box 4 poles on 300 columns" in chosen.reason
+
+
+def test_rank_agreement():
+    a = {"x": 1.0, "y": 2.0, "z": 3.0, "w": np.inf}
+    assert rank_agreement(a, a) == pytest.approx(1.0)
+    assert rank_agreement(a, {"x": 4.0, "y": 3.0, "z": 2.0, "w": 1.0}) == pytest.approx(-1.0)
+    with pytest.raises(ValueError, match="at least 3 common"):
+        rank_agreement({"x": 1.0, "y": 2.0}, {"x": 1.0, "y": 2.0})

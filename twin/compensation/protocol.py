@@ -1,0 +1,119 @@
+"""Training discipline for compensation models: automatic selection, stability refusal, continuation.
+
+- :func:`auto_select` (``twin train --select auto``): ranks candidate models by
+  blocked cross-validation across the operating regimes of the training
+  record (:mod:`models.selection_cv`: leave one speed block out and rolling
+  origin) and says why it chose what it chose;
+- :func:`stability_problem` (``twin train`` refuses unless ``--allow-unstable``):
+  a grey model with a negative development coefficient, or a prediction that
+  diverges on its own training data;
+- :func:`continued_prediction` (``twin evaluate --reference train``): a record that continues the training
+  record (it starts warm) is referenced to the training start instead of its
+  own (``fit_compensation_model`` keeps it in the model file), and
+  time-series models run over the whole history.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from models.selection_cv import Selection, select_by_blocked_cv
+
+from ..errors import TwinInputError
+from .store import dataset_label, make_estimator, sampling_interval
+
+#: candidates of ``--select auto``: fast to fit, every family (static, grey, grey-box)
+AUTO_CANDIDATES = ("mlr", "pcr", "anfis", "gm0n", "gm1n", "gmc", "greybox")
+#: a training prediction this many times larger than the largest measured change has diverged
+DIVERGENCE_FACTOR = 10.0
+
+
+def _speed_channel(dataset, inputs):
+    """The input channel in rpm (the spindle speed) that defines the operating regimes."""
+    rpm = [n for n in inputs if dataset.info(n).unit == "rpm"]
+    if not rpm:
+        raise TwinInputError(f"{dataset_label(dataset)}: --select auto needs a spindle-speed input in rpm to find the "
+                             f"operating regimes; the inputs are {inputs} "
+                             f"({', '.join(dataset.info(n).unit for n in inputs)})")
+    return rpm[0]
+
+
+def auto_select(datasets, inputs, target, candidates=AUTO_CANDIDATES, zero_reference=True) -> tuple[str, Selection]:
+    """The model name chosen by blocked cross-validation on one training record, and the full ranking.
+
+    The greybox candidate takes the inputs as given: the first must be the
+    spindle speed (rpm); if it is not, the greybox candidate is left out.
+    """
+    datasets = list(datasets)
+    if len(datasets) != 1:
+        raise TwinInputError(f"--select auto cross-validates across the operating regimes of one contiguous record; "
+                             f"got {len(datasets)} datasets")
+    ds = datasets[0]
+    speed_name = _speed_channel(ds, inputs)
+    X = ds.matrix(inputs)
+    y = ds[target]
+    if zero_reference:
+        X, y = X - X[:1], y - y[0]
+    dt = sampling_interval(ds, strict=True)
+    pool = {}
+    for name in candidates:
+        if name == "greybox":
+            if inputs[0] != speed_name:
+                continue
+            pool[name] = (make_estimator(name, {"sampling_interval": dt}), range(X.shape[1]))
+        else:
+            pool[name] = (make_estimator(name), range(X.shape[1]))
+    selection = select_by_blocked_cv(pool, X, y, ds[speed_name], unit=ds.info(target).unit)
+    return selection.best, selection
+
+
+def stability_problem(cm, datasets) -> str | None:
+    """Why the fitted model is unstable, or None: a < 0, or a diverging prediction on the training data."""
+    a = getattr(cm.estimator, "development_coefficient_", None)
+    if a is not None and a < 0:
+        return (f"{cm.model_name}: development coefficient a = {a:.3g} < 0, an unstable grey model whose prediction "
+                "grows without bound")
+    for ds in datasets:
+        measured, predicted = cm.target_values(ds), cm.predict(ds)
+        scale = max(float(np.max(np.abs(measured))), 1e-12)
+        if not np.all(np.isfinite(predicted)) or np.max(np.abs(predicted)) > DIVERGENCE_FACTOR * scale:
+            return (f"{cm.model_name}: the prediction diverges on its own training data {dataset_label(ds)} "
+                    f"(max |prediction| {np.nanmax(np.abs(predicted)):.3g} against max |measured change| "
+                    f"{scale:.3g} {cm.target_unit})")
+    return None
+
+
+def continued_prediction(cm, dataset, history=None) -> tuple[np.ndarray, np.ndarray]:
+    """``(measured, predicted)`` change of the target since the *training* start, for a record that continues it.
+
+    Static models map the inputs referenced to the training start. A
+    time-series model runs over ``history`` (the training record, from its
+    start) followed by ``dataset`` at the training sampling interval, and the
+    tail is returned.
+    """
+    ref = cm.preprocessing.get("training_reference")
+    if ref is None:
+        raise TwinInputError("--reference train needs a model trained by this version (its file holds no training "
+                             "reference); retrain it")
+    cm.check(dataset)
+    zero = cm.preprocessing.get("zero_reference", True)
+    x_ref = np.asarray(ref["inputs"]) if zero else 0.0
+    y_ref = ref["target"] if zero else 0.0
+    measured = dataset[cm.target] - y_ref
+    if not cm.is_time_series:
+        return measured, np.asarray(cm.estimator.predict(dataset.matrix(cm.inputs) - x_ref), float)
+    if history is None:
+        raise TwinInputError(f"{cm.model_name} is a time-series model: --reference train needs the training record "
+                             "as --history to run over the whole history")
+    cm.check(history)
+    for ds in (history, dataset):
+        dt = sampling_interval(ds, strict=True)
+        if abs(dt - cm.sampling_interval_s) > 1e-6 * dt:
+            raise TwinInputError(f"{dataset_label(ds)}: sampled every {dt:g} s, the model was trained at "
+                                 f"{cm.sampling_interval_s:g} s; --reference train needs the same interval")
+    start = history.matrix(cm.inputs)[: cm.preprocessing.get("reference_samples", 1)].mean(axis=0)
+    if not np.allclose(start, ref["inputs"], rtol=1e-9, atol=1e-9):
+        raise TwinInputError(f"{dataset_label(history)}: --history does not start like the training record "
+                             f"(inputs {np.round(start, 4).tolist()} against {np.round(ref['inputs'], 4).tolist()})")
+    X = np.vstack([history.matrix(cm.inputs), dataset.matrix(cm.inputs)]) - x_ref
+    predicted = np.asarray(cm.estimator.predict(X), float)[len(history):]
+    return measured, predicted - (cm.estimator.y_reference_ if zero else 0.0)
