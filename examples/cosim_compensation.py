@@ -38,9 +38,18 @@ def build_fmu(kind, out_dir, machine_name="vmc_ram", order=None):
                            outputs=[n for n in rom.output_names if n in ("X", "Y", "Z", "T18", "T01")])
 
 
+def measured_zones(path):
+    """The zones whose air the FMU takes as an input (``ambient_<zone>``), from its model description."""
+    from fmpy import read_model_description
+
+    names = [v.name for v in read_model_description(str(path)).modelVariables if v.causality == "input"]
+    return [n[len("ambient_"):] for n in names if n.startswith("ambient_") and n != "ambient_gradient"]
+
+
 def run(scenario_name="heat_cool_9000", kind="native", out_dir="runs/cosim", step_s=30.0, delay_s=60.0,
         update_s=60.0, sensor_lag_s=300.0, duration_h=None, fmu=None, door_drop_K=6.0):
     """Run the compensation loop; return a dict of time series (µm, h) and the PNG path."""
+    from twin.core.machine_definition import room_zone
     from twin.core.scenario import DoorOpening, load_scenario
     from twin.fmu.session import FMUSession
     from twin.rom.reduction import scenario_conditions
@@ -54,9 +63,8 @@ def run(scenario_name="heat_cool_9000", kind="native", out_dir="runs/cosim", ste
         scenario.events = list(scenario.events) + [DoorOpening(1800.0, 900.0, door_drop_K, 2400.0, None)]
     duration = scenario.duration_s if duration_h is None else min(scenario.duration_s, duration_h * 3600.0)
     times = np.arange(0.0, duration + 0.5 * step_s, step_s)
-    zones = rom.zones if rom is not None else ["room", "front"]
-    lags = rom.zone_lags_s if rom is not None else {}
-    cond = scenario_conditions(scenario, zones, np.r_[times[1:], times[-1]], lags)   # held over each step
+    zones = measured_zones(path)          # the FMU lags the other zones' air (e.g. the enclosure) itself
+    cond = scenario_conditions(scenario, zones, np.r_[times[1:], times[-1]])   # held over each step
 
     def inputs(k, ambient):
         return dict(spindle_speed=float(cond.spindle_rpm[k]), feed_x=float(cond.feed_mm_min["x"][k]),
@@ -66,7 +74,7 @@ def run(scenario_name="heat_cool_9000", kind="native", out_dir="runs/cosim", ste
 
     true_amb = {z: cond.ambient_C[z][0] for z in zones}
     sensed = dict(true_amb)
-    T0 = float(scenario.initial.get("temperature_C") or true_amb[zones[0]])
+    T0 = float(scenario.initial.get("temperature_C") or true_amb[room_zone(zones)])
     steady = scenario.initial["kind"] == "steady"
     plant = FMUSession(path, T_initial=T0, steady_start=steady, inputs=inputs(0, true_amb))
     model = FMUSession(path, T_initial=T0, steady_start=steady, inputs=inputs(0, sensed))

@@ -19,3 +19,7 @@ def test_cosim_compensation_example_fast(tmp_path):
     rms = lambda a: np.sqrt(np.mean(a ** 2))
     assert rms(residual[:, 2]) < 0.2 * rms(drift[:, 2])         # compensation removes most of it
     assert len(res["time_h"]) == 121
+    # --fmu: the zones come from the FMU itself, so a given FMU drives the same loop (no hard-coded zones)
+    again = example.main(["--fast", "--out", str(tmp_path / "given"), "--fmu", str(res["fmu"])])
+    np.testing.assert_array_equal(again["drift_um"], drift)
+    assert example.measured_zones(res["fmu"]) == ["front", "room"]

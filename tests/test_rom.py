@@ -157,3 +157,65 @@ def test_rom_runs_the_160h_etve(rom):
     # its speed is measured in bench/bench_rom_fmu.py, not asserted here
     ds = simulate_rom(rom, load_scenario("etve_160h"))
     assert len(ds) == 9601 and np.all(np.isfinite(ds.values))
+
+
+# ----------------------------------------------------------------------------- plant inputs: zone lags as states
+def test_plant_model_takes_what_a_plant_measures(rom):
+    assert rom.lagged_zones == ["enclosure"] and rom.zone_lags_s["enclosure"] == pytest.approx(3 * 3600.0)
+    assert "ambient:enclosure" not in rom.plant_input_names
+    assert set(rom.input_names) - set(rom.plant_input_names) == {"ambient:enclosure"}
+    ss = rom.plant_state_space()
+    r = rom.order
+    assert ss.A.shape == (r + 1, r + 1) and ss.B.shape == (r + 1, len(rom.plant_input_names))
+    assert ss.C.shape == (rom.n_outputs, r + 1) and ss.D.shape == (rom.n_outputs, len(rom.plant_input_names))
+    assert np.all(np.linalg.eigvals(ss.A).real < 0)
+    # the lagged air obeys dw/dt = (room − w)/τ
+    room = rom.plant_input_names.index("ambient:room")
+    assert ss.A[r, r] == pytest.approx(-1 / 10800.0) and ss.B[r, room] == pytest.approx(1 / 10800.0)
+    # a uniform machine in air at the same temperature is an equilibrium; a steady state is one too
+    u = rom.plant_inputs_from_conditions([0.0], {}, {"room": 21.0, "front": 21.0})[0]
+    assert np.abs(ss.A @ rom.plant_uniform(21.0) + ss.B @ u).max() < 1e-10
+    u = rom.plant_inputs_from_conditions([9000.0], {"x": [3000.0]}, {"room": 22.0, "front": 19.0})[0]
+    assert np.abs(ss.A @ rom.plant_steady_state(u) + ss.B @ u).max() < 1e-10
+
+
+def test_plant_zoh_is_exact_against_the_matrix_exponential(rom):
+    """Uneven steps, random held plant inputs: the closed-form step equals expm of the augmented system."""
+    rng = np.random.default_rng(3)
+    t = np.r_[0.0, np.cumsum(rng.uniform(1.0, 5000.0, 25))]
+    k = len(t)
+    U = rom.plant_inputs_from_conditions(rng.uniform(0, 12000, k), {a: rng.uniform(-5000, 5000, k) for a in "xyz"},
+                                         {z: rng.uniform(15, 25, k) for z in rom.measured_zones}, 0.2)
+    x0 = rom.plant_uniform(20.0, 17.0)
+    X = rom.plant_states(t, U, x0)
+    ss = rom.plant_state_space()
+    n, m = ss.B.shape
+    x = x0
+    for i, h in enumerate(np.diff(t)):
+        aug = np.zeros((n + m, n + m))
+        aug[:n, :n], aug[:n, n:] = ss.A, ss.B
+        e = scipy.linalg.expm(aug * h)
+        x = e[:n, :n] @ x + e[:n, n:] @ U[i]
+        np.testing.assert_allclose(X[i + 1], x, rtol=1e-9, atol=1e-9 * np.abs(x).max())
+    np.testing.assert_allclose(rom.plant_outputs(X, U), X @ ss.C.T + U @ ss.D.T + ss.offset, rtol=1e-12, atol=1e-9)
+
+
+def test_plant_step_has_no_cancellation_when_a_mode_matches_the_lag(rom):
+    """λᵢ = 1/τ exactly: the cross term is h e^{−λh}, and it is continuous around it."""
+    import dataclasses
+
+    lam = float(rom.eigenvalues[0])
+    h = 600.0
+    at = dataclasses.replace(rom, zone_lags_s={"enclosure": 1.0 / lam}).plant_step_coefficients(h)[3][0, 0]
+    near_rom = dataclasses.replace(rom, zone_lags_s={"enclosure": 1.0 / (lam * (1 + 1e-9))})
+    near = near_rom.plant_step_coefficients(h)[3][0, 0]
+    assert at == pytest.approx(h * np.exp(-lam * h), rel=1e-14)
+    assert near == pytest.approx(at, rel=1e-6)
+
+
+def test_cli_build_saves_into_a_new_folder(rom, tmp_path):
+    from twin.cli import main
+
+    out = tmp_path / "new" / "deeper" / "x.npz"
+    assert main(["rom", "build", "--out", str(out)]) == 0
+    assert ReducedModel.load(out).digest == rom.digest

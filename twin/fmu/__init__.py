@@ -4,7 +4,8 @@
   ``simulate`` an FMU through a scenario and the input tables it needs;
 - :mod:`twin.fmu.spec` — the interface both kinds share: variables, units, GUID, model structure, ``FMUError``;
 - :mod:`twin.fmu.session` — :class:`~twin.fmu.session.FMUSession`, an FMU stepped by hand;
-- :mod:`twin.fmu.native_source` — the C source of the native kind;
+- :mod:`twin.fmu.native_source` — the C sources of the native kind (fixed files in ``c/``, package data) and
+  the generated ``model_data.h``;
 - ``thermal_twin_slave.py`` — the PythonFMU slave, copied into every Python FMU (it runs outside this package);
 - :mod:`twin.fmu.cli` — ``twin fmu export|validate|simulate``.
 

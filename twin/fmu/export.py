@@ -8,8 +8,9 @@ Two kinds, one interface (:mod:`twin.fmu.spec`):
     importing process needs Python with numpy (and the ``twin`` package for
     ``engine="fe"``, the full finite-element model).
 ``native``
-    Generated C (``sources/``: ``thermal_twin_rom.c``, ``model_data.h``, the
-    official FMI 2 headers) compiled with the machine's C compiler into
+    C (``sources/``: ``thermal_twin_rom.c`` and ``model.c`` from the package's
+    ``c/`` folder, the generated ``model_data.h``, the official FMI 2 headers)
+    compiled with the machine's C compiler into
     ``binaries/linux64/thermal_twin_rom.so``; needs nothing at run time.
     ``modelDescription.xml`` lists the sources so other platforms can rebuild.
     ``fmi_version=3`` makes an FMI 3.0 FMU instead (``binaries/x86_64-linux``,
@@ -17,9 +18,13 @@ Two kinds, one interface (:mod:`twin.fmu.spec`):
 
 Both integrate the ROM exactly for inputs held over each communication step
 (zero-order hold, any step size) and are checked by :func:`validate` (fmpy).
+Their inputs are what a plant measures (speed, feeds, the measured zones' air):
+a zone whose air lags the room (the enclosure) is a state of the model
+(:meth:`twin.rom.reduction.ReducedModel.plant_state_space`).
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import shutil
 import subprocess
@@ -35,7 +40,7 @@ from ..core.machine_definition import room_zone
 from ..core.scenario import Scenario, load_scenario
 from ..rom.reduction import scenario_conditions
 from . import spec
-from .native_source import FMI2_SOURCE, fmi3_source, model_data_header
+from .native_source import c_sources, model_data_header
 from .spec import FMUError
 
 KINDS = ("python", "native")
@@ -59,6 +64,8 @@ def _subset(rom, rows):
     view.output_names = [rom.output_names[i] for i in rows]
     view.output_units = [rom.output_units[i] for i in rows]
     view.output_kinds = [rom.output_kinds[i] for i in rows]
+    view.output_labels = [rom.output_labels[i] for i in rows] if rom.output_labels else []
+    view.output_matrix, view.feedthrough, view.offset = rom.output_matrix[rows], rom.feedthrough[rows], rom.offset[rows]
     return view
 
 
@@ -108,21 +115,41 @@ def export_fmu(rom, out, kind="python", engine="rom", outputs=None, default_temp
 
 # ----------------------------------------------------------------------------- model description
 def _default_experiment(step_s):
-    return Element("DefaultExperiment", startTime="0.0", stepSize=repr(float(step_s)))
+    return Element("DefaultExperiment", startTime="0.0", stopTime=repr(spec.DEFAULT_STOP_S),
+                   stepSize=repr(float(step_s)))
 
 
-def _append_units_logs_experiment(root, variables, step_s):
+def _append_units_logs_experiment(root, variables, step_s, fmi_version=2):
     """Append UnitDefinitions, LogCategories and DefaultExperiment (step ``step_s`` in s) to ``root``.
 
-    The native FMUs of FMI 2.0 and 3.0 declare these alike, and both
+    (and TypeDefinitions between the first two).  The native FMUs of FMI 2.0 and 3.0 declare these alike, and both
     standards place them in this order between CoSimulation and
     ModelVariables.  The categories are the ones the C sources log under.
     """
     root.append(spec.unit_definitions({v.unit for v in variables if v.unit}))
+    root.append(spec.type_definitions({v.unit for v in variables if v.unit}, fmi_version))
     cats = SubElement(root, "LogCategories")
     for name, text in (("logStatusError", "errors: rejected inputs or calls"), ("logAll", "all messages")):
         SubElement(cats, "Category", name=name, description=text)
     root.append(_default_experiment(step_s))
+
+
+def documentation_html(view, variables, engine, note=""):
+    """``documentation/index.html``: what the FMU is, and a table of its variables (name, causality, unit,
+    range, start, description)."""
+    from html import escape
+
+    def cell(x):
+        return "" if x is None else escape(spec._fmt(x) if isinstance(x, float) else str(x))
+
+    rows = "".join(
+        f"<tr><td><code>{escape(v.name)}</code></td><td>{v.causality}</td><td>{cell(v.unit)}</td>"
+        f"<td>{cell(v.min)}</td><td>{cell(v.max)}</td><td>{cell(v.start)}</td><td>{escape(v.description)}</td></tr>\n"
+        for v in variables)
+    return ("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>Thermal twin FMU</title></head><body>\n"
+            f"<h1>Thermal twin FMU: machine {escape(view.machine)}</h1>\n<p>{escape(_description(view, engine))}."
+            f" {note}</p>\n<table border=\"1\">\n<tr><th>variable</th><th>causality</th><th>unit</th><th>min</th>"
+            f"<th>max</th><th>start</th><th>description</th></tr>\n{rows}</table>\n</body></html>\n")
 
 
 def _pretty(root):
@@ -148,10 +175,14 @@ def _native_model_description(view, variables, guid, step_s):
     return _pretty(root)
 
 
-def _patch_python_description(xml_bytes, view, variables, step_s):
-    """Declare units, ranges, InitialUnknowns and the default experiment in PythonFMU's description."""
+def _patch_python_description(xml_bytes, view, variables, step_s, guid):
+    """Declare units, ranges, InitialUnknowns and the default experiment in PythonFMU's description.
+
+    ``guid`` replaces PythonFMU's (a new uuid1 on every build) with one derived from the content.
+    """
     root = fromstring(xml_bytes)
     root.set("description", _description(view, "rom"))
+    root.set("guid", guid)
     by_name = {v.name: v for v in variables}
     mv = root.find("ModelVariables")
     for sv in mv.findall("ScalarVariable"):
@@ -161,13 +192,19 @@ def _patch_python_description(xml_bytes, view, variables, step_s):
         sv.set("description", v.description)
         child = sv.find(v.type)
         if v.type == "Real":
-            for key in ("unit", "min", "max"):
+            for key, value in spec.real_type_attributes(v).items():
+                child.set(key, value)
+            for key in ("min", "max"):
                 value = getattr(v, key)
                 if value is not None:
-                    child.set(key, value if key == "unit" else spec._fmt(value))
+                    child.set(key, spec._fmt(value))
+    cs = root.find("CoSimulation")       # the slave saves and restores its whole state (model, lags, inputs)
+    cs.set("canGetAndSetFMUstate", "true")
+    cs.set("canSerializeFMUstate", "true")
     children = list(root)
     position = [c.tag for c in children].index("CoSimulation") + 1
     root.insert(position, spec.unit_definitions({v.unit for v in variables if v.unit}))
+    root.insert(position + 1, spec.type_definitions({v.unit for v in variables if v.unit}))
     old = root.find("DefaultExperiment")
     if old is not None:
         root.remove(old)
@@ -182,6 +219,8 @@ def _export_python(rom, view, variables, out, engine, step_s, fe_options):
     from pythonfmu.builder import FmuBuilder
 
     config = {"engine": engine, "description": _description(view, engine), "outputs": view.output_names,
+              "room": room_zone(rom.zones),
+              "lags": [{"zone": z, "tau_s": float(rom.zone_lags_s[z])} for z in rom.lagged_zones],
               "variables": [dict(name=v.name, vr=v.vr, type=v.type, causality=v.causality,
                                  variability=v.variability, description=v.description, start=v.start,
                                  initial=v.initial, min=v.min, max=v.max, role=v.role) for v in variables]}
@@ -200,13 +239,18 @@ def _export_python(rom, view, variables, out, engine, step_s, fe_options):
             rom.save(tmp / "rom.npz")
             files.append(tmp / "rom.npz")
         built = Path(FmuBuilder.build_FMU(script, dest=tmp / "build", project_files=files))
+        # A stable GUID: the ROM, the kind, the slave's code and its configuration (not the build time).
+        content = hashlib.sha256(script.read_bytes() + json.dumps(config, sort_keys=True).encode()).hexdigest()
+        guid = spec.guid(view, f"python|{engine}|{content}")
         with zipfile.ZipFile(built) as zin, zipfile.ZipFile(out.with_suffix(".fmu.partial"), "w",
                                                            zipfile.ZIP_DEFLATED) as zout:
             for item in zin.infolist():
                 data = zin.read(item.filename)
                 if item.filename == "modelDescription.xml":
-                    data = _patch_python_description(data, view, variables, step_s)
+                    data = _patch_python_description(data, view, variables, step_s, guid)
                 zout.writestr(item.filename, data)
+            if "documentation/index.html" not in zin.namelist():
+                zout.writestr("documentation/index.html", documentation_html(view, variables, engine))
     out.with_suffix(".fmu.partial").replace(out)
     return out
 
@@ -222,14 +266,22 @@ def fmi_headers_dir():
     return path
 
 
-def write_native_sources(rom, view, variables, rows, folder, guid):
-    """Write the C sources of the native FMU into ``folder``; return the C file."""
+FMI2_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
+
+
+def write_native_sources(rom, variables, rows, folder, guid, fmi_version=2):
+    """Write the C sources of the native FMU into ``folder``; return the C file to compile.
+
+    The official FMI headers (from fmpy), the generated ``model_data.h``, and the package's
+    fixed C files (:mod:`twin.fmu.native_source`), the API file renamed ``thermal_twin_rom.c``.
+    """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    for name in ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"):
+    for name in (FMI2_HEADERS if int(fmi_version) == 2 else FMI3_HEADERS):
         shutil.copy2(fmi_headers_dir() / name, folder / name)
     (folder / "model_data.h").write_text(model_data_header(rom, variables, guid, rows), encoding="utf-8")
-    (folder / C_FILE).write_text(FMI2_SOURCE, encoding="utf-8")
+    for i, (name, text) in enumerate(c_sources(fmi_version).items()):
+        (folder / (C_FILE if i == 0 else name)).write_text(text, encoding="utf-8")
     return folder / C_FILE
 
 
@@ -266,16 +318,15 @@ def _export_native(rom, view, variables, rows, out, step_s, compiler):
     guid = spec.guid(view, "native")
     with tempfile.TemporaryDirectory(prefix="twin_fmu_native_") as tmp:
         tmp = Path(tmp)
-        source = write_native_sources(rom, view, variables, rows, tmp / "sources", guid)
+        source = write_native_sources(rom, variables, rows, tmp / "sources", guid)
         (tmp / "binaries" / "linux64").mkdir(parents=True)
         compile_native(source, tmp / "binaries" / "linux64" / f"{NATIVE_IDENTIFIER}.so", compiler)
         (tmp / "modelDescription.xml").write_bytes(_native_model_description(view, variables, guid, step_s))
         (tmp / "documentation").mkdir()
-        (tmp / "documentation" / "index.html").write_text(
-            "<html><body><h1>Thermal twin ROM FMU</h1><p>" + _description(view, "rom") +
-            ". Rebuild on another platform: <code>cc -shared -fPIC -O2 -I sources sources/" + C_FILE +
-            " -o binaries/&lt;platform&gt;/" + NATIVE_IDENTIFIER + ".&lt;so|dll|dylib&gt; -lm</code>.</p>"
-            "</body></html>\n", encoding="utf-8")
+        (tmp / "documentation" / "index.html").write_text(documentation_html(view, variables, "rom", (
+            "Rebuild on another platform: <code>cc -shared -fPIC -O2 -I sources sources/" + C_FILE +
+            " -o binaries/&lt;platform&gt;/" + NATIVE_IDENTIFIER + ".&lt;so|dll|dylib&gt; -lm</code>.")),
+            encoding="utf-8")
         _zip_fmu(tmp, out)
     return out
 
@@ -294,7 +345,7 @@ def _native_model_description3(view, variables, token, step_s):
         "modelIdentifier": NATIVE_IDENTIFIER, "canHandleVariableCommunicationStepSize": "true",
         "canGetAndSetFMUState": "true", "canSerializeFMUState": "true", "hasEventMode": "false",
         "providesIntermediateUpdate": "false", "canReturnEarlyAfterIntermediateUpdate": "false"})
-    _append_units_logs_experiment(root, variables, step_s)
+    _append_units_logs_experiment(root, variables, step_s, fmi_version=3)
     mv = SubElement(root, "ModelVariables")
     SubElement(mv, "Float64", name="time", valueReference=str(max(v.vr for v in variables) + 1),
                causality="independent", variability="continuous", description="simulation time")
@@ -304,10 +355,11 @@ def _native_model_description3(view, variables, token, step_s):
         if v.initial:
             attrib["initial"] = v.initial
         if v.type == "Real":
-            for key in ("unit", "min", "max"):
+            attrib.update(spec.real_type_attributes(v))
+            for key in ("min", "max"):
                 value = getattr(v, key)
                 if value is not None:
-                    attrib[key] = value if key == "unit" else spec._fmt(value)
+                    attrib[key] = spec._fmt(value)
             if v.start is not None:
                 attrib["start"] = spec._fmt(v.start)
             SubElement(mv, "Float64", attrib)
@@ -316,8 +368,10 @@ def _native_model_description3(view, variables, token, step_s):
             SubElement(mv, "Boolean", attrib)
     ms = SubElement(root, "ModelStructure")
     outputs = [v for v in variables if v.causality == "output"]
+    vr = {v.name: v.vr for v in variables}
     for v in outputs:
-        SubElement(ms, "Output", valueReference=str(v.vr))
+        SubElement(ms, "Output", valueReference=str(v.vr),
+                   dependencies=" ".join(str(vr[n]) for n in v.depends_on))
     for v in outputs:
         SubElement(ms, "InitialUnknown", valueReference=str(v.vr))
     return _pretty(root)
@@ -334,19 +388,16 @@ def _build_description3():
 
 def _export_native3(rom, view, variables, rows, out, step_s, compiler):
     token = spec.guid(view, "native-fmi3")
-    headers = fmi_headers_dir()
     with tempfile.TemporaryDirectory(prefix="twin_fmu_native3_") as tmp:
         tmp = Path(tmp)
         src = tmp / "sources"
-        src.mkdir()
-        for name in FMI3_HEADERS:
-            shutil.copy2(headers / name, src / name)
-        (src / "model_data.h").write_text(model_data_header(rom, variables, token, rows), encoding="utf-8")
-        (src / C_FILE).write_text(fmi3_source((headers / "fmi3FunctionTypes.h").read_text()), encoding="utf-8")
+        write_native_sources(rom, variables, rows, src, token, fmi_version=3)
         (src / "buildDescription.xml").write_bytes(_build_description3())
         (tmp / "binaries" / FMI3_PLATFORM).mkdir(parents=True)
         compile_native(src / C_FILE, tmp / "binaries" / FMI3_PLATFORM / f"{NATIVE_IDENTIFIER}.so", compiler)
         (tmp / "modelDescription.xml").write_bytes(_native_model_description3(view, variables, token, step_s))
+        (tmp / "documentation").mkdir()
+        (tmp / "documentation" / "index.html").write_text(documentation_html(view, variables, "rom"), encoding="utf-8")
         _zip_fmu(tmp, out)
     return out
 
@@ -369,25 +420,32 @@ def input_table(rom, scenario, times=None):
     applies after initialisation, for the first step — and then row i (at tᵢ)
     holds what the master sets for the step to tᵢ₊₁: the scenario's conditions
     at tᵢ₊₁ (left limits, :func:`twin.rom.reduction.held_conditions`).  So the FMU
-    reproduces :func:`twin.rom.reduction.simulate_rom` (zero-order hold) exactly,
-    initial state and feedthrough included.
+    reproduces :func:`simulate_table` exactly, initial state and feedthrough included.
+    Only the measured zones have a column: the FMU lags the enclosure's air itself,
+    from the room's (a scenario event that reaches a lagged zone but not the room
+    cannot be fed to it and is refused).
     """
     scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    for i, ev in enumerate(scenario.events):
+        inside = [z for z in (ev.zones or ()) if z in rom.lagged_zones]
+        if inside and room_zone(rom.zones) not in ev.zones:
+            raise FMUError(f"{scenario.source}: events[{i}] reaches zone(s) {inside} but not the room: the FMU's "
+                           f"{inside[0]!r} air follows the room, so no input can drive it")
     t = scenario.times() if times is None else np.asarray(times, float)
-    cond = scenario_conditions(scenario, rom.zones, t, rom.zone_lags_s)
+    cond = scenario_conditions(scenario, rom.measured_zones, t)    # the lagged zones' air is a state of the FMU
     rpm, feeds, ambient = cond.spindle_rpm, cond.feed_mm_min, cond.ambient_C
     init = scenario.initial
     rpm0 = rpm[0] if init["kind"] != "steady" else (init.get("spindle_rpm") or 0.0)
     feed0 = {a: (feeds[a][0] if init["kind"] != "steady" else 0.0) for a in "xyz"}
     amb0 = {z: (ambient[z][0] if init["kind"] != "steady" or init.get("ambient_C") is None else init["ambient_C"])
-            for z in rom.zones}
+            for z in rom.measured_zones}
 
     def held(values, first):
         return np.r_[first, first, values[1:], values[-1]]
 
     cols = [("time", np.r_[t[0] - 1.0, t[0], t]), ("spindle_speed", held(rpm, rpm0))]
     cols += [(f"feed_{a}", held(feeds[a], feed0[a])) for a in "xyz"]
-    cols += [(f"ambient_{z}", held(ambient[z], amb0[z])) for z in rom.zones]
+    cols += [(f"ambient_{z}", held(ambient[z], amb0[z])) for z in rom.measured_zones]
     cols += [("ambient_gradient", held(cond.gradient_K_per_m, cond.gradient_K_per_m[0]))]
     table = np.zeros(len(t) + 2, dtype=[(name, np.float64) for name, _ in cols])
     for name, values in cols:
@@ -411,10 +469,10 @@ def scenario_start(rom, scenario):
 
 
 def table_inputs(rom, table):
-    """Thermal inputs (k, m) of the ROM for an FMU input table."""
+    """Plant inputs (k, m_p) of the ROM (``rom.plant_input_names``) for an FMU input table."""
     feeds = {a: table[f"feed_{a}"] for a in "xyz"}
-    ambient = {z: table[f"ambient_{z}"] for z in rom.zones}
-    return rom.inputs_from_conditions(table["spindle_speed"], feeds, ambient, table["ambient_gradient"])
+    ambient = {z: table[f"ambient_{z}"] for z in rom.measured_zones}
+    return rom.plant_inputs_from_conditions(table["spindle_speed"], feeds, ambient, table["ambient_gradient"])
 
 
 def _start_index(t):
@@ -438,10 +496,11 @@ def simulate_table(rom, table, T_initial=20.0, steady_start=False, outputs=None)
     if k + 1 < len(t) and t[k + 1] == t[k]:
         k += 1
     t, U = t[k:], U[k:]
-    z0 = rom.steady_state(init) if steady_start else rom.uniform(T_initial)
-    _, Z = rom.states(t, U, z0, "zoh")
+    room = rom.plant_input_names.index(f"ambient:{room_zone(rom.zones)}")
+    x0 = rom.plant_steady_state(init) if steady_start else rom.plant_uniform(T_initial, init[room])
+    X = rom.plant_states(t, U, x0)
     applied = np.vstack([init[None, :], U[:-1]])
-    return rom.outputs(Z, applied)[:, _output_rows(rom, outputs)]
+    return rom.plant_outputs(X, applied)[:, _output_rows(rom, outputs)]
 
 
 def simulate(path, table, T_initial=20.0, steady_start=False, outputs=None, **kwargs):

@@ -34,7 +34,30 @@ def _source_power(src, rpm, feed):
     return src["coefficient_W"] * (n / src["reference"]) ** src["exponent"]
 
 
-class _RomEngine:
+class _Lags:
+    """Zones whose air follows the room through a first-order lag: their air ``w`` (°C) is a state.
+
+    ``config["lags"]`` lists ``{"zone", "tau_s"}``; ``config["room"]`` names the room zone.  The
+    thermal input of a lagged zone's ambient is ``w``, never an FMU input.
+    """
+
+    def _init_lags(self, config):
+        names = self.input_names
+        self.lag_cols = [names.index("ambient:" + lag["zone"]) for lag in config["lags"]]
+        self.mu = np.array([1.0 / lag["tau_s"] for lag in config["lags"]])
+        self.room_col = names.index("ambient:" + config["room"])
+        self.w = np.zeros(len(self.lag_cols))
+
+    def _lags_at_room(self, u):
+        self.w = np.full(len(self.lag_cols), float(u[self.room_col]))
+
+    def _with_lags(self, u, w=None):
+        u = np.array(u, float)
+        u[self.lag_cols] = self.w if w is None else w
+        return u
+
+
+class _RomEngine(_Lags):
     def __init__(self, resources, config):
         data = np.load(os.path.join(resources, "rom.npz"), allow_pickle=False)
         meta = json.loads(str(data["meta"]))
@@ -49,23 +72,41 @@ class _RomEngine:
         names = meta["output_names"]
         self.rows = np.array([names.index(n) for n in config["outputs"]], dtype=int)
         self.z = np.zeros(len(self.lam))
+        self._init_lags(config)
         self._h = None
 
     def start(self, T_initial, steady, u):
-        self.z = (self.B @ u) / self.lam if steady else T_initial * self.uniform
+        self._lags_at_room(u)
+        self.z = (self.B @ self._with_lags(u)) / self.lam if steady else T_initial * self.uniform
 
     def step(self, u, h):
+        """Exact ZOH step (as ``twin.rom.reduction.ReducedModel.plant_states``); the lagged air follows the room."""
         if h != self._h:
-            self._a = np.exp(-self.lam * h)
-            self._g = -np.expm1(-self.lam * h) / self.lam
+            lam = self.lam
+            self._a = np.exp(-lam * h)
+            self._g = -np.expm1(-lam * h) / lam
+            d = np.abs(lam[:, None] - self.mu[None, :])
+            slow = np.minimum(lam[:, None], self.mu[None, :])
+            with np.errstate(invalid="ignore", divide="ignore"):
+                self._E = np.where(d == 0.0, h, -np.expm1(-d * h) / d) * np.exp(-slow * h)
+            self._e = np.exp(-self.mu * h)
             self._h = h
-        self.z = self._a * self.z + self._g * (self.B @ u)
+        room = float(u[self.room_col])
+        cross = (self._E * self.B[:, self.lag_cols]) @ (self.w - room)
+        self.z = self._a * self.z + self._g * (self.B @ self._with_lags(u, room)) + cross
+        self.w = room + (self.w - room) * self._e
 
     def outputs(self, u):
-        return (self.C @ self.z + self.D @ u + self.c)[self.rows]
+        return (self.C @ self.z + self.D @ self._with_lags(u) + self.c)[self.rows]
+
+    def get_state(self):
+        return {"z": self.z.tolist(), "w": self.w.tolist()}
+
+    def set_state(self, state):
+        self.z, self.w = np.array(state["z"]), np.array(state["w"])
 
 
-class _FeEngine:
+class _FeEngine(_Lags):
     """The full FE twin (needs the ``twin`` package in the importing Python)."""
 
     def __init__(self, resources, config):
@@ -82,19 +123,32 @@ class _FeEngine:
         chans = [c.name for c in self.machine.channels]
         self.rows = np.array([chans.index(n) for n in config["outputs"]], dtype=int)
         self.T = None
+        self._init_lags(config)
 
     def start(self, T_initial, steady, u):
         n = self.machine.thermal.n_nodes
-        self.T = self.solver.steady_state(u) if steady else np.full(n, float(T_initial))
+        self._lags_at_room(u)
+        self.T = self.solver.steady_state(self._with_lags(u)) if steady else np.full(n, float(T_initial))
 
     def step(self, u, h):
+        """Backward Euler sub-steps ≤ max_step; the lagged air (exact for the held room) enters at their ends."""
         k = max(1, int(math.ceil(h / self.max_step - 1e-9)))
+        room = float(u[self.room_col])
         for _ in range(k):
-            self.T = self.solver.step(self.T, u, u, h / k)
+            self.w = room + (self.w - room) * np.exp(-self.mu * h / k)
+            uk = self._with_lags(u)
+            self.T = self.solver.step(self.T, uk, uk, h / k)
 
     def outputs(self, u):
+        u = self._with_lags(u)
         fe = self.machine.outputs.apply(self.T)
         return self.machine.channel_values(fe[None, :], u[None, :])[0][self.rows]
+
+    def get_state(self):
+        return {"T": self.T.tolist(), "w": self.w.tolist()}
+
+    def set_state(self, state):
+        self.T, self.w = np.array(state["T"]), np.array(state["w"])
 
 
 class ThermalTwin(Fmi2Slave):
@@ -116,7 +170,8 @@ class ThermalTwin(Fmi2Slave):
         self.output_vars = []
         causality = {"parameter": Fmi2Causality.parameter, "input": Fmi2Causality.input,
                      "output": Fmi2Causality.output}
-        variability = {"fixed": Fmi2Variability.fixed, "continuous": Fmi2Variability.continuous}
+        variability = {"fixed": Fmi2Variability.fixed, "tunable": Fmi2Variability.tunable,
+                       "continuous": Fmi2Variability.continuous}
         initial = {"exact": Fmi2Initial.exact, "calculated": Fmi2Initial.calculated, None: None}
         for v in config["variables"]:
             name = v["name"]
@@ -133,16 +188,32 @@ class ThermalTwin(Fmi2Slave):
             setter = (lambda value, n=name: self._set(n, value))
             cls = Boolean if v["type"] == "Boolean" else Real
             self.register_variable(cls(name, start=v["start"], getter=getter, setter=setter, **kw))
-            if v["causality"] == "input":
+            if v["causality"] == "input" or v["variability"] == "tunable":    # checked at each step
                 self.checks.append((name, v.get("min"), v.get("max")))
+            if v["causality"] == "input":
                 self.input_roles[v["role"]] = name
+        self.parameters = {v["name"] for v in config["variables"]        # fixed: settable until initialised
+                           if v["causality"] == "parameter" and v["variability"] == "fixed"}
+        self.spindle_factor = next(v["name"] for v in config["variables"] if v["role"] == "spindle_factor")
         self._cache = None
-        self.engine.start(float(self.values["T_initial"]), False, self._u())
+        self._phase = "instantiated"     # → initialization → step → terminated
+        self._start_key = None
 
     # -------------------------------------------------------------- helpers
     def _set(self, name, value):
+        if name in self.parameters and self._phase not in ("instantiated", "initialization"):
+            self.log(f"{name} is a fixed parameter: it can only be set before initialisation ends",
+                     Fmi2Status.error)
+            raise ValueError(f"{name} cannot be set after initialisation")
         self.values[name] = value
         self._cache = None
+
+    def _start(self):
+        """Set the engine to the start state the parameters and inputs imply (once per distinct setting)."""
+        key = (float(self.values["T_initial"]), bool(self.values["steady_start"]), tuple(self._u()))
+        if key != self._start_key:
+            self.engine.start(key[0], key[1], self._u())
+            self._start_key = key
 
     def _u(self):
         names = self.engine.input_names
@@ -151,12 +222,14 @@ class ThermalTwin(Fmi2Slave):
         rpm = float(self.values[r["rpm"]])
         feed = {a: float(self.values[r[f"feed_{a}"]]) for a in "xyz"}
         for i, n in enumerate(names):
-            if n.startswith("ambient:"):
+            if n in r:                       # a measured zone's ambient (lagged zones: a state, set by the engine)
                 u[i] = float(self.values[r[n]])
             elif n == "ambient_gradient":
                 u[i] = float(self.values[r["gradient"]])
+        factor = float(self.values[self.spindle_factor])
         for src in self.engine.sources:
-            u[names.index("power:" + src["name"])] = _source_power(src, rpm, feed)
+            u[names.index("power:" + src["name"])] = _source_power(src, rpm, feed) * (
+                factor if src["driver"] == "spindle" else 1.0)
         return u
 
     def _bad_inputs(self):
@@ -171,8 +244,23 @@ class ThermalTwin(Fmi2Slave):
 
     def _outputs(self):
         if self._cache is None:
+            if self._phase in ("instantiated", "initialization"):
+                self._start()            # Initialization Mode: the outputs of the state the parameters imply
             self._cache = self.engine.outputs(self._u())
         return self._cache
+
+    def _get_fmu_state(self):
+        state = {name: self.values[name] for name in self.values}
+        state["__engine__"] = self.engine.get_state()
+        state["__phase__"] = self._phase
+        return state
+
+    def _set_fmu_state(self, state):
+        state = dict(state)
+        self.engine.set_state(state.pop("__engine__"))
+        self._phase = state.pop("__phase__")
+        self.values.update(state)
+        self._cache = None
 
     # -------------------------------------------------------------- FMI
     def exit_initialization_mode(self):
@@ -180,11 +268,22 @@ class ThermalTwin(Fmi2Slave):
         if bad:
             self.log("initial inputs out of range: " + "; ".join(bad), Fmi2Status.error)
             return False
-        self.engine.start(float(self.values["T_initial"]), bool(self.values["steady_start"]), self._u())
+        self._start()
+        self._phase = "step"
         self._cache = None
         return True
 
+    def enter_initialization_mode(self):
+        self._phase = "initialization"
+
+    def terminate(self):
+        self._phase = "terminated"
+
     def do_step(self, current_time, step_size):
+        if self._phase != "step":
+            self.log(f"doStep at t = {current_time:g} s: the FMU is {self._phase}, not initialised for stepping",
+                     Fmi2Status.error)
+            return False
         bad = self._bad_inputs()
         if bad:
             self.log(f"doStep at t = {current_time:g} s rejected: " + "; ".join(bad), Fmi2Status.error)

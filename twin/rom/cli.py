@@ -64,6 +64,7 @@ def cmd_rom_report(args):
     best = report.passes("krylov") if "krylov" in args.methods else None
     print(f"\nsmallest Krylov order meeting TCP ≤ 0.05 µm and T ≤ 0.01 K on every scenario: {best}")
     if args.out:
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         Path(args.out).write_text(text + "\n", encoding="utf-8")
         print(f"table written to {args.out}")
 

@@ -276,6 +276,7 @@ class ReducedModel:
     info: dict = field(default_factory=dict)
     basis: np.ndarray | None = None
     zone_lags_s: dict = field(default_factory=dict)   # zones whose air lags the room (s), as the machine says
+    output_labels: list = field(default_factory=list)  # per output: the sensor's label and position (text)
 
     # ------------------------------------------------------------------ shape
     @property
@@ -422,14 +423,148 @@ class ReducedModel:
         a, g = self._step_coefficients(float(step_s))
         return np.diag(a), g[:, None] * self.input_matrix
 
+    # ------------------------------------------------------------------ plant inputs: zone lags as states
+    @property
+    def lagged_zones(self):
+        """Zones whose air follows the room through a first-order lag (``[[zones]] lag_h``), in zone order."""
+        return [z for z in self.zones if float(self.zone_lags_s.get(z, 0.0)) > 0.0]
+
+    @property
+    def measured_zones(self):
+        """Zones whose ambient is a plant input (every zone but the lagged ones)."""
+        return [z for z in self.zones if z not in self.lagged_zones]
+
+    @property
+    def plant_input_names(self):
+        """Inputs of the plant model: :attr:`input_names` without the lagged zones' ambients."""
+        lagged = {f"ambient:{z}" for z in self.lagged_zones}
+        return [n for n in self.input_names if n not in lagged]
+
+    def _plant_layout(self):
+        """(columns of the plant inputs in u, columns of the lagged ambients in u, the room's column in u_p)."""
+        room = room_zone(self.zones)
+        if room in self.lagged_zones:
+            raise ROMError(f"zone {room!r} is the room, which the lagged zones follow; it cannot lag itself")
+        plant = [self.input_names.index(n) for n in self.plant_input_names]
+        lagged = [self.input_names.index(f"ambient:{z}") for z in self.lagged_zones]
+        return plant, lagged, self.plant_input_names.index(f"ambient:{room}")
+
+    def plant_inputs_from_conditions(self, spindle_rpm, feed_mm_min, ambient_C, gradient_K_per_m=0.0):
+        """Plant inputs (k, m_p) (:attr:`plant_input_names`) from conditions.
+
+        As :meth:`inputs_from_conditions`, with ``ambient_C`` over :attr:`measured_zones` only.
+        """
+        if isinstance(ambient_C, dict):
+            room = ambient_C.get(room_zone(self.zones))
+            ambient_C = {**{z: room for z in self.lagged_zones}, **ambient_C}
+        U = self.inputs_from_conditions(spindle_rpm, feed_mm_min, ambient_C, gradient_K_per_m)
+        return U[:, self._plant_layout()[0]]
+
+    def _full_inputs(self, Up, lag_air):
+        """Thermal inputs u (k, m) from plant inputs (k, m_p) and the lagged zones' air (k, l)."""
+        plant, lagged, _ = self._plant_layout()
+        Up = np.atleast_2d(np.asarray(Up, float))
+        U = np.zeros((len(Up), self.n_inputs))
+        U[:, plant] = Up
+        U[:, lagged] = np.atleast_2d(lag_air)
+        return U
+
+    def plant_state_space(self):
+        """Continuous ``StateSpace`` on the plant inputs; states x = [z (r), lagged zone air (l), °C].
+
+        ż = −λ ⊙ z + B_z u,  ẇ_l = (u_room − w_l)/τ_l,  y = C_z z + D u + offset, where u is
+        the thermal input with each lagged zone's ambient replaced by its state w_l.  A, B, C, D
+        are dense; ``uniform_state`` is the state of a uniform 1 °C machine in 1 °C air.
+        """
+        plant, lagged, room = self._plant_layout()
+        r, l = self.order, len(lagged)
+        mu = np.array([1.0 / float(self.zone_lags_s[z]) for z in self.lagged_zones])
+        A = np.zeros((r + l, r + l))
+        A[:r, :r] = -np.diag(self.eigenvalues)
+        A[:r, r:] = self.input_matrix[:, lagged]
+        A[r:, r:] = -np.diag(mu)
+        B = np.zeros((r + l, len(plant)))
+        B[:r] = self.input_matrix[:, plant]
+        B[r:, room] = mu
+        C = np.hstack([self.output_matrix, self.feedthrough[:, lagged]])
+        return StateSpace(A, B, C, self.feedthrough[:, plant].copy(), self.offset.copy(),
+                          np.r_[self.uniform_state, np.ones(l)], self.plant_input_names, list(self.output_names),
+                          list(self.output_units))
+
+    def plant_uniform(self, temperature_C, room_C=None):
+        """Plant state of a uniform machine at ``temperature_C``, the lagged air at ``room_C`` (default the same)."""
+        room_C = temperature_C if room_C is None else room_C
+        return np.r_[self.uniform(temperature_C), np.full(len(self.lagged_zones), float(room_C))]
+
+    def plant_steady_state(self, u_plant):
+        """Plant state in equilibrium with constant plant inputs (the lagged air at the room's)."""
+        u_plant = np.asarray(u_plant, float)
+        w = np.full(len(self.lagged_zones), u_plant[self._plant_layout()[2]])
+        return np.r_[self.steady_state(self._full_inputs(u_plant, w)[0]), w]
+
+    def plant_outputs(self, x, u_plant):
+        """Outputs (p,) or (k, p) for plant states x (r + l,)/(k, ·) and plant inputs (m_p,)/(k, m_p)."""
+        x = np.asarray(x, float)
+        U = self._full_inputs(u_plant, np.atleast_2d(x)[:, self.order:])
+        y = self.outputs(np.atleast_2d(x)[:, :self.order], U)
+        return y if x.ndim == 2 else y[0]
+
+    def plant_step_coefficients(self, h):
+        """Exact ZOH coefficients of the plant model for a step ``h`` (s): (a, g, e, E).
+
+        a = e^{−λh}, g = (1 − e^{−λh})/λ per mode; e = e^{−h/τ} per lagged zone; E (r, l) =
+        ∫₀ʰ e^{−λ(h−s)} e^{−s/τ} ds = (e^{−h/τ} − e^{−λh})/(λ − 1/τ), evaluated without
+        cancellation.
+        """
+        lam = self.eigenvalues
+        mu = np.array([1.0 / float(self.zone_lags_s[z]) for z in self.lagged_zones])
+        a, g = self._step_coefficients(float(h))
+        d = lam[:, None] - mu[None, :]
+        slow = np.minimum(lam[:, None], mu[None, :])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            E = np.where(d == 0.0, h, -np.expm1(-np.abs(d) * h) / np.abs(d)) * np.exp(-slow * h)
+        return a, g, np.exp(-mu * h), E
+
+    def plant_states(self, times_s, inputs, x0):
+        """States (k, r + l) at ``times_s`` for plant inputs (k, m_p), row i held over [tᵢ, tᵢ₊₁) (exact ZOH).
+
+        The lagged zones' air w follows the held room value u_room exactly,
+        w ← u_room + (w − u_room) e^{−h/τ}, and drives the modes through the cross term E.
+        """
+        t = np.asarray(times_s, float)
+        Up = np.atleast_2d(np.asarray(inputs, float))
+        if len(Up) != len(t):
+            raise ROMError(f"{len(Up)} rows of plant inputs for {len(t)} times")
+        if not np.all(np.isfinite(Up)):
+            raise ROMError("ROM inputs contain NaN or infinite values")
+        if np.any(np.diff(t) <= 0):
+            raise ROMError("ROM times must increase strictly")
+        _, lagged, room = self._plant_layout()
+        r = self.order
+        X = np.empty((len(t), r + len(lagged)))
+        X[0] = x0
+        Bl = self.input_matrix[:, lagged]
+        cache = {}
+        for k, h in enumerate(np.diff(t)):
+            if h not in cache:
+                cache[h] = self.plant_step_coefficients(h)
+            a, g, e, E = cache[h]
+            z, w = X[k, :r], X[k, r:]
+            u_room = Up[k, room]
+            W = self.input_matrix @ self._full_inputs(Up[k], np.full(len(lagged), u_room))[0]
+            X[k + 1, :r] = a * z + g * W + (E * Bl) @ (w - u_room)
+            X[k + 1, r:] = u_room + (w - u_room) * e
+        return X
+
     # ------------------------------------------------------------------ persistence
     def save(self, path, keep_basis=False):
         """Write a versioned ``.npz`` (no pickle); the basis only with ``keep_basis``."""
         path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
         meta = dict(format=FORMAT, version=FORMAT_VERSION, method=self.method, input_names=self.input_names,
                     output_names=self.output_names, output_units=self.output_units,
                     output_kinds=self.output_kinds, zones=self.zones, zone_lags_s=self.zone_lags_s,
-                    sources=self.sources, limits=self.limits,
+                    sources=self.sources, limits=self.limits, output_labels=self.output_labels,
                     machine=self.machine, digest=self.digest, info=self.info)
         arrays = dict(eigenvalues=self.eigenvalues, input_matrix=self.input_matrix,
                       output_matrix=self.output_matrix, feedthrough=self.feedthrough, offset=self.offset,
@@ -457,7 +592,8 @@ class ReducedModel:
                    data["feedthrough"], data["offset"], data["uniform_state"], meta["input_names"],
                    meta["output_names"], meta["output_units"], meta["output_kinds"], meta["zones"],
                    meta["sources"], meta["limits"], meta["machine"], meta["digest"], meta["info"],
-                   data["basis"] if "basis" in data.files else None, meta.get("zone_lags_s", {}))
+                   data["basis"] if "basis" in data.files else None, meta.get("zone_lags_s", {}),
+                   meta.get("output_labels", []))
 
 
 def source_power(src, spindle_rpm, feed_mm_min):
@@ -574,7 +710,16 @@ def reduce_with_basis(machine, V, method="krylov", kinds=DEFAULT_KINDS, keep_bas
                         [ch.name for ch in channels], [ch.unit for ch in channels], [ch.kind for ch in channels],
                         list(machine.zones), _source_models(machine), limits, machine.name,
                         machine_digest(machine), info, Vq if keep_basis else None,
-                        dict(getattr(definition, "zone_lags_s", {}) or {}))
+                        dict(getattr(definition, "zone_lags_s", {}) or {}), channel_labels(machine, channels))
+
+
+def channel_labels(machine, channels=None):
+    """``"<label> at (x, y, z) m"`` per channel (default: every channel of the machine), for descriptions."""
+    out = []
+    for c in machine.channels if channels is None else channels:
+        where = "" if c.position is None else " at ({}) m".format(", ".join(f"{float(v):.4g}" for v in c.position))
+        out.append(f"{c.label}{where}")
+    return out
 
 
 def rom_cache_path(machine, order, method="krylov", points=None, kinds=DEFAULT_KINDS):
@@ -590,6 +735,8 @@ def cached_rom(machine, order=DEFAULT_ORDER, method="krylov", points=None, kinds
     if path.exists() and not rebuild and checked(path) is not None:
         rom = ReducedModel.load(path)
         rom.machine = machine.name          # not in the key: a renamed copy of a machine reuses the ROM
+        labels = dict(zip([c.name for c in machine.channels], channel_labels(machine)))
+        rom.output_labels = [labels.get(n, "") for n in rom.output_names]   # nor are labels: text only
         rom.info["from_cache"] = str(path)
         return rom
     rom = build_rom(machine, order, method, points, kinds)
