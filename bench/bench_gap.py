@@ -5,6 +5,9 @@ Run from the repository root:
     python bench/bench_gap.py                   # truth on the 35 mm mesh if cached/shipped, else the nominal one
     python bench/bench_gap.py --effect belt_drive --truth-mesh-size 0
     python bench/bench_gap.py --repeat 2        # a second diagnosis in the same process (engine cached)
+    python bench/bench_gap.py --independent column_source --out runs/gap_independent
+                                                # cases of the independent benchmark (comma list or
+                                                # library/outside/pairs/controls/all), report printed
 
 The record is ``gap_blind_24h`` (24 h, 1 min sampling, 1441 rows, 36 sensor
 channels) with one effect of the library switched on in the truth (default
@@ -38,7 +41,15 @@ def main(argv=None):
     p.add_argument("--truth-mesh-size", type=float, default=TRUTH_MESH_SIZE_M)
     p.add_argument("--repeat", type=int, default=1)
     p.add_argument("--no-render", action="store_true")
+    p.add_argument("--independent", metavar="CASES", help="run cases of the independent benchmark instead")
+    p.add_argument("--out", help="with --independent: output folder (independent.md, independent.json)")
     args = p.parse_args(argv)
+    if args.independent:
+        from twin.gap.benchmark import independent_benchmark
+
+        result = independent_benchmark(args.independent, out_dir=args.out)
+        print(result.markdown)
+        return
 
     t0 = time.perf_counter()
     truth_machine = _machine("vmc_ram", args.truth_mesh_size or None)

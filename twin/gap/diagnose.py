@@ -1,32 +1,17 @@
 """The gap diagnosis: measured record + nominal twin → where it misses, which effect explains it, how far it shrinks.
 
 :func:`diagnose` runs the nominal twin with the measured inputs (spindle
-speed, feeds, ambients from the air sensors), splits the record
-chronologically into a fit part and a held-out part, fits every candidate
-effect of the library (and the pairs of the leading ones) on the fit part,
-ranks them by penalised evidence on the held-out part, and decides whether
-there is a significant gap at all:
-
-- the nominal residual must exceed the noise and the model tolerance
-  (held-out RMS > :data:`NOISE_FACTOR` × max(noise, tolerance) in some
-  channel group; tolerances :data:`twin.gap.fit.GROUP_FLOOR`), and
-- the best model must beat the nominal twin by ΔBIC > :data:`MIN_DELTA_BIC`
-  *and* be material: remove from the held-out residual of some channel group
-  a component at least as large as the group's scale σ_g = max(noise,
-  tolerance), i.e. (RMS_before² − RMS_after²) / σ_g² ≥ :data:`MIN_MATERIAL`.
-  Long records make tiny systematic improvements "significant" by BIC alone
-  (an effect bending itself to the discretisation error); materiality asks
-  for a change that matters at the twin's accuracy.
-
-A pair is named instead of a single effect only if each of its single
-effects still leaves a gap (the first test, on the single's residual) and the
-pair passes the second test against it: an effect is added only while a
-significant gap remains.  Without the first condition a second effect that
-bends itself to the twin's own discretisation error (a few % of a joint
-conductance absorbing the difference between a coarse and a fine mesh) is
-named beside the true one.
-
-Otherwise the verdict is "no significant gap" and no cause is named.
+speed and feeds as piecewise-constant signals integrated exactly over each
+step, ambients from the air sensors), splits the record chronologically into
+a fit part and a held-out part, fits every candidate effect of the library
+(and pairs: the leading effect with every other one, and the pairs among the
+leaders) on the fit part, ranks them by ΔBIC on the held-out part, and
+decides by :func:`twin.gap.verdict.decide`: ``no_significant_gap``,
+``explained``, ``partly_explained`` or ``not_explained``, per channel group
+and per sensor, with the timing floor of the record's sampling (the nominal
+twin's held-out change when the input change times move by ± half a sample)
+in the scales.  When a gap remains, the effect discovery of
+:mod:`twin.gap.discovery` searches what the library lacks.
 """
 from __future__ import annotations
 
@@ -39,20 +24,27 @@ from ..core.machine import build_machine
 from ..core.scenario import Scenario, load_scenario
 from ..errors import TwinInputError
 from ..infra.sweep import cached
-from . import attribution, where
+from . import attribution, verdict, where
 from .drive import measured_drive
 from .effects import library_by_name
 from .engine import make_backend
-from .fit import Evaluator, effective_samples, fit_effects, model_names, nominal_result, score
-from .measured import match_record, read_measured
+from .fit import (
+    Evaluator,
+    effective_samples,
+    fit_effects,
+    model_names,
+    nominal_result,
+    score,
+)
+from .measured import check_scale, match_record, read_measured
 from .model import GapModel
 from .signals import noise_level, uniform_grid
 from .structure import build_structure
 
-MIN_DELTA_BIC = 10.0
-MIN_MATERIAL = 1.0
-NOISE_FACTOR = 2.0
 DEFAULT_STEP_S = 60.0
+#: Shortest record the diagnosis accepts, s: a fit part and a held-out part that each see the machine's
+#: slow response (hours) need a few hours in all.
+MIN_RECORD_S = 2 * 3600.0
 
 
 @dataclass
@@ -68,26 +60,54 @@ class Diagnosis:
     singles: list
     pairs: list
     ranking: list
-    winner: object
-    runner_up: object
-    significant: bool
-    verdict: str
-    evidence_ratio: float
+    decision: object                 # twin.gap.verdict.Verdict
+    scales: object                   # twin.gap.verdict.Scales
     n_eff_hold: float
     noise: dict
     gap_over_noise: dict
     phases: np.ndarray
+    verdict: str = ""
     where: dict = field(default_factory=dict)
     attribution: dict = field(default_factory=dict)
     separation: dict | None = None
+    discovery: object = None
     timings: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
     skipped: list = field(default_factory=list)
-    gap_over_tolerance: dict = field(default_factory=dict)
 
     @property
     def names(self):
         return self.record.names
+
+    @property
+    def outcome(self):
+        return self.decision.outcome
+
+    @property
+    def winner(self):
+        return self.decision.winner
+
+    @property
+    def runner_up(self):
+        return self.decision.runner_up
+
+    @property
+    def significant(self):
+        return self.decision.significant
+
+    @property
+    def gap_over_tolerance(self):
+        """Held-out RMS / σ_g of the nominal twin per channel group (σ_g with the timing floor)."""
+        return self.decision.nominal_gap
+
+    @property
+    def evidence_ratio(self):
+        """The Bayes-factor equivalent of ΔBIC over the runner-up (inf when it overflows a float; no clamp)."""
+        ev = self.decision.evidence()
+        if "log10_ratio_vs_runner_up" not in ev:
+            return float("inf")
+        with np.errstate(over="ignore"):
+            return float(np.power(10.0, ev["log10_ratio_vs_runner_up"]))
 
     def result(self, name):
         for r in [self.nominal] + self.ranking:
@@ -131,40 +151,6 @@ def _pair_candidates(ranked, n_pairs):
     return out
 
 
-def materiality(result, reference, sigma):
-    """max over channel groups of (RMS_ref² − RMS²) / σ_g² on the held-out rows (see the module docstring)."""
-    out = -np.inf
-    for g, sig in sigma.items():
-        a = reference.summary["groups"][g]["hold_rms"]
-        b = result.summary["groups"][g]["hold_rms"]
-        if np.isfinite(a) and np.isfinite(b):
-            out = max(out, (a * a - b * b) / sig ** 2)
-    return float(out)
-
-
-def gap_over_tolerance(result, sigma):
-    """Held-out RMS / σ_g per channel group of a result's residual."""
-    return {g: result.summary["groups"][g]["hold_rms"] / sig for g, sig in sigma.items()}
-
-
-def leaves_a_gap(result, sigma):
-    """True when the held-out residual still exceeds :data:`NOISE_FACTOR` × σ_g in some channel group."""
-    return max(gap_over_tolerance(result, sigma).values()) > NOISE_FACTOR
-
-
-def _parsimonious(ranking, sigma):
-    """The best model, but a pair only when each of its effects earns its place (module docstring)."""
-    by_name = {r.name: r for r in ranking}
-    for r in ranking:
-        if len(r.effects) == 1:
-            return r
-        singles = [by_name[e] for e in r.effects if e in by_name]
-        if all(leaves_a_gap(s, sigma) and r.delta_bic - s.delta_bic > MIN_DELTA_BIC
-               and materiality(r, s, sigma) >= MIN_MATERIAL for s in singles):
-            return r
-    return ranking[0]
-
-
 def engine(machine, effects, backend="rom", **options):
     """(structure, backend) for a machine and a library, built once per process (:func:`twin.infra.sweep.cached`)."""
     key = ("gap-engine", id(machine), tuple(e.name for e in effects), backend, tuple(sorted(options.items())))
@@ -187,8 +173,134 @@ def _machine(machine, mesh_size_m=None):
     return machine
 
 
+def _check_length(record, holdout_fraction):
+    """Stop with a clear message on a record too short to split into a fit and a held-out part."""
+    t = record.time_s
+    span = float(t[-1] - t[0])
+    source = record.report.get("source", "the record")
+    if span < MIN_RECORD_S:
+        raise TwinInputError(f"{source}: the record spans {span / 3600:.2f} h; a diagnosis needs at least "
+                             f"{MIN_RECORD_S / 3600:g} h (a fit part and a held-out part that each see the machine's "
+                             "slow thermal response)")
+    split = t[0] + (1.0 - float(holdout_fraction)) * span
+    fit_rows, hold_rows = t <= split, t > split
+    if fit_rows.sum() < 5 or hold_rows.sum() < 5:
+        raise TwinInputError(f"{source}: the split at {split / 3600:.2f} h leaves too few rows "
+                             f"({fit_rows.sum()} fit, {hold_rows.sum()} held out)")
+    return split, fit_rows, hold_rows
+
+
+#: Where between two differing samples the input change is put (fraction of the sample interval): the earliest
+#: possible time, the midpoint, the latest.  :func:`reconstruct_inputs` picks one on the fit part.
+POSITIONS = (0.0, 0.5, 1.0)
+
+
+def reconstruct_inputs(machine, structure, be, grid, record, sc, initial, evaluator):
+    """The record's twin with its input change times placed by the data, and the timing floor.
+
+    The nominal twin runs with every spindle/feed change at the earliest, middle and latest time the sampling
+    allows (:data:`POSITIONS`); the placement with the smallest weighted residual on the *fit* rows is kept (a
+    logger's convention — a sample that describes the interval before it, or the speed at its instant — is a
+    property of the record, chosen on training data).  The timing floor per sensor is the held-out RMS of half
+    the residual change between the earliest and latest placements: what ± half a sample of timing does.
+    Returns (model, position, floor (p,)).
+    """
+    evaluator.set_weights()
+    models, residuals = {}, {}
+    for position in POSITIONS:
+        models[position] = GapModel(structure, be, measured_drive(machine, grid, record, sc, position),
+                                    record.time_s, initial)
+        residuals[position] = evaluator.residual(models[position].predict())
+    best = min(POSITIONS, key=lambda p: residuals[p].sse_fit)
+    half = 0.5 * (residuals[POSITIONS[-1]].R - residuals[POSITIONS[0]].R)[evaluator.hold_rows]
+    return models[best], best, np.sqrt(np.nanmean(half ** 2, axis=0))
+
+
+def _fit_library(model, ev, applicable, nominal, n_pairs, progress):
+    """Fit every single effect and the pairs; return (singles, pairs, ranking, n_eff_hold)."""
+    hold_rows = ev.hold_rows
+    n_eff_hold = effective_samples(nominal.residual, ev, hold_rows)
+    singles = []
+    for i, e in enumerate(applicable):
+        singles.append(fit_effects(model, ev, [e]))
+        if progress is not None:
+            progress(i + 1, len(applicable))
+    # Effective held-out samples from what is left after the best single effect (the nominal's when none
+    # helps): an F-test-like reference that keeps systematic leftovers from counting as independent evidence.
+    best_single = min(singles, key=lambda r: r.residual.sse_hold) if singles else nominal
+    if best_single.residual.sse_hold < nominal.residual.sse_hold:
+        n_eff_hold = effective_samples(best_single.residual, ev, hold_rows)
+    ranked = score(singles, nominal, n_eff_hold)
+    pairs = []
+    for a, b in _pair_candidates(ranked, n_pairs):
+        ea, eb = [e for e in applicable if e.name in (a.name, b.name)]
+        start = np.r_[a.values, b.values] if ea.name == a.name else np.r_[b.values, a.values]
+        pairs.append(fit_effects(model, ev, [ea, eb], start=start))
+        if progress is not None:
+            progress(len(applicable) + len(pairs), len(applicable) + len(pairs))
+    return singles, pairs, score(singles + pairs, nominal, n_eff_hold), n_eff_hold
+
+
+def split_half_sd(model, ev, result, effects):
+    """Delete-a-half jackknife sd of a model's parameters: |θ(first half) − θ(second half)| / 2, each half of
+    the fit rows fitted alone.  A parameter that drifts through the record (model discrepancy the Jacobian and
+    the HAC sandwich do not see) shows here; :func:`diagnose` reports the larger of the two sds."""
+    n = len(ev.fit_rows)
+    rows = np.flatnonzero(ev.fit_rows)
+    first = np.arange(n) < rows[len(rows) // 2]
+    estimates = []
+    for half in (ev.fit_rows & first, ev.fit_rows & ~first):
+        sub = Evaluator(ev.Y, ev.cols, ev.kinds, half, ev.hold_rows, ev.noise)
+        sub.set_weights()
+        estimates.append(fit_effects(model, sub, effects, start=result.values).values)
+    return np.abs(estimates[1] - estimates[0]) / 2.0
+
+
+def _widen(model, ev, result, applicable):
+    """Widen a named model's sds to its split-half jackknife sd where that is larger (in place)."""
+    effects = [next(e for e in applicable if e.name == name) for name in result.effects]
+    jack = split_half_sd(model, ev, result, effects)
+    result.sd = np.maximum(result.sd, jack)
+    result.notes.append("sd: max(HAC sandwich, split-half jackknife " + ", ".join(f"{j:.3g}" for j in jack) + ")")
+
+
+def _where(d, drive):
+    """Fill ``d.where``, ``d.attribution`` and ``d.separation`` (residuals by phase and band, parts)."""
+    model, ev, nominal, winner = d.model, d.evaluator, d.nominal, d.winner
+    t = d.record.time_s
+    names = model_names(model, ev)
+    d.where = {"phases": where.phase_table(nominal.residual, ev, d.phases, names),
+               "bands": where.band_table(nominal.residual, ev, t, names)}
+    if winner is not None:
+        d.where["phases_after"] = where.phase_table(winner.residual, ev, d.phases, names)
+        d.where["bands_after"] = where.band_table(winner.residual, ev, t, names)
+    d.attribution = {"regions": attribution.region_estimate(model.structure, ev, nominal.residual, names)}
+    if winner is not None:
+        d.attribution["winner"] = attribution.effect_attribution(model, winner, nominal, names)
+    runner, best = d.runner_up, winner or d.decision.best
+    if runner is not None and best is not None:
+        try:
+            d.separation = attribution.separating_sensor(model, best, runner, nominal,
+                                                         noise_K=max(d.noise.get("temperature", 0.02), 0.02))
+        except Exception as exc:  # pragma: no cover - diagnostic extra, never fatal, but reported
+            d.separation = {"error": str(exc)}
+
+
+def _discover(d):
+    """Run :func:`twin.gap.discovery.discover` on what the named model (else the nominal) leaves; the result, or
+    None with a note when the discovery fails (reported, never silent)."""
+    from .discovery import discover
+
+    try:
+        return discover(d.model, d.evaluator, base=d.winner or d.nominal)
+    except Exception as exc:  # the verdict stands without it; the report says why it is missing
+        d.notes.append(f"effect discovery failed: {type(exc).__name__}: {exc}")
+        return None
+
+
 def diagnose(measured, machine="vmc_ram", scenario=None, column_map=None, holdout_fraction=0.3, effects=None,
-             n_pairs=3, backend="rom", step_s=DEFAULT_STEP_S, initial=None, progress=None, engine_options=None):
+             n_pairs=3, backend="rom", step_s=DEFAULT_STEP_S, initial=None, progress=None, engine_options=None,
+             discovery=True):
     """Diagnose the sim-to-real gap of a measured record; return a :class:`Diagnosis`.
 
     Parameters
@@ -206,6 +318,7 @@ def diagnose(measured, machine="vmc_ram", scenario=None, column_map=None, holdou
     step_s : the twin's time step, s
     initial : ``steady`` (idle steady state at the first sample, the default) or ``uniform``
     progress : optional callable ``progress(done, total)`` over the fits
+    discovery : search beyond the library (:mod:`twin.gap.discovery`) when a gap remains unexplained
     """
     timings = {}
     t0 = time.perf_counter()
@@ -216,107 +329,49 @@ def diagnose(measured, machine="vmc_ram", scenario=None, column_map=None, holdou
     if scenario is not None:
         sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     record = match_record(read_measured(measured, column_map), machine)
+    split, fit_rows, hold_rows = _check_length(record, holdout_fraction)
     if initial is None:
         initial = "uniform" if sc is not None and sc.initial["kind"] == "uniform" else "steady"
     library = library_by_name(effects)
     applicable = [e for e in library if e.applicable(machine)]
-    skipped = [e.name for e in library if not e.applicable(machine)]
     structure, be = engine(machine, library_by_name(None), backend, **(engine_options or {}))
     timings["engine_s"] = time.perf_counter() - t0
     t = record.time_s
     grid = uniform_grid(t[0], t[-1], float(step_s))
-    drive = measured_drive(machine, grid, record, sc)
-    model = GapModel(structure, be, drive, t, initial)
-    model.effects = applicable
-    split = t[0] + (1.0 - float(holdout_fraction)) * (t[-1] - t[0])
-    fit_rows, hold_rows = t <= split, t > split
-    if fit_rows.sum() < 5 or hold_rows.sum() < 5:
-        raise TwinInputError(f"the split at {split / 3600:.2f} h leaves too few rows "
-                             f"({fit_rows.sum()} fit, {hold_rows.sum()} held out)")
-    cols = [structure.index[n] for n in record.names]
     noise = noise_level(record.values)
-    ev = Evaluator(record.values, cols, record.kinds, fit_rows, hold_rows, noise)
+    ev = Evaluator(record.values, [structure.index[n] for n in record.names], record.kinds, fit_rows, hold_rows,
+                   noise)
+    model, position, timing = reconstruct_inputs(machine, structure, be, grid, record, sc, initial, ev)
+    drive = model.drive
+    model.effects = applicable
     nominal = nominal_result(model, ev)
-    n_eff_hold = effective_samples(nominal.residual, ev, hold_rows)
+    check_scale(record, nominal.prediction.values[:, ev.cols], record.report["columns"])
     timings["nominal_s"] = time.perf_counter() - t0 - timings["engine_s"]
 
     t1 = time.perf_counter()
-    total = len(applicable)
-    singles = []
-    for i, e in enumerate(applicable):
-        singles.append(fit_effects(model, ev, [e]))
-        if progress is not None:
-            progress(i + 1, total)
-    # Effective held-out samples from what is left after the best single effect (the nominal's when none
-    # helps): an F-test-like reference that keeps systematic leftovers from counting as independent evidence.
-    best_single = min(singles, key=lambda r: r.residual.sse_hold) if singles else nominal
-    if best_single.residual.sse_hold < nominal.residual.sse_hold:
-        n_eff_hold = effective_samples(best_single.residual, ev, hold_rows)
-    ranked = score(singles, nominal, n_eff_hold)
-    pairs = []
-    for a, b in _pair_candidates(ranked, n_pairs):
-        ea, eb = [e for e in applicable if e.name in (a.name, b.name)]
-        start = np.r_[a.values, b.values] if ea.name == a.name else np.r_[b.values, a.values]
-        pairs.append(fit_effects(model, ev, [ea, eb], start=start))
-        if progress is not None:
-            progress(len(applicable) + len(pairs), len(applicable) + len(pairs))
-    ranking = score(singles + pairs, nominal, n_eff_hold)
+    singles, pairs, ranking, n_eff_hold = _fit_library(model, ev, applicable, nominal, n_pairs, progress)
     timings["fits_s"] = time.perf_counter() - t1
 
-    # ------------------------------------------------------------------ decision
-    groups = ev.groups()
-    noise_g = {g: float(np.nanmedian(noise[idx])) for g, idx in groups.items()}
-    gap_over_noise = {g: nominal.summary["groups"][g]["hold_rms"] / max(noise_g[g], 1e-9) for g in groups}
-    gap_tolerance = gap_over_tolerance(nominal, ev.sigma)
-    best = _parsimonious(ranking, ev.sigma)
-    reduction = 1.0 - best.residual.sse_hold / max(nominal.residual.sse_hold, 1e-300)
-    material = materiality(best, nominal, ev.sigma)
-    above_noise = leaves_a_gap(nominal, ev.sigma)
-    significant = bool(above_noise and best.delta_bic > MIN_DELTA_BIC and material >= MIN_MATERIAL)
-    winner = best if significant else None
-    if winner is not None:
-        others = [r for r in ranking if not set(r.effects) & set(winner.effects) and len(r.effects) == 1]
-    else:
-        others = ranking[1:]
-    runner = others[0] if others else None
-    evidence_ratio = float(np.exp(min((runner.bic - best.bic) / 2, 700))) if runner is not None else float("inf")
-    if not above_noise:
-        verdict = ("no significant gap: the nominal twin's held-out residual is within the noise and the model "
-                   f"tolerance (at most {max(gap_tolerance.values()):.1f} × max(noise, tolerance))")
-    elif not significant:
-        verdict = (f"no significant gap: no candidate effect beats the nominal twin on held-out data by "
-                   f"ΔBIC > {MIN_DELTA_BIC:g} with a material change (best: {best.name}, ΔBIC {best.delta_bic:.1f}, "
-                   f"materiality {material:.2f} < {MIN_MATERIAL:g})")
-    else:
-        values = ", ".join(f"{p['name']} = {p['value']:.3g} ± {p['sd']:.2g} {p['unit']}" for p in winner.params())
-        verdict = (f"gap explained by {winner.name} ({values}); "
-                   f"ΔBIC {winner.delta_bic:.1f} vs nominal, held-out residual −{reduction:.0%}")
-        if runner is not None:
-            ratio = "> 1e100" if evidence_ratio > 1e100 else f"{evidence_ratio:.3g}"
-            verdict += f"; evidence ratio {ratio} over the runner-up {runner.name}"
-
-    # ------------------------------------------------------------------ where
+    scales = verdict.scales(ev, record.names, timing)
+    decision = verdict.decide(nominal, ranking, scales)
+    if decision.winner is not None:
+        _widen(model, ev, decision.winner, applicable)
+    noise_g = {g: float(np.nanmedian(noise[idx])) for g, idx in ev.groups().items()}
+    d = Diagnosis(machine, record, model, ev, float(split), nominal, singles, pairs, ranking, decision, scales,
+                  n_eff_hold, noise_g,
+                  {g: nominal.summary["groups"][g]["hold_rms"] / max(noise_g[g], 1e-9) for g in noise_g},
+                  where.phases(drive, t), notes=list(drive.notes) + [
+                      f"spindle and feed changes placed {position:g} of the way between samples (chosen on the "
+                      "fit part among 0, 0.5, 1)"],
+                  skipped=[e.name for e in library if not e.applicable(machine)])
     t2 = time.perf_counter()
-    names = model_names(model, ev)
-    labels = where.phases(drive, t)
-    where_out = {"phases": where.phase_table(nominal.residual, ev, labels, names),
-                 "bands": where.band_table(nominal.residual, ev, t, names)}
-    if winner is not None:
-        where_out["phases_after"] = where.phase_table(winner.residual, ev, labels, names)
-        where_out["bands_after"] = where.band_table(winner.residual, ev, t, names)
-    attr = {"regions": attribution.region_estimate(structure, ev, nominal.residual, names)}
-    if winner is not None:
-        attr["winner"] = attribution.effect_attribution(model, winner, nominal, names)
-    separation = None
-    if runner is not None:
-        try:
-            separation = attribution.separating_sensor(model, winner or best, runner, nominal,
-                                                       noise_K=max(noise_g.get("temperature", 0.02), 0.02))
-        except Exception as exc:  # pragma: no cover - diagnostic extra, never fatal
-            separation = {"error": str(exc)}
+    _where(d, drive)
     timings["where_s"] = time.perf_counter() - t2
+    if discovery and d.outcome in ("partly_explained", "not_explained"):
+        t3 = time.perf_counter()
+        d.discovery = _discover(d)
+        timings["discovery_s"] = time.perf_counter() - t3
+    d.verdict = verdict.sentence(d)
     timings["total_s"] = time.perf_counter() - t0
-    notes = list(drive.notes)
-    return Diagnosis(machine, record, model, ev, float(split), nominal, singles, pairs, ranking, winner, runner,
-                     significant, verdict, evidence_ratio, n_eff_hold, noise_g, gap_over_noise, labels, where_out,
-                     attr, separation, timings, notes, skipped, gap_tolerance)
+    d.timings = timings
+    return d

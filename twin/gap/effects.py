@@ -107,6 +107,10 @@ class Effect:
         """Displacement readings (n, k) from the true drift D (n, k); ``axes`` is 'x'/'y'/'z' per column."""
         return D
 
+    def _speed_factor(self, rpm, feeds):
+        """(|n| / reference_rpm)^exponent of the hidden constants (spindle-driven effects; feeds unused)."""
+        return (np.abs(rpm) / self.hidden["reference_rpm"]) ** self.hidden["exponent"]
+
 
 # ============================================================================= system effects
 def _scaled_definition(definition, groups=(), joint=None, factor=2.0):
@@ -262,7 +266,7 @@ class AirPocket(Effect):
         structure.add_input("gap:air_pocket", lumped_facet_load(machine, mask, h))
 
     def input_changes(self, theta, drive, structure):
-        x = (np.abs(drive.spindle_rpm) / self.hidden["reference_rpm"]) ** self.hidden["exponent"]
+        x = drive.step_mean(self._speed_factor)
         return {"gap:air_pocket": theta[0] * lag(x, drive.step_s, self.hidden["lag_min"] * 60.0)}
 
 
@@ -289,8 +293,7 @@ class UnmodelledSource(Effect):
         structure.add_input("gap:belt_drive", B[:, changed.thermal.input_index("power:gap_belt_drive")].toarray())
 
     def input_changes(self, theta, drive, structure):
-        x = (np.abs(drive.spindle_rpm) / self.hidden["reference_rpm"]) ** self.hidden["exponent"]
-        return {"gap:belt_drive": theta[0] * x}
+        return {"gap:belt_drive": theta[0] * drive.step_mean(self._speed_factor)}
 
 
 def _spindle_sources(machine):
@@ -309,7 +312,7 @@ class SpindlePowerScale(Effect):
         return bool(_spindle_sources(machine))
 
     def input_changes(self, theta, drive, structure):
-        return {f"power:{s.name}": (theta[0] - 1.0) * s.power_W(drive.spindle_rpm, drive.feed_mm_min)
+        return {f"power:{s.name}": (theta[0] - 1.0) * drive.step_mean(s.power_W)
                 for s in _spindle_sources(structure.machine)}
 
 
@@ -329,9 +332,9 @@ class SpeedExponent(Effect):
     def input_changes(self, theta, drive, structure):
         out = {}
         for s in _spindle_sources(structure.machine):
-            base = s.power_W(drive.spindle_rpm, drive.feed_mm_min)
-            out[f"power:{s.name}"] = s.power_W(drive.spindle_rpm, drive.feed_mm_min, 1.0,
-                                               s.exponent + theta[0]) - base
+            exponent = s.exponent + theta[0]
+            out[f"power:{s.name}"] = drive.step_mean(lambda n, f, s=s, b=exponent: s.power_W(n, f, 1.0, b)
+                                                     - s.power_W(n, f))
         return out
 
 

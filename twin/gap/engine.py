@@ -1,8 +1,9 @@
 """Fast simulation of the twin with effects switched on: a parametric reduced model, or the full FE.
 
 Both backends run ``M Ṫ + (A₀ + Σ aᵢ dAᵢ) T = (B₀ + Σ aᵢ dBᵢ) u`` on a
-uniform grid with the input held over each step at its end value (the
-scenario convention; zero-order hold), from the steady state for an idle
+uniform grid with input row k held over step k, (t_{k−1}, t_k] (zero-order
+hold; the drive makes the source powers their exact interval means over the
+step, :meth:`twin.gap.drive.Drive.step_mean`), from the steady state for an idle
 start input plus optional initial-field shapes, and return the FE outputs
 (°C, µm, µε; without the operator's constant offset).
 
@@ -24,7 +25,7 @@ start input plus optional initial-field shapes, and return the FE outputs
 from __future__ import annotations
 
 import time
-from types import SimpleNamespace
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
@@ -32,6 +33,21 @@ import scipy.sparse as sp
 from fea.linsolve import factorize
 
 from ..rom.reduction import krylov_basis, slowest_rate
+
+@dataclass(frozen=True)
+class Pencil:
+    """The thermal system ``M Ṫ + A T = B u`` that :func:`twin.rom.reduction.krylov_basis` and
+    :func:`~twin.rom.reduction.slowest_rate` reduce (they read ``n_nodes``, ``mass``, ``stiffness``,
+    ``input_matrix``): the structure's nominal system or one perturbed by a system term."""
+
+    mass: object
+    stiffness: object
+    input_matrix: object
+
+    @property
+    def n_nodes(self):
+        return self.mass.shape[0]
+
 
 #: Default orders: the nominal Krylov basis, and the basis added per system term and bound.
 NOMINAL_ORDER = 100
@@ -80,16 +96,14 @@ class ReducedBackend:
         start = time.perf_counter()
         s = structure
         M, A0, B0 = s.mass, s.stiffness, s.input_matrix
-        lam1 = slowest_rate(SimpleNamespace(mass=M, stiffness=A0))
+        lam1 = slowest_rate(Pencil(M, A0, B0))
         points = [0.0, 10 * lam1, 100 * lam1, 1000 * lam1]
         order = min(nominal_order, s.n_nodes - 1)
-        blocks = [krylov_basis(SimpleNamespace(n_nodes=s.n_nodes, mass=M, stiffness=A0, input_matrix=B0),
-                               order, points)]
+        blocks = [krylov_basis(Pencil(M, A0, B0), order, points)]
         for name, param_values in self._term_values(s):
             dA, dB = s.system_terms[name][0], s.system_input_change(name)
             for a in param_values:
-                blocks.append(krylov_basis(SimpleNamespace(n_nodes=s.n_nodes, mass=M, stiffness=A0 + a * dA,
-                                                           input_matrix=B0 + a * dB),
+                blocks.append(krylov_basis(Pencil(M, A0 + a * dA, B0 + a * dB),
                                            min(term_order, s.n_nodes - 1), points[:2], uniform=False))
         for f in s.fields.values():
             blocks.append(f[:, None])

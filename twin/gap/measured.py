@@ -23,6 +23,13 @@ from ..core.dataset import Dataset, sidecar_path
 from ..errors import TwinInputError
 
 SENSOR_KINDS = ("temperature", "air", "displacement", "strain")
+#: Plausible values per channel kind in its edge unit (°C, °C, µm, µε): a machine tool in a workshop.  Values
+#: outside are a unit error (kelvin under ``_degC``, nm under ``_um``) or a broken channel, never data.
+PLAUSIBLE = {"temperature": (-40.0, 150.0), "air": (-40.0, 80.0), "displacement": (-5000.0, 5000.0),
+             "strain": (-5000.0, 5000.0)}
+#: A measured channel whose range differs from the nominal twin's by more than this factor (either way) is
+#: taken as a unit error (mm under ``_um``) when the twin predicts a clear signal there.
+SCALE_FACTOR = 20.0
 CONDITION_UNITS = {"spindle": "rpm", "feed_x": "mm_min", "feed_y": "mm_min", "feed_z": "mm_min",
                    "ambient_gradient": "K_m"}
 
@@ -75,68 +82,138 @@ def _nan_runs(t, v):
     return float(max(lengths))
 
 
+def _hint(kind, value):
+    if kind in ("temperature", "air") and 230.0 <= value <= 430.0:
+        return f"; it looks like kelvin ({value - 273.15:.2f} °C)"
+    if kind in ("displacement", "strain") and abs(value) > PLAUSIBLE[kind][1]:
+        return "; it looks like nm or a raw count"
+    return ""
+
+
+def check_plausible(dataset, channel, kind, values):
+    """Stop with a clear error when a sensor's values lie outside :data:`PLAUSIBLE` for its kind."""
+    lo, hi = PLAUSIBLE[kind]
+    bad = np.flatnonzero(np.isfinite(values) & ((values < lo) | (values > hi)))
+    if bad.size:
+        k = bad[0]
+        source = dataset.metadata.get("source", "the data")
+        raise TwinInputError(
+            f"{source}: column {channel.column!r} has value {values[k]:g} at "
+            f"t = {dataset.time_s[k]:g} s, outside the plausible {lo:g} … {hi:g} {channel.unit} of a {kind} "
+            f"sensor{_hint(kind, float(values[k]))}")
+
+
+def check_scale(record, predicted, columns):
+    """Stop when a sensor's measured range differs from the nominal twin's by more than :data:`SCALE_FACTOR`
+    (mm written under ``_um``), where the twin predicts a clear signal; ``predicted`` (n, p) at the record's
+    times, ``columns`` the record's CSV column names."""
+    floor = {"temperature": 0.5, "air": 0.5, "displacement": 2.0, "strain": 5.0}
+    for j, (name, kind) in enumerate(zip(record.names, record.kinds)):
+        v = record.values[:, j]
+        ok = np.isfinite(v)
+        expected = float(np.ptp(predicted[ok, j])) if ok.sum() > 1 else 0.0
+        if expected < floor[kind]:
+            continue
+        seen = float(np.ptp(v[ok]))
+        ratio = seen / expected
+        if ratio < 1.0 / SCALE_FACTOR or ratio > SCALE_FACTOR:
+            raise TwinInputError(
+                f"{record.report.get('source', 'the data')}: column {columns.get(name, name)!r} ({name}) spans "
+                f"{seen:.4g} {GROUP_UNITS[kind]} but the nominal twin predicts {expected:.4g} {GROUP_UNITS[kind]} "
+                f"there ({ratio:.3g} ×): a unit error (mm under _um, µm under _um × 1000?); fix the column's unit")
+
+
+GROUP_UNITS = {"temperature": "degC", "air": "degC", "displacement": "um", "strain": "ue"}
+
+
+class _Channels:
+    """The channels of a dataset sorted into sensors, operating conditions, air inputs and ignored ones."""
+
+    def __init__(self, dataset, machine):
+        self.dataset, self.machine = dataset, machine
+        self.d = machine.definition
+        self.sensors = {c.name: c for c in machine.channels if c.kind in SENSOR_KINDS}
+        self.cameras = {c.name for c in machine.channels if c.kind == "camera"}
+        self.zones = list(self.d.zones)
+        self.t = np.asarray(dataset.time_s, float)
+        self.names, self.kinds, self.cols = [], [], []
+        self.feeds, self.air, self.ignored, self.empty = {}, [], [], []
+        self.spindle = self.gradient = None
+
+    def valid_names(self):
+        return (f"sensors {sorted(self.sensors)}; conditions {sorted(CONDITION_UNITS)} and "
+                f"{['ambient_' + z for z in self.zones]}")
+
+    def add(self, ch):
+        v = np.asarray(self.dataset[ch.name], float)
+        if ch.name in self.sensors:
+            self.sensor(ch, v)
+        elif ch.name in CONDITION_UNITS:
+            self.condition(ch, v)
+        elif ch.name.startswith("ambient_") and ch.name[len("ambient_"):] in self.zones and ch.unit == "degC":
+            if np.isfinite(v).any():
+                self.air.append((ch.name, ch.name[len("ambient_"):], 0.0, _fill(self.t, v)))
+        elif ch.name.startswith("P_") and ch.unit == "W" or ch.name in self.cameras:
+            self.ignored.append(ch.name)
+        else:
+            raise TwinInputError(
+                f"channel {ch.name!r} (column {ch.column}) matches no sensor or condition of machine "
+                f"{self.machine.name!r}; valid names: {self.valid_names()}. Rename it in the CSV or map it with a "
+                "column map (--column-map), e.g. {\"" + ch.column + "\": \"T01_degC\"}")
+
+    def sensor(self, ch, v):
+        c = self.sensors[ch.name]
+        if ch.unit != c.unit:
+            raise TwinInputError(f"channel {ch.name!r} is in {ch.unit!r}, but sensor {ch.name} of machine "
+                                 f"{self.machine.name!r} reads {c.unit!r} (column {ch.name}_{c.unit})")
+        if not np.isfinite(v).any():
+            self.empty.append(ch.name)
+            return
+        check_plausible(self.dataset, ch, c.kind, v)
+        if c.kind == "air":
+            sensor = self.d.sensor(ch.name)
+            self.air.append((ch.name, sensor.zone, sensor.position[2] - self.d.ambient_reference_height_m,
+                             _fill(self.t, v)))
+        self.names.append(ch.name)
+        self.kinds.append(c.kind)
+        self.cols.append(v)
+
+    def condition(self, ch, v):
+        if ch.unit != CONDITION_UNITS[ch.name]:
+            raise TwinInputError(f"channel {ch.name!r} must be in {CONDITION_UNITS[ch.name]!r}, got {ch.unit!r}")
+        if not np.isfinite(v).any():
+            self.empty.append(ch.name)
+            return
+        filled = _fill(self.t, v)
+        if ch.name == "spindle":
+            self.spindle = filled
+        elif ch.name == "ambient_gradient":
+            self.gradient = filled
+        else:
+            self.feeds[ch.name[-1]] = filled
+
+
 def match_record(dataset, machine):
     """Match a dataset's channels to a machine; return a :class:`Record` (see the module docstring)."""
-    d = machine.definition
-    sensors = {c.name: c for c in machine.channels if c.kind in SENSOR_KINDS}
-    cameras = {c.name for c in machine.channels if c.kind == "camera"}
-    zones = list(d.zones)
     t = np.asarray(dataset.time_s, float)
     if len(t) < 10:
         raise TwinInputError(f"{dataset.metadata.get('source', 'dataset')}: {len(t)} rows are too few "
                              "for a diagnosis (need at least 10)")
-    names, kinds, cols = [], [], []
-    feeds, air, ignored, empty = {}, [], [], []
-    spindle = gradient = None
-    z_ref = d.ambient_reference_height_m
-
-    def valid_names():
-        return (f"sensors {sorted(sensors)}; conditions {sorted(CONDITION_UNITS)} and "
-                f"{['ambient_' + z for z in zones]}")
-
+    m = _Channels(dataset, machine)
     for ch in dataset.channels:
-        v = np.asarray(dataset[ch.name], float)
-        if ch.name in sensors:
-            c = sensors[ch.name]
-            if ch.unit != c.unit:
-                raise TwinInputError(f"channel {ch.name!r} is in {ch.unit!r}, but sensor {ch.name} of machine "
-                                     f"{machine.name!r} reads {c.unit!r} (column {ch.name}_{c.unit})")
-            if not np.isfinite(v).any():
-                empty.append(ch.name)
-                continue
-            if c.kind == "air":
-                sensor = d.sensor(ch.name)
-                air.append((ch.name, sensor.zone, sensor.position[2] - z_ref, _fill(t, v)))
-            names.append(ch.name)
-            kinds.append(c.kind)
-            cols.append(v)
-        elif ch.name in CONDITION_UNITS:
-            if ch.unit != CONDITION_UNITS[ch.name]:
-                raise TwinInputError(f"channel {ch.name!r} must be in {CONDITION_UNITS[ch.name]!r}, got {ch.unit!r}")
-            if not np.isfinite(v).any():
-                empty.append(ch.name)
-                continue
-            filled = _fill(t, v)
-            if ch.name == "spindle":
-                spindle = filled
-            elif ch.name == "ambient_gradient":
-                gradient = filled
-            else:
-                feeds[ch.name[-1]] = filled
-        elif ch.name.startswith("ambient_") and ch.name[len("ambient_"):] in zones and ch.unit == "degC":
-            if np.isfinite(v).any():
-                air.append((ch.name, ch.name[len("ambient_"):], 0.0, _fill(t, v)))
-        elif ch.name.startswith("P_") and ch.unit == "W" or ch.name in cameras:
-            ignored.append(ch.name)
-        else:
-            raise TwinInputError(
-                f"channel {ch.name!r} (column {ch.column}) matches no sensor or condition of machine "
-                f"{machine.name!r}; valid names: {valid_names()}. Rename it in the CSV or map it with a column "
-                "map (--column-map), e.g. {\"" + ch.column + "\": \"T01_degC\"}")
-    if not names:
+        m.add(ch)
+    if not m.names:
         raise TwinInputError(f"the data has no sensor channel of machine {machine.name!r}; valid names: "
-                             f"{valid_names()}")
-    values = np.column_stack(cols)
+                             f"{m.valid_names()}")
+    values = np.column_stack(m.cols)
+    report = _import_report(dataset, m, t, values)
+    return Record(t, m.names, m.kinds, values, m.spindle, m.feeds, m.gradient, m.air, report,
+                  dict(dataset.metadata))
+
+
+def _import_report(dataset, m, t, values):
+    """What the record has and lacks: rows, sampling, gaps, missing and empty channels, NaNs, inputs."""
+    names, air = m.names, m.air
     steps = np.diff(t)
     typical = float(np.median(steps))
     gaps = np.flatnonzero(steps > 1.5 * typical)
@@ -149,16 +226,17 @@ def match_record(dataset, machine):
         "gaps": [{"after_s": float(t[g]), "length_s": float(steps[g])} for g in gaps[:50]],
         "n_gaps": int(len(gaps)),
         "sensors_used": names,
-        "sensors_missing": sorted(set(sensors) - set(names) - {n for n, *_ in air}),
-        "channels_empty": empty,
-        "channels_ignored": ignored,
+        "sensors_missing": sorted(set(m.sensors) - set(names) - {n for n, *_ in air}),
+        "channels_empty": m.empty,
+        "channels_ignored": m.ignored,
         "nan_counts": {n: int((~np.isfinite(values[:, j])).sum()) for j, n in enumerate(names)
                        if not np.isfinite(values[:, j]).all()},
         "longest_nan_run_s": {n: _nan_runs(t, values[:, j]) for j, n in enumerate(names)
                               if not np.isfinite(values[:, j]).all()},
-        "has_spindle": spindle is not None, "feeds": sorted(feeds),
+        "has_spindle": m.spindle is not None, "feeds": sorted(m.feeds),
         "air_inputs": [n for n, *_ in air],
     }
     if imported.get("nan_counts"):
         report["input_nan_counts"] = {k: v for k, v in imported["nan_counts"].items() if k not in names}
-    return Record(t, names, kinds, values, spindle, feeds, gradient, air, report, dict(dataset.metadata))
+    report["columns"] = {ch.name: ch.column for ch in dataset.channels if ch.name in names}
+    return report

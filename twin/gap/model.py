@@ -39,7 +39,7 @@ class GapModel:
         s = structure
         n_extra = s.n_inputs - s.n_machine_inputs
         self.U0 = drive.inputs(s.machine, n_extra)
-        idle = _idle(drive)
+        idle = drive.idle()
         self.idle_drive = idle
         self.U0_idle = idle.inputs(s.machine, n_extra)
         self.interp = Interpolator(drive.grid, self.times_s)
@@ -115,13 +115,3 @@ def output_effects(active):
     """The output effects among ``active`` = [(effect, θ), …], in the order they apply (:data:`SENSOR_ORDER`)."""
     return sorted([(e, th) for e, th in active if e.kind == "output"],
                   key=lambda p: SENSOR_ORDER.index(p[0].name) if p[0].name in SENSOR_ORDER else len(SENSOR_ORDER))
-
-
-def _idle(drive):
-    """A copy of a drive with the spindle and feeds stopped (for the steady start)."""
-    import copy
-
-    idle = copy.copy(drive)
-    idle.spindle_rpm = np.zeros_like(drive.spindle_rpm)
-    idle.feed_mm_min = {a: np.zeros_like(v) for a, v in drive.feed_mm_min.items()}
-    return idle

@@ -14,13 +14,16 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from ..core.dataset import json_default  # noqa: E402
-from ..infra.outdir import atomic_directory  # noqa: E402
-from ..infra.plots import save_figure  # noqa: E402
-from .fit import GROUP_UNIT  # noqa: E402
+from ..core.dataset import json_default
+from ..infra.outdir import atomic_directory
+from ..infra.plots import save_figure
+from ..infra.tables import markdown_table
+from .fit import GROUP_UNIT
+from .verdict import parameters
+from .verdict import to_json as verdict_json
 
 GROUP_LABEL = {"temperature": "surface temperatures", "air": "air sensors", "displacement": "TCP drift",
                "strain": "strain lines"}
@@ -30,10 +33,6 @@ def _f(v, spec=".3g"):
     if v is None or (isinstance(v, float) and not np.isfinite(v)):
         return "–"
     return format(v, spec)
-
-
-def _ratio(x):
-    return "> 1e100" if x > 1e100 else _f(x, ".3g")
 
 
 def _save(fig, path):
@@ -73,12 +72,13 @@ def to_json(d):
     attr = d.attribution.get("regions")
     win = d.attribution.get("winner")
     return {
-        "verdict": d.verdict, "significant": d.significant,
+        "verdict": verdict_json(d), "significant": d.significant,
         "winner": res(d.winner) if d.winner is not None else None,
         "runner_up": d.runner_up.name if d.runner_up is not None else None,
-        "evidence_ratio": d.evidence_ratio, "n_eff_hold": d.n_eff_hold,
+        "n_eff_hold": d.n_eff_hold,
         "split_s": d.split_s, "noise": d.noise, "gap_over_noise": d.gap_over_noise,
-        "gap_over_tolerance": d.gap_over_tolerance, "group_scale": d.evaluator.sigma,
+        "gap_over_tolerance": d.gap_over_tolerance, "group_scale": d.scales.group,
+        "sensor_scale": d.scales.sensor, "timing_floor": d.scales.timing_sensor,
         "nominal": {**res(d.nominal), "channels": d.nominal.summary["channels"],
                     "offsets": dict(zip(d.names, d.nominal.residual.offsets.tolist())),
                     "initial_state": d.nominal.residual.nuisance},
@@ -191,7 +191,9 @@ def plot_attribution(d, path):
 
 def render_figures(d, tmp):
     """Off-screen renders: sensors and parts coloured by residual; the winner's temperature change."""
-    from ..infra.render import render_machine  # on use: pyvista/VTK take seconds to load
+    from ..infra.render import (
+        render_machine,  # on use: pyvista/VTK take seconds to load
+    )
 
     s = d.model.structure
     machine = s.machine
@@ -224,126 +226,152 @@ def render_figures(d, tmp):
     return out
 
 
+def _table(rows, headers, spec=".3g"):
+    """A Markdown table (:func:`twin.infra.tables.markdown_table`) as a list of lines, numbers as ``spec``."""
+    return markdown_table(rows, headers, formats=spec).split("\n")
+
+
 def _breakdown_table(key, table, groups, drift_names, rows=False):
     """Markdown lines of a phase or band table (:mod:`.where`): RMS per channel group (no air) and drift axis."""
     shown = [g for g in groups if g != "air"]
-    head = f"| {key} | " + ("rows | " if rows else "")
-    L = [head + " | ".join(GROUP_LABEL[g] for g in shown) + " | " + " | ".join(f"{n} (µm)" for n in drift_names)
-         + " |", "|---|" + ("---|" if rows else "") + "---|" * (len(shown) + len(drift_names))]
-    for name, e in table.items():
-        L.append(f"| {name} | " + (f"{e['rows']} | " if rows else "") + " | ".join(_f(e.get(g)) for g in shown)
-                 + " | " + " | ".join(_f(e.get(n)) for n in drift_names) + " |")
-    return L
+    headers = [key] + (["rows"] if rows else []) + [f"{GROUP_LABEL[g]} ({GROUP_UNIT[g]})" for g in shown] \
+        + [f"{n} (µm)" for n in drift_names]
+    body = [[name] + ([e["rows"]] if rows else []) + [e.get(g) for g in shown + drift_names]
+            for name, e in table.items()]
+    return _table(body, headers)
 
 
 # ============================================================================= Markdown
 def format_report(d, figures):
-    rec = d.record.report
-    ev = d.evaluator
-    groups = [g for g in ("temperature", "air", "displacement", "strain") if g in ev.groups()]
-    L = [f"# Gap diagnosis: {rec.get('source')} on `{d.machine.name}`", ""]
-    L += [f"**Verdict: {d.verdict}.**", ""]
-    # ---------------------------------------------------------------- data
-    L += ["## Data", "",
-          f"- {rec['rows']} rows over {rec['span_h']:.2f} h, sampling {rec['sampling_interval_s']:g} s"
-          f" ({'regular' if rec['sampling_regular'] else 'irregular'}); {rec['n_gaps']} gap(s)"
-          + (f", the longest {max(g['length_s'] for g in rec['gaps']):g} s" if rec["gaps"] else ""),
-          f"- twin on a {d.model.drive.step_s:g} s grid ({d.model.backend.name} backend"
-          + (f", {d.model.backend.order} states" if hasattr(d.model.backend, "order") else "")
-          + "), interpolated to the measured times",
-          f"- sensors used ({len(d.names)}): {', '.join(d.names)}",
-          f"- sensors of the machine not in the data: {', '.join(rec['sensors_missing']) or 'none'}",
-          f"- channels with no value at all (left out): {', '.join(rec['channels_empty']) or 'none'}",
-          f"- ignored channels: {', '.join(rec['channels_ignored']) or 'none'}",
-          "- NaNs (masked out of the residuals): " + (", ".join(
-              f"{k} {v} (longest run {rec['longest_nan_run_s'][k]:g} s)" for k, v in rec["nan_counts"].items())
-              or "none"),
-          f"- inputs: spindle {'measured' if rec['has_spindle'] else 'from the scenario'}; feeds "
-          f"{', '.join(rec['feeds']) or 'none'}; ambient from {', '.join(rec['air_inputs']) or 'the scenario'}",
-          f"- split: fit on t ≤ {d.split_s / 3600:.2f} h, held out after "
-          f"({int(ev.hold_rows.sum())} rows); effective independent held-out samples n_eff = {d.n_eff_hold:.0f}",
-          "- noise level (median per group, from second differences): "
-          + ", ".join(f"{GROUP_LABEL[g]} {d.noise[g]:.3g} {GROUP_UNIT[g]}" for g in groups)]
-    for note in d.notes:
-        L.append(f"- note: {note}")
+    """``report.md``: verdict, data, (a) where, (b) which effect, discoveries, (c) shrinkage, timing."""
+    L = [f"# Gap diagnosis: {d.record.report.get('source')} on `{d.machine.name}`", "",
+         f"**Verdict ({d.outcome.replace('_', ' ')}): {d.verdict}.**", ""]
+    for section in (_data_section, _where_section, _parts_section, _which_section, _discovery_section,
+                    _shrink_section, _timing_section):
+        L += section(d, figures)
+    return "\n".join(L)
+
+
+def _groups(d):
+    return [g for g in ("temperature", "air", "displacement", "strain") if g in d.evaluator.groups()]
+
+
+def _data_section(d, figures):
+    rec, ev = d.record.report, d.evaluator
+    nans = ", ".join(f"{k} {v} (longest run {rec['longest_nan_run_s'][k]:g} s)" for k, v in rec["nan_counts"].items())
+    longest = f", the longest {max(g['length_s'] for g in rec['gaps']):g} s" if rec["gaps"] else ""
+    backend = d.model.backend
+    L = ["## Data", "",
+         f"- {rec['rows']} rows over {rec['span_h']:.2f} h, sampling {rec['sampling_interval_s']:g} s"
+         f" ({'regular' if rec['sampling_regular'] else 'irregular'}); {rec['n_gaps']} gap(s){longest}",
+         f"- twin on a {d.model.drive.step_s:g} s grid ({backend.name} backend"
+         + (f", {backend.order} states" if hasattr(backend, "order") else "")
+         + "), spindle and feeds as piecewise-constant signals integrated exactly over each step, "
+           "interpolated to the measured times",
+         f"- sensors used ({len(d.names)}): {', '.join(d.names)}",
+         f"- sensors of the machine not in the data: {', '.join(rec['sensors_missing']) or 'none'}",
+         f"- channels with no value at all (left out): {', '.join(rec['channels_empty']) or 'none'}",
+         f"- ignored channels: {', '.join(rec['channels_ignored']) or 'none'}",
+         f"- NaNs (masked out of the residuals): {nans or 'none'}",
+         f"- inputs: spindle {'measured' if rec['has_spindle'] else 'from the scenario'}; feeds "
+         f"{', '.join(rec['feeds']) or 'none'}; ambient from {', '.join(rec['air_inputs']) or 'the scenario'}",
+         f"- split: fit on t ≤ {d.split_s / 3600:.2f} h, held out after ({int(ev.hold_rows.sum())} rows); "
+         f"effective independent held-out samples n_eff = {d.n_eff_hold:.0f}",
+         "- noise level (median per group, from second differences): "
+         + ", ".join(f"{GROUP_LABEL[g]} {d.noise[g]:.3g} {GROUP_UNIT[g]}" for g in _groups(d)),
+         "- timing floor (held-out RMS change of the nominal twin when the input change times move by ± half a "
+         "sample): " + ", ".join(f"{GROUP_LABEL[g]} {d.scales.timing_group[g]:.3g} {GROUP_UNIT[g]}"
+                                  for g in _groups(d))]
+    L += [f"- note: {note}" for note in d.notes]
     off = d.nominal.residual.offsets
     big = [(n, o, GROUP_UNIT[k]) for n, o, k in zip(d.names, off, ev.kinds) if abs(o) > 0.25]
     L += [f"- constant offsets (estimated on the fit part, every model): largest |offset| "
           f"{max(np.abs(off)):.3g}; " + (", ".join(f"{n} {o:+.2f} {u}" for n, o, u in big[:12]) or "all small")
           + " (thermometer accuracy, probe zero, ambient level)",
-          f"- initial state (nuisance, nominal): {', '.join(f'{k} {v:+.3g}' for k, v in d.nominal.residual.nuisance.items())}",
-          ""]
-    # ---------------------------------------------------------------- where
-    L += ["## (a) Where the twin misses", "",
-          "| channel group | fit RMS | held-out RMS | held-out max | held-out RMS / noise | / max(noise, tolerance) |",
-          "|---|---|---|---|---|---|"]
-    for g in groups:
-        s = d.nominal.summary["groups"][g]
-        L.append(f"| {GROUP_LABEL[g]} ({GROUP_UNIT[g]}) | {_f(s['fit_rms'])} | {_f(s['hold_rms'])} | "
-                 f"{_f(s['hold_max'])} | {_f(d.gap_over_noise[g], '.1f')} | {_f(d.gap_over_tolerance[g], '.1f')} |")
+          "- initial state (nuisance, nominal): "
+          + ", ".join(f"{k} {v:+.3g}" for k, v in d.nominal.residual.nuisance.items()), ""]
+    return L
+
+
+def _where_section(d, figures):
+    ev, sc = d.evaluator, d.scales
+    groups = _groups(d)
+    rows = [[f"{GROUP_LABEL[g]} ({GROUP_UNIT[g]})", d.nominal.summary["groups"][g]["fit_rms"],
+             d.nominal.summary["groups"][g]["hold_rms"], d.nominal.summary["groups"][g]["hold_max"],
+             d.gap_over_noise[g], sc.group[g], d.gap_over_tolerance[g]] for g in groups]
+    L = ["## (a) Where the twin misses", ""]
+    L += _table(rows, ["channel group", "fit RMS", "held-out RMS", "held-out max", "held-out RMS / noise",
+                       "scale σ_g", "held-out RMS / σ_g"])
     L += ["", f"![residuals]({figures['residuals']})", "",
-          "Per sensor (nominal twin; after = with the named effect):", "",
-          "| sensor | kind | fit RMS | held-out RMS | held-out max | after: held-out RMS |", "|---|---|---|---|---|---|"]
+          "Per sensor (σ_j = max(noise, tolerance) with the timing floor; after = with the named effect):", ""]
+    rows = []
     for j, n in enumerate(d.names):
         s = d.nominal.summary["channels"][n]
-        a = d.winner.summary["channels"][n]["hold_rms"] if d.winner is not None else None
-        L.append(f"| {n} | {ev.kinds[j]} ({GROUP_UNIT[ev.kinds[j]]}) | {_f(s['fit_rms'])} | {_f(s['hold_rms'])} | "
-                 f"{_f(s['hold_max'])} | {_f(a)} |")
+        after = d.winner.summary["channels"][n]["hold_rms"] if d.winner is not None else None
+        rows.append([n, f"{ev.kinds[j]} ({GROUP_UNIT[ev.kinds[j]]})", s["fit_rms"], s["hold_rms"], s["hold_max"],
+                     sc.sensor[n], s["hold_rms"] / sc.sensor[n], after])
+    L += _table(rows, ["sensor", "kind", "fit RMS", "held-out RMS", "held-out max", "σ_j", "held-out RMS / σ_j",
+                       "after: held-out RMS"])
     drift_names = [n for n, k in zip(d.names, ev.kinds) if k == "displacement"]
     L += ["", "By operating phase (RMS over all rows; phases from spindle speed and ambient activity):", ""]
     L += _breakdown_table("phase", d.where["phases"], groups, drift_names, rows=True)
     L += ["", "By frequency band (RMS over all rows):", ""]
     L += _breakdown_table("band", d.where["bands"], groups, drift_names)
     L += ["", f"![phases and bands]({figures['breakdown']})", ""]
+    return L
+
+
+def _parts_section(d, figures):
+    L = []
     est = d.attribution.get("regions")
     if est is not None and est["shares"]:
         L += ["Which part's temperature error explains the drift error (model-free: a uniform temperature error "
               "per part, ridge-estimated from the thermometer and drift residuals through the displacement "
-              "influence operators; share = part's contribution · residual / |residual|²):", "",
-              "| part | sensors on it | est. error RMS (K) | " + " | ".join(f"{a} share" for a in est["shares"])
-              + " | " + " | ".join(f"{a} {est['units'][a]}/K" for a in est["influence"]) + " |",
-              "|---|---|---|" + "---|" * (2 * len(est["shares"]))]
-        for r in est["regions"]:
-            L.append(f"| {r} | {'yes' if r in est['observed_regions'] else 'no'} | {est['rms_K'][r]:.3f} | "
-                     + " | ".join(f"{est['shares'][a][r]['share']:+.2f}" for a in est["shares"]) + " | "
-                     + " | ".join(f"{est['influence'][a][r]:+.2f}" for a in est["influence"]) + " |")
+              "influence operators; share = part's contribution · residual / |residual|²):", ""]
+        rows = [[r, "yes" if r in est["observed_regions"] else "no", est["rms_K"][r]]
+                + [est["shares"][a][r]["share"] for a in est["shares"]]
+                + [est["influence"][a][r] for a in est["influence"]] for r in est["regions"]]
+        L += _table(rows, ["part", "sensors on it", "est. error RMS (K)"] + [f"{a} share" for a in est["shares"]]
+                    + [f"{a} ({est['units'][a]}/K)" for a in est["influence"]], "+.2f")
         L.append("")
     win = d.attribution.get("winner")
     if win is not None:
         axes = list(win["shares"])
         L += [f"Through the named effect ({d.winner.name}): its drift change split exactly over the parts "
-              "(share of the change; 'sensor/fixture' is the part not due to temperature):", "",
-              "| part | " + " | ".join(axes) + " |", "|---|" + "---|" * len(axes)]
-        for r in list(win["shares"][axes[0]]):
-            L.append(f"| {r} | " + " | ".join(f"{win['shares'][a][r]['share']:+.2f}" for a in axes) + " |")
+              "(share of the change; 'sensor/fixture' is the part not due to temperature):", ""]
+        L += _table([[r] + [win["shares"][a][r]["share"] for a in axes] for r in win["shares"][axes[0]]],
+                    ["part"] + axes, "+.2f")
         L.append("")
-    if "attribution" in figures:
-        L += [f"![attribution]({figures['attribution']})", ""]
-    if "render_residuals" in figures:
-        L += [f"![render]({figures['render_residuals']})", ""]
-    # ---------------------------------------------------------------- which effect
-    L += ["## (b) Which effect", "",
-          f"Candidates: {len(d.singles)} effects of the library"
-          + (f" (not applicable to this machine: {', '.join(d.skipped)})" if d.skipped else "")
-          + f", and {len(d.pairs)} pairs (the leading effect with each other one, and pairs of the leaders). Ranked by ΔBIC against the nominal twin on the "
-          "held-out part (n_eff · ln(SSE/SSE_nominal) + k · ln n_eff); parameters ± 1 sd from the Jacobian.", "",
-          "| rank | model | parameters | ΔBIC | held-out SSE / nominal | "
-          + " | ".join(f"held-out {GROUP_LABEL[g]} RMS" for g in groups if g != "air") + " | notes |",
-          "|---|---|---|---|---|" + "---|" * len([g for g in groups if g != "air"]) + "---|"]
+    for key, name in (("attribution", "attribution"), ("render_residuals", "render")):
+        if key in figures:
+            L += [f"![{name}]({figures[key]})", ""]
+    return L
+
+
+def _which_section(d, figures):
+    groups = [g for g in _groups(d) if g != "air"]
+    L = ["## (b) Which effect", "",
+         f"Candidates: {len(d.singles)} effects of the library"
+         + (f" (not applicable to this machine: {', '.join(d.skipped)})" if d.skipped else "")
+         + f", and {len(d.pairs)} pairs (the leading effect with each other one, and pairs of the leaders). Ranked "
+           "by ΔBIC against the nominal twin on the held-out part (n_eff · ln(SSE/SSE_nominal) + k · ln n_eff); "
+           "90 % intervals from a HAC sandwich covariance inflated by the held-out misfit.", ""]
+    rows = []
     for i, r in enumerate(d.ranking[:20]):
-        params = "; ".join(f"{p['name'].split('.', 1)[1]} = {p['value']:.3g} ± {p['sd']:.2g} {p['unit']}"
-                           for p in r.params())
+        params = "; ".join(f"{p['name'].split('.', 1)[1]} = {p['value']:.3g} ({p['interval90'][0]:.3g} … "
+                           f"{p['interval90'][1]:.3g}) {p['unit']}" for p in parameters(r))
         mark = " **(named)**" if d.winner is not None and r is d.winner else ""
-        L.append(f"| {i + 1} | {r.name}{mark} | {params} | {r.delta_bic:.1f} | "
-                 f"{r.residual.sse_hold / max(d.nominal.residual.sse_hold, 1e-300):.3f} | "
-                 + " | ".join(_f(r.summary["groups"][g]["hold_rms"]) for g in groups if g != "air")
-                 + f" | {'; '.join(r.notes)} |")
+        rows.append([i + 1, r.name + mark, params, r.delta_bic,
+                     r.residual.sse_hold / max(d.nominal.residual.sse_hold, 1e-300)]
+                    + [r.summary["groups"][g]["hold_rms"] for g in groups] + ["; ".join(r.notes)])
+    L += _table(rows, ["rank", "model", "parameters (90 %)", "ΔBIC", "held-out SSE / nominal"]
+                + [f"held-out {GROUP_LABEL[g]} RMS ({GROUP_UNIT[g]})" for g in groups] + ["notes"])
     L += ["", f"![ranking]({figures['ranking']})", ""]
-    if d.runner_up is not None:
-        best = d.winner or d.ranking[0]
-        L.append(f"**Confidence:** {best.name} vs the runner-up {d.runner_up.name}: ΔBIC "
-                 f"{d.runner_up.bic - best.bic:.1f}, evidence ratio {_ratio(d.evidence_ratio)} "
-                 "(> 150 is 'very strong' on the Kass–Raftery scale).")
+    ev = d.decision.evidence()
+    if "runner_up" in ev:
+        L.append(f"**Evidence:** {ev['model']} vs the runner-up {ev['runner_up']}: ΔBIC "
+                 f"{ev['delta_bic_vs_runner_up']:.1f} (log10 evidence ratio {ev['log10_ratio_vs_runner_up']:.1f}; "
+                 "> 2.2 is 'very strong' on the Kass–Raftery scale).")
     if d.separation and "error" not in d.separation:
         s = d.separation
         L.append(f"**Separating sensor** ({s['a']} vs {s['b']}): a thermometer on the {s['part']} at "
@@ -354,21 +382,32 @@ def format_report(d, figures):
     L.append("")
     if "render_effect" in figures:
         L += [f"![effect]({figures['render_effect']})", ""]
-    # ---------------------------------------------------------------- shrinkage
-    L += ["## (c) How far the residual shrinks (held-out part)", ""]
+    return L
+
+
+def _discovery_section(d, figures):
+    if d.discovery is None:
+        return []
+    return ["## Beyond the library (effect discovery)", ""] + [f"- {line}" for line in d.discovery.summary()] + [""]
+
+
+def _shrink_section(d, figures):
+    L = ["## (c) How far the residual shrinks (held-out part)", ""]
     if d.winner is None:
-        L += ["No effect is named, so the residual stays the nominal one.", ""]
-    else:
-        L += [f"With {d.winner.name} added:", "", "| channels | RMS before → after | max before → after | RMS reduction |",
-              "|---|---|---|---|"]
-        for k, s in d.shrinkage().items():
-            label = f"{GROUP_LABEL[k]} ({GROUP_UNIT[k]})" if k in GROUP_LABEL else f"drift {k} (µm)"
-            L.append(f"| {label} | {_f(s['before_rms'])} → {_f(s['after_rms'])} | {_f(s['before_max'])} → "
-                     f"{_f(s['after_max'])} | {_f(100 * s['reduction'], '.0f')} % |")
-        L.append("")
+        return L + ["No effect is named, so the residual stays the nominal one.", ""]
+    rows = []
+    for k, s in d.shrinkage().items():
+        label = f"{GROUP_LABEL[k]} ({GROUP_UNIT[k]})" if k in GROUP_LABEL else f"drift {k} (µm)"
+        rows.append([label, f"{_f(s['before_rms'])} → {_f(s['after_rms'])}",
+                     f"{_f(s['before_max'])} → {_f(s['after_max'])}", 100 * s["reduction"]])
+    return L + [f"With {d.winner.name} added:", ""] + _table(
+        rows, ["channels", "RMS before → after", "max before → after", "RMS reduction (%)"], ".0f") + [""]
+
+
+def _timing_section(d, figures):
     t = d.timings
-    L += ["## Timing", "",
-          f"engine {t.get('engine_s', 0):.1f} s (cached per process), nominal {t.get('nominal_s', 0):.1f} s, fits "
-          f"{t.get('fits_s', 0):.1f} s, where/attribution {t.get('where_s', 0):.1f} s; total {t.get('total_s', 0):.1f} s.",
-          ""]
-    return "\n".join(L)
+    return ["## Timing", "",
+            f"engine {t.get('engine_s', 0):.1f} s (cached per process), nominal {t.get('nominal_s', 0):.1f} s, fits "
+            f"{t.get('fits_s', 0):.1f} s, where/attribution {t.get('where_s', 0):.1f} s"
+            + (f", discovery {t['discovery_s']:.1f} s" if "discovery_s" in t else "")
+            + f"; total {t.get('total_s', 0):.1f} s.", ""]

@@ -8,16 +8,36 @@ zero-order hold at 60 s), the effects' *truth variants* (other hidden
 constants than the library's), and the scenario's sensor noise (offsets and
 quantisation).  The dataset holds what a test rig records: spindle speed,
 feeds and the sensors — no true ambient and no source power.
+
+:func:`physics_truth` makes truths by a route that shares nothing with the
+library's effect code: it changes the machine's physics in a *copy of the
+definition* (:class:`PhysicsChange`: the h of convection groups, the
+conductance of joints, extra heat sources, another mesh, another integrator
+and step), assembles it and runs :func:`twin.core.simulate.simulate` (full
+FE).  Records are cached under the user cache folder by a content hash of
+everything that makes them (machine file, scenario file, change, seed,
+project version).
 """
 from __future__ import annotations
 
+import hashlib
+import json
 import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 
+from meshes.cachefiles import user_cache_dir
+
 from ..core.dataset import ChannelInfo, Dataset, project_version
+from ..core.machine import build_machine, reassemble
+from ..core.machine_definition import HeatSource
 from ..core.noise import apply_noise
 from ..core.scenario import Scenario, load_scenario
+from ..core.simulate import simulate
+from ..errors import TwinInputError
+from ..infra.sweep import cached
 from .drive import ScenarioDrive
 from .engine import FullBackend
 from .model import GapModel
@@ -68,3 +88,123 @@ def truth_dataset(scenario, machine, active=(), seed=None, noise=True, step_s=No
         "model": "full FE", "wall_seconds": time.perf_counter() - t0, "project_version": project_version(),
     }
     return Dataset(times, np.column_stack(columns), channels, metadata)
+
+
+#: Channel kinds a rig records (no true ambients, no source powers).
+RECORDED_KINDS = ("spindle_speed", "feed", "temperature", "air", "displacement", "strain")
+SCHEMES = {"backward_euler": 1.0, "crank_nicolson": 0.5}
+
+
+@dataclass(frozen=True)
+class PhysicsChange:
+    """A change of the machine's physics for a truth run (all optional; the default is the nominal machine).
+
+    ``convection`` {group: factor on h}; ``joints`` {"partA-partB": factor on the contact conductance};
+    ``sources`` tuple of :class:`~twin.core.machine_definition.HeatSource` added; ``source_scale``
+    {source: factor on its power}; ``source_exponent`` {source: change of its speed exponent};
+    ``zone_lags_h`` {zone: lag of its air behind the room, h}; ``mesh_size_m`` another
+    mesh (must be in the mesh cache to be quick); ``scheme`` ``backward_euler``/``crank_nicolson`` and
+    ``time_step_s`` another integrator and step; ``output_step_s`` another output sampling (it must divide
+    the duration).
+    """
+
+    convection: dict = field(default_factory=dict)
+    joints: dict = field(default_factory=dict)
+    sources: tuple = ()
+    source_scale: dict = field(default_factory=dict)
+    source_exponent: dict = field(default_factory=dict)
+    zone_lags_h: dict = field(default_factory=dict)
+    mesh_size_m: float | None = None
+    scheme: str | None = None
+    time_step_s: float | None = None
+    output_step_s: float | None = None
+
+    def key(self):
+        return json.dumps(asdict(self), sort_keys=True, default=str)
+
+
+def changed_definition(definition, change):
+    """A copy of a machine definition with ``change`` (a :class:`PhysicsChange`) applied; unknown names raise."""
+    groups = {r.name for r in definition.convection}
+    bad = sorted(set(change.convection) - groups)
+    if bad:
+        raise TwinInputError(f"PhysicsChange.convection: unknown group(s) {bad}; groups: {sorted(groups)}")
+    pairs = {f"{a}-{b}": (a, b) for a, b, _ in definition.joints}
+    bad = sorted(set(change.joints) - set(pairs))
+    if bad:
+        raise TwinInputError(f"PhysicsChange.joints: unknown joint(s) {bad}; joints: {sorted(pairs)}")
+    names = {src.name for src in definition.sources}
+    bad = sorted((set(change.source_scale) | set(change.source_exponent)) - names)
+    if bad:
+        raise TwinInputError(f"PhysicsChange: unknown source(s) {bad}; sources: {sorted(names)}")
+    bad = sorted(set(change.zone_lags_h) - set(definition.zone_lags_s))
+    if bad:
+        raise TwinInputError(f"PhysicsChange.zone_lags_h: unknown lagged zone(s) {bad}; "
+                             f"lagged zones: {sorted(definition.zone_lags_s)}")
+    convection = [replace(r, coefficient=r.coefficient * change.convection.get(r.name, 1.0))
+                  for r in definition.convection]
+    joints = [(a, b, h * change.joints.get(f"{a}-{b}", 1.0)) for a, b, h in definition.joints]
+    sources = [replace(src, coefficient_W=src.coefficient_W * change.source_scale.get(src.name, 1.0),
+                       exponent=src.exponent + change.source_exponent.get(src.name, 0.0))
+               for src in definition.sources]
+    sources += [s if isinstance(s, HeatSource) else HeatSource(**s) for s in change.sources]
+    lags = {**definition.zone_lags_s, **{z: h * 3600.0 for z, h in change.zone_lags_h.items()}}
+    return replace(definition, convection=convection, joints=joints, sources=sources, zone_lags_s=lags)
+
+
+def changed_scenario(scenario, change):
+    """The scenario with the change's integrator, step and output sampling."""
+    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    updates = {}
+    if change.scheme is not None:
+        if change.scheme not in SCHEMES:
+            raise TwinInputError(f"PhysicsChange.scheme: {change.scheme!r}; schemes: {list(SCHEMES)}")
+        updates["theta"] = SCHEMES[change.scheme]
+    if change.time_step_s is not None:
+        updates["time_step_s"] = float(change.time_step_s)
+    if change.output_step_s is not None:
+        updates["sample_interval_s"] = float(change.output_step_s)
+    return replace(sc, **updates) if updates else sc
+
+
+def _content_key(scenario, change, machine, seed, noise):
+    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    parts = [change.key(), machine, str(seed), str(noise), project_version()]
+    for path in (sc.source, _machine_file(machine)):
+        p = Path(path) if path else None
+        parts.append(p.read_text() if p is not None and p.exists() else str(path))
+    return hashlib.sha256("\n".join(parts).encode("utf-8")).hexdigest()[:20]
+
+
+def _machine_file(machine):
+    from ..core.machine_definition import load_machine
+
+    return load_machine(machine).source
+
+
+def physics_truth(scenario, change=PhysicsChange(), machine="vmc_ram", seed=None, noise=True, cache=True):
+    """A "measured" record (rig channels only) of ``scenario`` on a machine whose physics ``change`` alters.
+
+    The full FE of :func:`twin.core.simulate.simulate` on the changed definition copy (reassembled on the
+    nominal or the change's mesh).  With ``cache`` the record is read from / written to the user cache
+    folder under a content hash (see the module docstring).
+    """
+    path = user_cache_dir() / "gap-truth" / f"truth-{_content_key(scenario, change, machine, seed, noise)}.csv"
+    if cache and path.exists():
+        try:
+            return Dataset.read(path)
+        except TwinInputError:
+            pass                                   # damaged entry: make it again
+    base = cached(("machine", machine, change.mesh_size_m), lambda: build_machine(machine, change.mesh_size_m))
+    definition = changed_definition(base.definition, change)
+    m = reassemble(base, definition) if definition != base.definition else base
+    sc = changed_scenario(scenario, change)
+    t0 = time.perf_counter()
+    data = simulate(sc, machine=m, noise=noise, seed=seed).dataset
+    out = data.select([c.name for c in data.channels if c.kind in RECORDED_KINDS])
+    out.metadata.update({"kind": "synthetic truth (physics change, full FE)", "change": asdict(change),
+                         "truth_seconds": time.perf_counter() - t0})
+    if cache:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        out.write(path)
+    return out

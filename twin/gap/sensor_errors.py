@@ -1,0 +1,146 @@
+"""Sensor errors and sampling of the benchmark's truth records, written independently of :mod:`twin.gap.effects`.
+
+The diagnosis models a thermometer's lag as one first-order filter
+(:func:`twin.gap.signals.lag`).  A real mounting is not that: a pad and the
+sensor's own body make a second-order response, a wire-wound probe in a
+bore has a dead time.  These functions make such readings from the true
+signals by other routes (a state-space simulation by :func:`scipy.signal.lsim`,
+interpolation for a dead time), so a truth built with them never has
+exactly the form the library fits.
+
+Sampling: a logger samples at its own times (45 s, irregular 30–70 s, a
+clock 15 s off the minute).  :func:`resample` takes a finely sampled truth
+(the FE's own output grid) to such times: sensors by linear interpolation
+between the fine samples (their error is second order in the fine step),
+operating conditions as the scenario's values at the new times.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.signal import lsim
+
+from ..core.dataset import Dataset
+from ..core.machine_definition import load_machine, room_zone
+from ..errors import TwinInputError
+
+
+def _check_uniform(t, what):
+    t = np.asarray(t, float)
+    d = np.diff(t)
+    if len(t) < 2 or not np.allclose(d, d[0], rtol=1e-9, atol=1e-9):
+        raise TwinInputError(f"{what}: needs a uniformly sampled signal (got steps {d.min():g}–{d.max():g} s)")
+    return t
+
+
+def second_order_lag(t, y, tau1_s, tau2_s):
+    """Readings of a sensor with response 1 / ((τ₁s + 1)(τ₂s + 1)) to true signals y (n,) or (n, k), from rest at y[0].
+
+    Continuous-time state space simulated by :func:`scipy.signal.lsim` (input linear between samples).
+    """
+    t = _check_uniform(t, "second_order_lag")
+    if tau1_s <= 0 or tau2_s <= 0:
+        raise TwinInputError(f"second_order_lag: time constants must be > 0 s, got {tau1_s}, {tau2_s}")
+    y = np.asarray(y, float)
+    cols = y.reshape(len(t), -1)
+    a1, a0 = tau1_s + tau2_s, tau1_s * tau2_s
+    # ẍ·a0 + ẋ·a1 + x = u  →  companion form, state (x, ẋ)
+    A = np.array([[0.0, 1.0], [-1.0 / a0, -a1 / a0]])
+    B = np.array([[0.0], [1.0 / a0]])
+    C, D = np.array([[1.0, 0.0]]), np.array([[0.0]])
+    out = np.empty_like(cols)
+    for j in range(cols.shape[1]):
+        u = cols[:, j]
+        _, yo, _ = lsim((A, B, C, D), u - u[0], t - t[0], X0=[0.0, 0.0], interp=True)
+        out[:, j] = yo + u[0]
+    return out.reshape(y.shape)
+
+
+def dead_time(t, y, delay_s):
+    """Readings delayed by ``delay_s`` (transport delay; the first value held before it)."""
+    t = np.asarray(t, float)
+    y = np.asarray(y, float)
+    cols = y.reshape(len(t), -1)
+    out = np.column_stack([np.interp(t - delay_s, t, cols[:, j]) for j in range(cols.shape[1])])
+    return out.reshape(y.shape)
+
+
+def offsets(kinds, sd, seed):
+    """Constant calibration offsets (k,) for channels of the given kinds: N(0, sd[kind]), 0 for kinds not in ``sd``."""
+    rng = np.random.default_rng(seed)
+    return np.array([rng.normal(0.0, sd[k]) if k in sd else 0.0 for k in kinds])
+
+
+def sample_times(duration_s, kind, seed=0):
+    """Logger times over [0, duration]: ``"45s"`` / any ``"<n>s"`` regular, ``"irregular"`` (30–70 s steps,
+    seeded), ``"clock_offset"`` (every 60 s, 15 s after the minute)."""
+    if kind == "irregular":
+        rng = np.random.default_rng(seed)
+        steps = rng.uniform(30.0, 70.0, int(duration_s / 30.0) + 2)
+        t = np.concatenate([[0.0], np.cumsum(steps)])
+        return t[t <= duration_s]
+    if kind == "clock_offset":
+        return np.arange(15.0, duration_s + 1e-9, 60.0)
+    if kind.endswith("s"):
+        try:
+            step = float(kind[:-1])
+        except ValueError:
+            step = 0.0
+        if step > 0:
+            return np.arange(0.0, duration_s + 1e-9, step)
+    raise TwinInputError(f"unknown sampling {kind!r}; use '<n>s' (e.g. '45s'), 'irregular' or 'clock_offset'")
+
+
+def resample(dataset, times_s, scenario):
+    """The record at other times: sensors interpolated from the fine truth, operating conditions from the scenario."""
+    times_s = np.asarray(times_s, float)
+    t = dataset.time_s
+    if times_s.min() < t[0] - 1e-9 or times_s.max() > t[-1] + 1e-9:
+        raise TwinInputError(f"resample: times {times_s.min():g}–{times_s.max():g} s outside the record "
+                             f"({t[0]:g}–{t[-1]:g} s)")
+    rpm, feeds = scenario.operating(times_s)
+    columns = []
+    for j, c in enumerate(dataset.channels):
+        if c.kind == "spindle_speed":
+            columns.append(rpm)
+        elif c.kind == "feed":
+            columns.append(feeds[c.name[-1]])
+        else:
+            columns.append(np.interp(times_s, t, dataset.values[:, j]))
+    meta = dict(dataset.metadata)
+    meta["sampling"] = {"n": len(times_s), "first_s": float(times_s[0]),
+                        "median_step_s": float(np.median(np.diff(times_s))) if len(times_s) > 1 else None}
+    return Dataset(times_s, np.column_stack(columns), list(dataset.channels), meta)
+
+
+def apply_sensor_errors(dataset, errors, scenario):
+    """The record with sensor errors applied to its (uniformly sampled) true readings.
+
+    ``errors``: tuples ``("thermometer_lag2", τ₁ s, τ₂ s)`` (every surface thermometer through
+    :func:`second_order_lag`), ``("thermometer_dead_time", s)``, ``("fixture", k_x, k_y, k_z µm/K, τ₁ min,
+    τ₂ min)`` (each displacement probe += k·(room air through a second-order lag − its start value); the
+    room air is the scenario's, which the record does not contain).
+    """
+    t = dataset.time_s
+    V = dataset.values.copy()
+    kinds = [c.kind for c in dataset.channels]
+    thermo = [j for j, k in enumerate(kinds) if k == "temperature"]
+    for err in errors:
+        name, args = err[0], err[1:]
+        if name == "thermometer_lag2":
+            V[:, thermo] = second_order_lag(t, V[:, thermo], *args)
+        elif name == "thermometer_dead_time":
+            V[:, thermo] = dead_time(t, V[:, thermo], *args)
+        elif name == "fixture":
+            kx, ky, kz, tau1, tau2 = args
+            room = room_zone(load_machine(scenario.machine).zones)
+            air = second_order_lag(t, scenario.zone_ambient(t, [room])[room], tau1 * 60.0, tau2 * 60.0)
+            k = {"x": kx, "y": ky, "z": kz}
+            for j, c in enumerate(dataset.channels):
+                if c.kind == "displacement":
+                    V[:, j] += k[c.name[0].lower()] * (air - air[0])
+        else:
+            raise TwinInputError(f"unknown sensor error {name!r}; errors: thermometer_lag2, thermometer_dead_time, "
+                                 "fixture")
+    meta = dict(dataset.metadata)
+    meta["sensor_errors"] = [list(e) for e in errors]
+    return Dataset(t, V, list(dataset.channels), meta)

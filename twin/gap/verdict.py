@@ -1,0 +1,318 @@
+"""The verdict of a gap diagnosis: one of four outcomes, decided per channel group and per sensor.
+
+Scales.  Every channel group g has a scale σ_g (:meth:`twin.gap.fit.Evaluator.set_weights`: the larger of its
+noise level and the model tolerance), and every sensor j its own σ_j = max(noise_j, tolerance_g).  Both are
+widened in quadrature by the *timing floor*: how far the nominal twin's held-out prediction moves when the
+piecewise-constant inputs (spindle, feeds) are reconstructed with their change times at the earliest and at the
+latest time the sampling allows (:func:`twin.gap.diagnose.reconstruct_inputs`).  A residual of that size is what the record's sampling cannot
+resolve, so it is no evidence of an effect.
+
+A *gap* is a held-out RMS above :data:`NOISE_FACTOR` × σ_g in some group, or above :data:`SENSOR_FACTOR` × σ_j
+at some single sensor.  The sensor test keeps one thermometer with a 7× residual from being averaged away in a
+group of 25.
+
+A model (an effect or a pair) is *admissible* when it beats the nominal twin on held-out data by ΔBIC >
+:data:`MIN_DELTA_BIC`, removes a material share (at least one σ² of held-out mean square in some group, or at
+some sensor that has a gap) and makes no group worse (its held-out mean square may not grow by more than
+:data:`MAX_WORSENING` σ_g²): a model that degrades a group cannot be the explanation, however much it helps
+another.
+
+Outcomes (:data:`OUTCOMES`):
+
+``no_significant_gap``  the nominal twin leaves no gap.
+``explained``           an admissible model leaves no gap in any group and at any sensor.
+``partly_explained``    an admissible model, but a gap remains (where, when and in which band is reported).
+``not_explained``       a gap, and no admissible model in the library.
+
+Evidence is ΔBIC and its log10 Bayes-factor equivalent ΔBIC / (2 ln 10): no exponential, no overflow.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .fit import GROUP_FLOOR
+
+OUTCOMES = ("no_significant_gap", "explained", "partly_explained", "not_explained")
+MIN_DELTA_BIC = 10.0
+MIN_MATERIAL = 1.0
+NOISE_FACTOR = 2.0
+SENSOR_FACTOR = 4.0
+MAX_WORSENING = 0.1
+
+
+@dataclass
+class Scales:
+    """σ per channel group and per sensor (channel units), the timing floor included (module docstring)."""
+
+    group: dict
+    sensor: dict
+    timing_group: dict = field(default_factory=dict)
+    timing_sensor: dict = field(default_factory=dict)
+
+
+def scales(evaluator, names, timing=None):
+    """:class:`Scales` of an evaluator with weights set; ``timing`` (p,) is the per-sensor timing floor or None."""
+    noise = np.nan_to_num(evaluator.noise)
+    timing = np.zeros(len(names)) if timing is None else np.nan_to_num(np.asarray(timing, float))
+    sensor, t_sensor, group, t_group = {}, {}, {}, {}
+    for g, idx in evaluator.groups().items():
+        t_group[g] = float(np.sqrt(np.mean(timing[idx] ** 2)))
+        group[g] = float(np.hypot(evaluator.sigma[g], t_group[g]))
+        for j in idx:
+            t_sensor[names[j]] = float(timing[j])
+            sensor[names[j]] = float(np.hypot(max(noise[j], GROUP_FLOOR[g]), timing[j]))
+    return Scales(group, sensor, t_group, t_sensor)
+
+
+def group_ratios(result, sc):
+    """Held-out RMS / σ_g per channel group."""
+    return {g: result.summary["groups"][g]["hold_rms"] / s for g, s in sc.group.items()}
+
+
+def sensor_ratios(result, sc):
+    """Held-out RMS / σ_j per sensor."""
+    return {n: result.summary["channels"][n]["hold_rms"] / s for n, s in sc.sensor.items()}
+
+
+def flagged_sensors(result, sc):
+    """Sensors whose held-out RMS exceeds :data:`SENSOR_FACTOR` × σ_j, worst first: [(name, ratio)]."""
+    r = sensor_ratios(result, sc)
+    return sorted([(n, v) for n, v in r.items() if np.isfinite(v) and v > SENSOR_FACTOR], key=lambda p: -p[1])
+
+
+def leaves_a_gap(result, sc):
+    """True when some group exceeds :data:`NOISE_FACTOR` × σ_g or some sensor :data:`SENSOR_FACTOR` × σ_j."""
+    return max(group_ratios(result, sc).values()) > NOISE_FACTOR or bool(flagged_sensors(result, sc))
+
+
+def worsened_groups(result, reference, sc):
+    """Groups whose held-out mean square grows by more than :data:`MAX_WORSENING` σ_g² against ``reference``."""
+    out = []
+    for g, s in sc.group.items():
+        a = reference.summary["groups"][g]["hold_rms"]
+        b = result.summary["groups"][g]["hold_rms"]
+        if np.isfinite(a) and np.isfinite(b) and (b * b - a * a) / s ** 2 > MAX_WORSENING:
+            out.append(g)
+    return out
+
+
+def materiality(result, reference, sc):
+    """max of (RMS_ref² − RMS²) / σ² over the groups and over the sensors with a gap in ``reference``."""
+    out = -np.inf
+    for g, s in sc.group.items():
+        a, b = reference.summary["groups"][g]["hold_rms"], result.summary["groups"][g]["hold_rms"]
+        if np.isfinite(a) and np.isfinite(b):
+            out = max(out, (a * a - b * b) / s ** 2)
+    for n, _ in flagged_sensors(reference, sc):
+        a, b = reference.summary["channels"][n]["hold_rms"], result.summary["channels"][n]["hold_rms"]
+        if np.isfinite(b):
+            out = max(out, (a * a - b * b) / sc.sensor[n] ** 2)
+    return float(out)
+
+
+def admissible(result, reference, sc):
+    """True when ``result`` beats ``reference`` by ΔBIC, materially, and worsens no group (module docstring)."""
+    return (result.delta_bic - reference.delta_bic > MIN_DELTA_BIC
+            and materiality(result, reference, sc) >= MIN_MATERIAL
+            and not worsened_groups(result, reference, sc))
+
+
+def parsimonious(ranking, nominal, sc):
+    """The best admissible model; a pair only when each of its single effects leaves a gap and the pair is
+    admissible against it (an effect is added only while a gap remains).  None when nothing is admissible."""
+    by_name = {r.name: r for r in ranking}
+    for r in ranking:
+        if not admissible(r, nominal, sc):
+            continue
+        singles = [by_name[e] for e in r.effects if e in by_name]
+        if len(r.effects) == 1 or all(leaves_a_gap(s, sc) and admissible(r, s, sc) for s in singles):
+            return r
+    return None
+
+
+def log10_evidence(delta_bic):
+    """log10 of the Bayes-factor equivalent exp(ΔBIC / 2) of a ΔBIC (no overflow)."""
+    return float(delta_bic) / (2.0 * np.log(10.0))
+
+
+def reductions(result, nominal):
+    """Held-out RMS before and after per group: {group: {nominal_rms, fitted_rms, reduction}}."""
+    out = {}
+    for g, b in nominal.summary["groups"].items():
+        a = result.summary["groups"][g]["hold_rms"] if result is not None else b["hold_rms"]
+        out[g] = {"nominal_rms": b["hold_rms"], "fitted_rms": a,
+                  "reduction": 1.0 - a / b["hold_rms"] if b["hold_rms"] > 0 else float("nan")}
+    return out
+
+
+@dataclass
+class Verdict:
+    """The decision (module docstring): outcome, the model it names (or None) and the figures behind it."""
+
+    outcome: str
+    winner: object
+    best: object
+    runner_up: object
+    nominal_gap: dict
+    nominal_flagged: list
+    remaining_gap: dict
+    remaining_flagged: list
+    worsened: list
+    material: float
+
+    @property
+    def significant(self):
+        return self.winner is not None
+
+    def evidence(self):
+        """ΔBIC of the named (else best) model vs the nominal and vs the runner-up, with log10 equivalents."""
+        model = self.winner or self.best
+        out = {"model": model.name if model is not None else None}
+        if model is not None:
+            out.update(delta_bic_vs_nominal=model.delta_bic, log10_ratio_vs_nominal=log10_evidence(model.delta_bic))
+        if model is not None and self.runner_up is not None:
+            dbic = self.runner_up.bic - model.bic
+            out.update(runner_up=self.runner_up.name, delta_bic_vs_runner_up=dbic,
+                       log10_ratio_vs_runner_up=log10_evidence(dbic))
+        return out
+
+
+def decide(nominal, ranking, sc):
+    """:class:`Verdict` from the nominal result and the ranked fits (see the module docstring)."""
+    nominal_gap = group_ratios(nominal, sc)
+    flagged = flagged_sensors(nominal, sc)
+    best = ranking[0] if ranking else None
+    if not leaves_a_gap(nominal, sc):
+        winner, outcome = None, "no_significant_gap"
+    else:
+        winner = parsimonious(ranking, nominal, sc)
+        if winner is None:
+            outcome = "not_explained"
+        else:
+            outcome = "partly_explained" if leaves_a_gap(winner, sc) else "explained"
+    model = winner or best
+    if winner is not None:
+        others = [r for r in ranking if not set(r.effects) & set(winner.effects) and len(r.effects) == 1]
+    else:
+        others = [r for r in ranking if r is not best]
+    return Verdict(outcome, winner, best, others[0] if others else None, nominal_gap, flagged,
+                   group_ratios(model, sc) if model is not None else {},
+                   flagged_sensors(model, sc) if model is not None else [],
+                   worsened_groups(model, nominal, sc) if model is not None else [],
+                   materiality(model, nominal, sc) if model is not None else float("nan"))
+
+
+# ============================================================================= written forms
+Z90 = 1.6448536269514722
+
+
+def parameters(result):
+    """Fitted parameters with 90 % intervals: [{name, value, interval90: [lo, hi], unit}]."""
+    if result is None:
+        return []
+    return [{"name": p["name"], "value": p["value"], "interval90": [p["value"] - Z90 * p["sd"],
+                                                                   p["value"] + Z90 * p["sd"]], "unit": p["unit"]}
+            for p in result.params()]
+
+
+def flagged_table(d):
+    """Sensors with a gap before or after the named (else best) model, worst first."""
+    sc, model = d.scales, d.winner or d.decision.best
+    before = dict(flagged_sensors(d.nominal, sc))
+    after = dict(flagged_sensors(model, sc)) if model is not None else {}
+    out = []
+    for n in sorted(set(before) | set(after), key=lambda n: -max(before.get(n, 0), after.get(n, 0))):
+        kind = d.evaluator.kinds[d.names.index(n)]
+        row = {"name": n, "kind": kind, "unit": UNIT[kind], "scale": sc.sensor[n],
+               "nominal_rms": d.nominal.summary["channels"][n]["hold_rms"]}
+        if d.winner is not None:
+            row["fitted_rms"] = d.winner.summary["channels"][n]["hold_rms"]
+        out.append(row)
+    return out
+
+
+UNIT = {"temperature": "K", "air": "K", "displacement": "µm", "strain": "µε"}
+
+
+def _remainder(d):
+    """Where, when and in which band the named model's worst remaining group or sensor misses."""
+    model = d.winner
+    groups = group_ratios(model, d.scales)
+    g = max(groups, key=groups.get)
+    parts = [f"{g} {groups[g]:.1f} × σ_g"]
+    flagged = flagged_sensors(model, d.scales)
+    if flagged:
+        parts.append("sensors " + ", ".join(f"{n} {v:.1f} × σ" for n, v in flagged[:4]))
+    for key, label in (("phases_after", "worst phase"), ("bands_after", "worst band")):
+        table = d.where.get(key) or {}
+        vals = {k: e.get(g) for k, e in table.items() if e.get(g) is not None and np.isfinite(e.get(g))}
+        if vals:
+            k = max(vals, key=vals.get)
+            parts.append(f"{label} {k} ({vals[k]:.3g} {UNIT[g]})")
+    return "; ".join(parts)
+
+
+def _held_out_line(d, model):
+    out = []
+    for g, e in reductions(model, d.nominal).items():
+        out.append(f"{g} {e['nominal_rms']:.3g} → {e['fitted_rms']:.3g} {UNIT[g]} ({-100 * e['reduction']:+.0f} %)")
+    return "held-out RMS " + ", ".join(out)
+
+
+def sentence(d):
+    """The one-paragraph verdict of a :class:`~twin.gap.diagnose.Diagnosis`."""
+    v, sc = d.decision, d.scales
+    worst_group = max(v.nominal_gap.values())
+    worst_sensor = max(sensor_ratios(d.nominal, sc).values())
+    if v.outcome == "no_significant_gap":
+        return ("no significant gap: the nominal twin's held-out residual is within noise, tolerance and timing "
+                f"floor in every channel group (at most {worst_group:.1f} × σ_g) and at every sensor (at most "
+                f"{worst_sensor:.1f} × σ_j)")
+    ev = v.evidence()
+    if v.outcome == "not_explained":
+        text = (f"gap not explained by the library: nominal held-out residual up to {worst_group:.1f} × σ_g "
+                f"({', '.join(f'{g} {r:.1f}' for g, r in v.nominal_gap.items())})")
+        if v.nominal_flagged:
+            text += "; sensors " + ", ".join(f"{n} {r:.1f} × σ" for n, r in v.nominal_flagged[:4])
+        if v.best is not None:
+            why = []
+            if v.best.delta_bic <= MIN_DELTA_BIC:
+                why.append(f"ΔBIC {v.best.delta_bic:.1f} ≤ {MIN_DELTA_BIC:g}")
+            if v.material < MIN_MATERIAL:
+                why.append(f"materiality {v.material:.2f} < {MIN_MATERIAL:g}")
+            if v.worsened:
+                why.append(f"worsens {', '.join(v.worsened)}")
+            text += f"; best candidate {v.best.name} rejected ({'; '.join(why) or 'its pair rule'})"
+    else:
+        values = ", ".join(f"{p['name']} = {p['value']:.3g} (90 %: {p['interval90'][0]:.3g} … "
+                           f"{p['interval90'][1]:.3g}) {p['unit']}" for p in parameters(v.winner))
+        head = "gap explained by" if v.outcome == "explained" else "gap partly explained by"
+        text = f"{head} {v.winner.name} ({values}); {_held_out_line(d, v.winner)}"
+        text += f"; ΔBIC {ev['delta_bic_vs_nominal']:.1f} vs nominal"
+        if "runner_up" in ev:
+            text += (f", {ev['delta_bic_vs_runner_up']:.1f} vs the runner-up {ev['runner_up']} "
+                     f"(log10 evidence ratio {ev['log10_ratio_vs_runner_up']:.1f})")
+        if v.outcome == "partly_explained":
+            text += f"; what remains: {_remainder(d)}"
+    if d.discovery is not None and getattr(d.discovery, "items", None):
+        text += "; discovered beyond the library: " + "; ".join(d.discovery.summary())
+    return text
+
+
+def to_json(d):
+    """The machine-readable verdict block of ``diagnosis.json``."""
+    v = d.decision
+    model = v.winner
+    held = reductions(model, d.nominal)
+    for g, e in held.items():
+        e["unit"] = UNIT[g]
+        e["scale"] = d.scales.group[g]
+        e["timing_floor"] = d.scales.timing_group[g]
+    return {"outcome": v.outcome, "explanation": d.verdict, "model": model.name if model is not None else None,
+            "parameters": parameters(model),
+            "discoveries": d.discovery.as_dict()["items"] if d.discovery is not None else [],
+            "held_out": held, "flagged_sensors": flagged_table(d),
+            "evidence": {**v.evidence(), "worsened_groups": v.worsened, "materiality": v.material,
+                         "nominal_gap_over_scale": v.nominal_gap, "remaining_gap_over_scale": v.remaining_gap}}
