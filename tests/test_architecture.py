@@ -3,7 +3,7 @@
 Layers, lowest first: ``fea`` (imports no other package of the project), ``models`` (none either),
 ``meshes`` (``fea`` only), then ``twin``.  Inside ``twin``: ``errors`` imports nothing of the project,
 ``core`` only the lower packages and ``errors``, ``infra`` also ``core``; the capability subpackages
-(``run``, ``compensation``, ``placement``, ``rom``, ``fmu``, ``gap``) may use all of those and each
+(``run``, ``compensation``, ``placement``, ``rom``, ``fmu``, ``gap``, ``live``) may use all of those and each
 other.  Nothing imports the command-line dispatcher ``twin.cli`` or the ``twin`` façade itself.
 """
 import ast
@@ -13,7 +13,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 LOWER = ("fea", "models", "meshes")
-CAPABILITIES = ("twin.run", "twin.compensation", "twin.placement", "twin.rom", "twin.fmu", "twin.gap")
+CAPABILITIES = ("twin.run", "twin.compensation", "twin.placement", "twin.rom", "twin.fmu", "twin.gap",
+                "twin.live")
 #: Layer → the layers it may import (a layer always may import itself).
 ALLOWED = {
     "fea": (),

@@ -23,16 +23,24 @@ from .fmu import cli as fmu_cli
 from .gap import cli as gap_cli
 from .infra.outdir import COMMAND
 from .infra.progress import close_bars
+from .live import cli as live_cli
 from .placement import cli as placement_cli
 from .rom import cli as rom_cli
 from .run import cli as run_cli
 
 #: The command modules, in the order ``twin --help`` lists their commands.
-COMMAND_MODULES = (run_cli, fmu_cli, rom_cli, compensation_cli, placement_cli, gap_cli)
+COMMAND_MODULES = (run_cli, fmu_cli, rom_cli, compensation_cli, placement_cli, gap_cli, live_cli)
 INTERRUPTED = 130          # the shell's code for a process ended by SIGINT (128 + 2)
 
 
-def build_parser():
+def build_parser() -> argparse.ArgumentParser:
+    """The ``twin`` parser, with every capability's commands.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        Each command sets ``func``, its handler.
+    """
     parser = argparse.ArgumentParser(prog="twin", description="Thermal digital twin of a CNC machine tool.")
     sub = parser.add_subparsers(dest="command", required=True)
     for module in COMMAND_MODULES:
@@ -94,7 +102,19 @@ def _notices_to_stderr():
     logger.setLevel(logging.INFO)
 
 
-def main(argv=None):
+def main(argv: list[str] | None = None) -> int:
+    """Run one ``twin`` command; user errors, missing files and Ctrl-C become one line on stderr.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments (default: ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        Exit code: 0 done, 2 error, 130 interrupted.
+    """
     previous = _on_sigint(_exit_now)
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
     recorded = COMMAND.set(shlex.join(["twin", *argv]))       # the command line result folders record

@@ -1,0 +1,145 @@
+"""``twin live``: the observer beside a running machine over OPC UA, or against a replayed dataset.
+
+    twin live --endpoint opc.tcp://HOST:4840/ --node-map machine.toml --log drift.csv
+    twin live --replay DATASET.csv --speed 600 --log drift.csv
+"""
+from __future__ import annotations
+
+from ..errors import TwinInputError
+from ..infra.cli_common import add_overwrite, split_names
+from ..rom.cli import DEFAULT_ORDER
+
+#: The observer's thermometers unless told: :func:`twin.live.observer.choose_thermometers` for vmc_ram
+#: (order 80, Z axis, k = 6; model-based, no record used).
+DEFAULT_THERMOMETERS = ("T18", "T26", "T23", "T22", "T16", "T09")
+DEFAULT_SPEED = 600.0
+
+
+def free_port(host="127.0.0.1"):
+    """A TCP port nothing listens on now (the OS picks it)."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind((host, 0))
+        return s.getsockname()[1]
+
+
+def _observer(args, thermometers):
+    from ..core.machine import build_machine
+    from ..rom.reduction import cached_rom
+    from .observer import DriftObserver
+
+    rom = cached_rom(build_machine(args.machine), args.order)
+    return DriftObserver(rom, thermometers)
+
+
+def _replay_columns(dataset, path, names):
+    missing = [n for n in names if n not in dataset]
+    if missing:
+        raise TwinInputError(f"{path}: no channel {missing[0]!r} to replay; channels: {', '.join(dataset.names)}")
+    return dataset.matrix(names)
+
+
+async def replay_session(dataset, thermometers, observer, speed, room_air="T15", spindle="spindle", port=None,
+                         log_path=None, host="127.0.0.1", source="dataset"):
+    """Serve ``dataset`` on a local replay server and run the live client against it; returns (stats, wall s)."""
+    import asyncio
+
+    from .client import LiveClient
+    from .replay import ReplayServer, default_node_map
+
+    names = [spindle, room_air, *thermometers]
+    values = _replay_columns(dataset, source, names)
+    async with ReplayServer(names, host, port or free_port(host)) as server:
+        node_map = default_node_map(thermometers, room_air, spindle, server.index)
+        client = LiveClient(server.endpoint, node_map, observer, log_path)
+        until = float(dataset.time_s[-1])
+        task = asyncio.create_task(client.run(until_time_s=until, max_wall_s=30.0 + until / speed * 5))
+        while not client._subscribed and not task.done():
+            await asyncio.sleep(0.01)
+        if task.done():
+            return task.result(), 0.0
+        wall = await server.replay(dataset.time_s, values, speed)
+        return await task, wall
+
+
+def cmd_live(args):
+    import asyncio
+    from pathlib import Path
+
+    import numpy as np
+
+    from .observer import AXES
+
+    if args.log:
+        from ..infra.outdir import check_output_file
+        check_output_file(args.log, args.overwrite)
+    if args.replay:
+        if args.endpoint or args.node_map:
+            raise TwinInputError("twin live: give either --replay DATASET or --endpoint with --node-map, not both")
+        if args.speed <= 0 or not np.isfinite(args.speed):
+            raise TwinInputError(f"--speed must be a positive number, got {args.speed}")
+        from ..core.dataset import Dataset
+
+        dataset = Dataset.read(args.replay)
+        thermometers = split_names(args.thermometers) or list(DEFAULT_THERMOMETERS)
+        _replay_columns(dataset, args.replay, [args.spindle, args.room_air, *thermometers])
+        observer = _observer(args, thermometers)
+        stats, wall = asyncio.run(replay_session(dataset, thermometers, observer, args.speed, args.room_air,
+                                                 args.spindle, args.port, args.log, source=args.replay))
+        print(f"replayed {len(dataset)} samples of {Path(args.replay).name} at {args.speed:g}× in {wall:.1f} s")
+    else:
+        if not (args.endpoint and args.node_map):
+            raise TwinInputError("twin live: give --endpoint opc.tcp://… with --node-map FILE.toml (or --replay DATASET)")
+        from .client import LiveClient
+        from .nodemap import load_node_map
+
+        node_map = load_node_map(args.node_map)
+        thermometers = split_names(args.thermometers) or list(node_map.thermometers)
+        try:
+            observer = _observer(args, thermometers)
+        except TwinInputError as exc:
+            raise TwinInputError(f"{args.node_map}: {exc}") from None
+        client = LiveClient(args.endpoint, node_map, observer, args.log, late_after_s=args.late_after)
+        stats = asyncio.run(client.run(max_wall_s=args.duration or np.inf))
+        dataset = None
+    rate = stats.samples / stats.wall_s if stats.wall_s else 0.0
+    print(f"fused {stats.samples} samples in {stats.wall_s:.1f} s ({rate:.0f} samples/s) from "
+          f"{', '.join(thermometers)} + spindle speed + room air; late {stats.late}, missing readings "
+          f"{stats.missing}, reconnects {stats.reconnects}")
+    if stats.last is not None:
+        e = stats.last
+        print(f"at t = {e.time_s:g} s: " + ", ".join(f"{a} {e.drift_um[j]:.2f} ± {e.band_um[j]:.2f} µm"
+                                                     for j, a in enumerate(AXES)) + " (95 %)")
+    if dataset is not None and "Z" in dataset and stats.history:
+        t = np.array([h[0] for h in stats.history])
+        z = np.array([h[1][2] for h in stats.history])
+        truth = np.interp(t, dataset.time_s, dataset["Z"])
+        print(f"Z against the dataset's Z: RMS {np.sqrt(np.mean((z - truth) ** 2)):.2f} µm, "
+              f"max {np.abs(z - truth).max():.2f} µm")
+    if args.log:
+        print(f"log written to {args.log}")
+
+
+def register(sub):
+    """Add the ``live`` command."""
+    p = sub.add_parser("live", help="run the drift observer on a machine's OPC UA sensors (or a replayed dataset)")
+    p.add_argument("--endpoint", help="OPC UA server, opc.tcp://HOST:PORT/…")
+    p.add_argument("--node-map", help="TOML file: [inputs] spindle_speed, room_air; [thermometers]; [outputs]")
+    p.add_argument("--replay", metavar="DATASET", help="serve this dataset (CSV) on a local OPC UA server and run "
+                                                         "against it")
+    p.add_argument("--speed", type=float, default=DEFAULT_SPEED,
+                   help=f"replay speed, machine seconds per wall second (default {DEFAULT_SPEED:g})")
+    p.add_argument("--port", type=int, help="replay server port (default: a free one on 127.0.0.1)")
+    p.add_argument("--thermometers", help="comma-separated ROM thermometers the observer fuses (default: the node "
+                                          f"map's; replay: {','.join(DEFAULT_THERMOMETERS)})")
+    p.add_argument("--room-air", default="T15", help="replay: the dataset channel of the room air (default T15)")
+    p.add_argument("--spindle", default="spindle", help="replay: the dataset channel of the spindle speed, rpm")
+    p.add_argument("--machine", default="vmc_ram", help="machine name or TOML path (default vmc_ram)")
+    p.add_argument("--order", type=int, default=DEFAULT_ORDER, help=f"ROM order (default {DEFAULT_ORDER})")
+    p.add_argument("--log", help="CSV log of the estimates (µm), written as FILE.part and renamed at the end")
+    p.add_argument("--duration", type=float, help="stop after this many wall seconds (default: run until stopped)")
+    p.add_argument("--late-after", type=float, default=1.0,
+                   help="wall seconds to wait for a sample's missing readings before fusing it (default 1)")
+    add_overwrite(p, "file")
+    p.set_defaults(func=cmd_live)
