@@ -3,6 +3,7 @@ import ast
 import math
 import shutil
 import subprocess
+import sys
 import zipfile
 from pathlib import Path
 
@@ -411,19 +412,36 @@ def _step_table(rom):
     return table
 
 
+_SIMULATE = """
+import sys
+import numpy as np
+from fmpy import simulate_fmu
+table = np.load(sys.argv[1])
+for fmu in sys.argv[2:]:
+    result = simulate_fmu(fmu, stop_time=7200.0, output_interval=60.0, step_size=60.0, input=table)
+    np.save(fmu + ".out.npy", result)
+"""
+
+
+def _simulate_in_own_process(fmu_paths, table, tmp_path):
+    """fmpy results of some FMUs, simulated in a fresh process: a Python FMU loaded earlier in the same test
+    process (pythonfmu) can leave it in a state in which instantiating another FMU crashes (seen as a
+    segfault in fmi2Instantiate of the container under pytest-xdist; the test alone passed)."""
+    np.save(tmp_path / "input.npy", table)
+    run = subprocess.run([sys.executable, "-c", _SIMULATE, str(tmp_path / "input.npy"), *map(str, fmu_paths)],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stdout + run.stderr
+    return [np.load(f"{path}.out.npy") for path in fmu_paths]
+
+
 def test_fmucontainer_round_trip_equals_the_bare_fmu(fmus, rom, tmp_path):
     """The native FMU wrapped by fmucontainer (fmu-manipulation-toolbox) gives the bare FMU's outputs."""
-    from fmpy import simulate_fmu
-
     (tmp_path / "twin.fmu").write_bytes(fmus["native"].read_bytes())
     (tmp_path / "box.csv").write_text("rule;from_fmu;from_port;to_fmu;to_port\nFMU;twin.fmu;;;\n")
     run = subprocess.run(["fmucontainer", "-container", "box.csv:60", "-fmu-directory", str(tmp_path)],
                          cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0 and (tmp_path / "box.fmu").exists(), run.stdout + run.stderr
-    table = _step_table(rom)
-    kw = dict(stop_time=7200.0, output_interval=60.0, step_size=60.0, input=table)
-    bare = simulate_fmu(str(tmp_path / "twin.fmu"), **kw)
-    boxed = simulate_fmu(str(tmp_path / "box.fmu"), **kw)
+    bare, boxed = _simulate_in_own_process([tmp_path / "twin.fmu", tmp_path / "box.fmu"], _step_table(rom), tmp_path)
     for name in ("T01", "A_front", "Z"):
         np.testing.assert_allclose(boxed[name], bare[name], rtol=0, atol=1e-11)
     assert np.abs(bare["Z"]).max() > 5.0
