@@ -219,3 +219,22 @@ def test_cli_build_saves_into_a_new_folder(rom, tmp_path):
     out = tmp_path / "new" / "deeper" / "x.npz"
     assert main(["rom", "build", "--out", str(out)]) == 0
     assert ReducedModel.load(out).digest == rom.digest
+
+
+def test_error_report_tables_name_units_worst_errors_and_missing_cells():
+    from twin.rom.report import ErrorReport, ReportRow, format_markdown, format_summary
+    good = {"temperature": 0.5 * GOAL_TEMPERATURE_K, "displacement": 0.5 * GOAL_TCP_UM}
+    bad = {"temperature": 2 * GOAL_TEMPERATURE_K, "displacement": 0.5 * GOAL_TCP_UM, "strain": 3.0}
+    rows = [ReportRow("a", "krylov", 10, bad, 0.1), ReportRow("b", "krylov", 10, good, 0.1),
+            ReportRow("a", "krylov", 20, good, 0.1), ReportRow("b", "krylov", 20, good, 0.1),
+            ReportRow("a", "modal", 10, good, 0.1)]
+    report = ErrorReport(rows, {"a": 1.0, "b": 2.0}, {"krylov": 1.0}, failures={"c": "no such machine"})
+    assert report.passes() == 20 and report.passes("modal") == 10 and report.passes(max_order=10) is None
+    summary = format_summary(report).splitlines()
+    assert summary[2] == ("| r | krylov T (K) | krylov TCP (µm) | krylov strain (µε) | modal T (K) | modal TCP (µm) "
+                          "| modal strain (µε) | Krylov meets the goal on |")
+    assert summary[4] == "| 10 | 2.00e-02 | 2.50e-02 | 3.00e+00 | 5.00e-03 | 2.50e-02 | 0.00e+00 | 1/2 |"
+    assert summary[5].endswith("| 2/2 |")
+    tables = format_markdown(report)
+    assert "**a** (full FE run 1.0 s)" in tables and "| 20 | 5.00e-03 | 2.50e-02 | – | – | – | – |" in tables
+    assert tables.endswith("- c: not reported (no such machine)")

@@ -411,3 +411,16 @@ def test_cli_run_missing_scenario_file(tmp_path, capsys, no_mesh):
     assert main(["run", str(tmp_path / "missing.toml")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "missing.toml" in err and "not found" in err
+
+
+@pytest.mark.parametrize("initial, rpm, ambient", [({"kind": "steady", "spindle_rpm": None, "ambient_C": None}, 0.0,
+                                                     {"room": 21.0, "enclosure": 22.0}),
+                                                    ({"kind": "steady", "spindle_rpm": 4500.0, "ambient_C": 18.5},
+                                                     4500.0, {"room": 18.5, "enclosure": 18.5})])
+def test_a_steady_start_is_idle_in_the_starting_air_unless_the_scenario_names_them(initial, rpm, ambient):
+    from dataclasses import replace
+    scenario = replace(load_scenario("heat_cool_9000"), initial=initial)
+    speed, feeds, air = scenario.idle_start({"room": np.array([21.0]), "enclosure": np.array([22.0])})
+    assert speed.tolist() == [rpm]
+    assert {a: f.tolist() for a, f in feeds.items()} == {"x": [0.0], "y": [0.0], "z": [0.0]}
+    assert {z: a.tolist() for z, a in air.items()} == {z: [v] for z, v in ambient.items()}

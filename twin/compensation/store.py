@@ -27,7 +27,6 @@ On disk (``.json``, no pickle)::
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -37,6 +36,7 @@ from models.persistence import model_from_document, model_to_document
 from models.registry import is_time_series, registered_models
 
 from ..core.dataset import json_default, project_version
+from ..core.files import write_text_atomic
 from ..errors import TwinInputError
 
 FORMAT = "thermal-twin-compensation-model"
@@ -208,10 +208,7 @@ class CompensationModel:
         """Write the model as JSON (atomically); returns the path."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.name}.partial")
-        tmp.write_text(json.dumps(self.to_document(), indent=1, default=json_default), encoding="utf-8")
-        os.replace(tmp, path)
-        return path
+        return write_text_atomic(path, json.dumps(self.to_document(), indent=1, default=json_default))
 
     @classmethod
     def load(cls, path: Path | str) -> CompensationModel:

@@ -17,7 +17,6 @@ from __future__ import annotations
 import hashlib
 import io
 import json
-import os
 from dataclasses import asdict, dataclass
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
@@ -25,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import TwinInputError
+from .files import write_text_atomic
 
 FORMAT = "thermal-twin-dataset"
 FORMAT_VERSION = 1
@@ -68,13 +68,6 @@ class ChannelInfo:
     def column(self) -> str:
         """The CSV column name, ``<name>_<unit>`` (e.g. ``T01_degC``)."""
         return f"{self.name}_{self.unit}"
-
-
-def _atomic_write_text(path, text):
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.partial")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
 
 
 def split_column(column: str) -> tuple[str, str] | None:
@@ -262,7 +255,7 @@ class Dataset:
         buffer.write(",".join(header) + "\n")
         np.savetxt(buffer, np.column_stack([self.time_s, self.values]), delimiter=",", fmt="%.17g")
         text = buffer.getvalue()
-        _atomic_write_text(path, text)
+        write_text_atomic(path, text)
         sidecar = {
             "format": FORMAT,
             "version": FORMAT_VERSION,
@@ -270,7 +263,7 @@ class Dataset:
             "channels": [asdict(c) for c in self.channels],
             "metadata": self.metadata,
         }
-        _atomic_write_text(sidecar_path(path), json.dumps(sidecar, indent=1, default=json_default))
+        write_text_atomic(sidecar_path(path), json.dumps(sidecar, indent=1, default=json_default))
         return path
 
     @classmethod

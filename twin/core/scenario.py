@@ -205,6 +205,32 @@ class Scenario:
         feeds = {a: np.where(inside, feed[k, i], 0.0) for i, a in enumerate("xyz")}
         return rpm, feeds
 
+    def idle_start(self, ambient_C: dict[str, np.ndarray]) -> tuple[np.ndarray, dict[str, np.ndarray],
+                                                                     dict[str, np.ndarray]]:
+        """The conditions a steady initial state is computed for.
+
+        The machine stands idle before the test unless ``[initial]`` names a
+        ``spindle_rpm``; the feeds are zero; the air is the scenario's at the
+        start unless ``[initial]`` names an ``ambient_C``.
+
+        Parameters
+        ----------
+        ambient_C : dict of str to ndarray, shape (1,)
+            Zone → the scenario's ambient at the start, °C.
+
+        Returns
+        -------
+        spindle_rpm : ndarray, shape (1,)
+            Spindle speed, rpm.
+        feed_mm_min : dict of str to ndarray, shape (1,)
+            Axis → feed, mm/min (zero).
+        ambient_C : dict of str to ndarray, shape (1,)
+            Zone → ambient, °C.
+        """
+        named = self.initial.get("ambient_C")
+        ambient = ambient_C if named is None else {z: np.array([named]) for z in ambient_C}
+        return np.array([self.initial.get("spindle_rpm") or 0.0]), {a: np.zeros(1) for a in "xyz"}, ambient
+
     def zone_ambient(self, t: np.ndarray, zones: list[str],
                      lags_s: dict[str, float] | None = None) -> dict[str, np.ndarray]:
         """The ambient of each zone at some times.

@@ -271,11 +271,7 @@ def initial_temperature(machine: Machine, scenario: Scenario, schedule: Scenario
         zone = room_zone(machine.zones)
         return float(schedule.conditions([0.0]).ambient_C[zone][0] if value is None else value)
     cond = schedule.conditions([0.0])
-    # The machine stands idle before the test unless the scenario names a speed.
-    rpm = np.array([init.get("spindle_rpm") or 0.0])
-    idle = {a: np.zeros(1) for a in "xyz"}
-    ambient = cond.ambient_C if init.get("ambient_C") is None else \
-        {z: np.array([init["ambient_C"]]) for z in machine.zones}
+    rpm, idle, ambient = scenario.idle_start(cond.ambient_C)
     u = machine.input_matrix(rpm, idle, ambient, cond.gradient_K_per_m)[0]
     return fea.ThermalSolver(machine.thermal).steady_state(u)
 

@@ -43,8 +43,11 @@ def cmd_fmu_validate(args):
 
 def cmd_fmu_simulate(args):
     """Run an FMU through a scenario in fmpy, compare it with the in-process ROM, write a CSV."""
+    import io
+
     import numpy as np
 
+    from ..core.files import write_text_atomic
     from ..core.scenario import load_scenario
     from .export import input_table, scenario_start, simulate, simulate_table
 
@@ -59,8 +62,10 @@ def cmd_fmu_simulate(args):
     names = [n for n in result.dtype.names if n != "time"]
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    np.savetxt(out, np.column_stack([result[n] for n in result.dtype.names]), delimiter=",",
+    text = io.StringIO()
+    np.savetxt(text, np.column_stack([result[n] for n in result.dtype.names]), delimiter=",",
                header=",".join(result.dtype.names), comments="", fmt="%.17g")
+    write_text_atomic(out, text.getvalue())
     print(f"{args.fmu}: {len(result)} samples of {scenario.name} in {out}")
     ref = simulate_table(rom, table, T0, steady)
     worst = 0.0

@@ -434,18 +434,16 @@ def input_table(rom, scenario, times=None):
     t = scenario.times() if times is None else np.asarray(times, float)
     cond = scenario_conditions(scenario, rom.measured_zones, t)    # the lagged zones' air is a state of the FMU
     rpm, feeds, ambient = cond.spindle_rpm, cond.feed_mm_min, cond.ambient_C
-    init = scenario.initial
-    rpm0 = rpm[0] if init["kind"] != "steady" else (init.get("spindle_rpm") or 0.0)
-    feed0 = {a: (feeds[a][0] if init["kind"] != "steady" else 0.0) for a in "xyz"}
-    amb0 = {z: (ambient[z][0] if init["kind"] != "steady" or init.get("ambient_C") is None else init["ambient_C"])
-            for z in rom.measured_zones}
+    # at initialisation: the conditions a steady start is computed for, else those at t₀
+    rpm0, feed0, amb0 = (scenario.idle_start({z: a[:1] for z, a in ambient.items()})
+                         if scenario.initial["kind"] == "steady" else (rpm, feeds, ambient))
 
     def held(values, first):
         return np.r_[first, first, values[1:], values[-1]]
 
-    cols = [("time", np.r_[t[0] - 1.0, t[0], t]), ("spindle_speed", held(rpm, rpm0))]
-    cols += [(f"feed_{a}", held(feeds[a], feed0[a])) for a in "xyz"]
-    cols += [(f"ambient_{z}", held(ambient[z], amb0[z])) for z in rom.measured_zones]
+    cols = [("time", np.r_[t[0] - 1.0, t[0], t]), ("spindle_speed", held(rpm, rpm0[0]))]
+    cols += [(f"feed_{a}", held(feeds[a], feed0[a][0])) for a in "xyz"]
+    cols += [(f"ambient_{z}", held(ambient[z], amb0[z][0])) for z in rom.measured_zones]
     cols += [("ambient_gradient", held(cond.gradient_K_per_m, cond.gradient_K_per_m[0]))]
     table = np.zeros(len(t) + 2, dtype=[(name, np.float64) for name, _ in cols])
     for name, values in cols:

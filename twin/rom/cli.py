@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..core.files import write_text_atomic
 from ..errors import TwinInputError
 from ..infra.cli_common import add_overwrite, check_out_file
 
@@ -65,7 +66,7 @@ def cmd_rom_report(args):
     print(f"\nsmallest Krylov order meeting TCP ≤ 0.05 µm and T ≤ 0.01 K on every scenario: {best}")
     if args.out:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.out).write_text(text + "\n", encoding="utf-8")
+        write_text_atomic(args.out, text + "\n")
         print(f"table written to {args.out}")
 
 

@@ -770,11 +770,7 @@ def initial_state(rom, scenario):
     if init["kind"] == "uniform":
         value = init.get("temperature_C")
         return rom.uniform(cond.ambient_C[room_zone(rom.zones)][0] if value is None else value)
-    # The machine stands idle before the test unless the scenario names a speed (as twin.core.simulate does).
-    rpm = np.array([init.get("spindle_rpm") or 0.0])
-    idle = {a: np.zeros(1) for a in "xyz"}
-    ambient = cond.ambient_C if init.get("ambient_C") is None else \
-        {z: np.array([init["ambient_C"]]) for z in rom.zones}
+    rpm, idle, ambient = scenario.idle_start(cond.ambient_C)
     u = rom.inputs_from_conditions(rpm, idle, ambient, cond.gradient_K_per_m)[0]
     return rom.steady_state(u)
 

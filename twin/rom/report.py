@@ -28,6 +28,7 @@ import numpy as np
 
 from ..core.scenario import SCENARIOS_DIR, load_scenario
 from ..core.simulate import simulate
+from ..infra.tables import markdown_table
 from .reduction import compute_basis, reduce_with_basis, simulate_rom
 
 GROUPS = (("temperature", "K"), ("displacement", "um"), ("strain", "ue"))
@@ -44,6 +45,11 @@ class ReportRow:
     errors: dict                 # kind → max abs error (K, µm, µε)
     rom_seconds: float
 
+    def meets_goal(self):
+        """Whether this run meets the issue's TCP and temperature goals."""
+        return (self.errors.get("displacement", 0.0) <= GOAL_TCP_UM and
+                self.errors.get("temperature", 0.0) <= GOAL_TEMPERATURE_K)
+
 
 @dataclass
 class ErrorReport:
@@ -58,8 +64,7 @@ class ErrorReport:
         orders = sorted({r.order for r in self.rows if r.method == method and r.order <= max_order})
         for order in orders:
             rows = [r for r in self.rows if r.method == method and r.order == order]
-            if rows and all(r.errors.get("displacement", 0.0) <= GOAL_TCP_UM and
-                            r.errors.get("temperature", 0.0) <= GOAL_TEMPERATURE_K for r in rows):
+            if rows and all(r.meets_goal() for r in rows):
                 return order
         return None
 
@@ -117,50 +122,58 @@ def error_report(machine, orders=(10, 20, 30, 40, 60, 80, 100), methods=("krylov
     return ErrorReport(rows, fe_seconds, basis_seconds, zoh, failures)
 
 
+def _method_headers(methods):
+    """Three error columns per method, units named."""
+    return [f"{m} {label}" for m in methods for label in ("T (K)", "TCP (µm)", "strain (µε)")]
+
+
+def _errors(rows, fill):
+    """The worst error per channel kind over ``rows`` (``fill`` where a kind or every row is missing)."""
+    return [max((r.errors.get(kind, fill) for r in rows), default=fill) for kind, _ in GROUPS]
+
+
+def _ordered_methods(report):
+    """Krylov first, then modal, then any other method."""
+    known = ("krylov", "modal")
+    return sorted({r.method for r in report.rows}, key=lambda m: known.index(m) if m in known else len(known))
+
+
 def format_summary(report):
     """One Markdown table: per order, the worst error over all scenarios for each method."""
     methods = [m for m in ("krylov", "modal") if any(r.method == m for r in report.rows)]
     n = len({r.scenario for r in report.rows})
-    head = "| r |" + "".join(f" {m} T (K) | {m} TCP (µm) | {m} strain (µε) |" for m in methods) + \
-        " Krylov meets the goal on |"
-    lines = [f"Worst over {n} scenarios (largest |ROM − FE| over time, channels and scenarios):", "",
-             head, "|---:|" + "---:|" * (3 * len(methods) + 1)]
+    table = []
     for order in sorted({r.order for r in report.rows}):
-        cells = []
-        for m in methods:
-            rows = [r for r in report.rows if r.method == m and r.order == order]
-            cells += [f"{max(r.errors.get(k, 0.0) for r in rows):.2e}" for k, _ in GROUPS]
-        ok = [r for r in report.rows if r.method == "krylov" and r.order == order and
-              r.errors.get("displacement", 0.0) <= GOAL_TCP_UM and r.errors.get("temperature", 0.0) <= GOAL_TEMPERATURE_K]
-        lines.append(f"| {order} | " + " | ".join(cells) + f" | {len(ok)}/{n} |")
-    return "\n".join(lines)
+        cells = [e for m in methods for e in _errors([r for r in report.rows if r.method == m and r.order == order],
+                                                     0.0)]
+        met = sum(r.meets_goal() for r in report.rows if r.method == "krylov" and r.order == order)
+        table.append([order, *cells, f"{met}/{n}"])
+    return "\n".join([f"Worst over {n} scenarios (largest |ROM − FE| over time, channels and scenarios):", "",
+                      markdown_table(table, ["r", *_method_headers(methods), "Krylov meets the goal on"],
+                                     align="right", formats=".2e")])
+
+
+def _scenario_section(report, name, methods):
+    """One scenario's error-vs-order table, and its ZOH note."""
+    rows = [r for r in report.rows if r.scenario == name]
+    table = [[order, *(e for m in methods for e in _errors([r for r in rows if r.method == m and r.order == order],
+                                                            float("nan")))]
+             for order in sorted({r.order for r in rows})]
+    lines = [f"**{name}** (full FE run {report.fe_seconds[name]:.1f} s)", "",
+             markdown_table(table, ["r", *_method_headers(methods)], align="right", formats=".2e")]
+    if name in report.zoh_errors:
+        e = report.zoh_errors[name]
+        lines += ["", f"ZOH ROM ({methods[0]}, r = {max(r.order for r in rows)}) vs the FE's backward Euler: "
+                  f"T {e.get('temperature', 0):.2e} K, TCP {e.get('displacement', 0):.2e} µm "
+                  "(time-discretisation difference of the FE step, not reduction error)"]
+    return lines + [""]
 
 
 def format_markdown(report):
     """The error-vs-order tables (one per scenario: Krylov vs modal side by side) in Markdown."""
-    lines = []
-    methods = sorted({r.method for r in report.rows}, key=lambda m: ("krylov", "modal").index(m)
-                     if m in ("krylov", "modal") else 9)
-    for name in sorted({r.scenario for r in report.rows}):
-        rows = [r for r in report.rows if r.scenario == name]
-        lines.append(f"**{name}** (full FE run {report.fe_seconds[name]:.1f} s)")
-        lines.append("")
-        head = "| r |" + "".join(f" {m} T (K) | {m} TCP (µm) | {m} strain (µε) |" for m in methods)
-        lines += [head, "|---:|" + "---:|" * (3 * len(methods))]
-        for order in sorted({r.order for r in rows}):
-            cells = []
-            for m in methods:
-                match = [r for r in rows if r.method == m and r.order == order]
-                e = match[0].errors if match else {}
-                cells += [f"{e.get(k, float('nan')):.2e}" for k, _ in GROUPS]
-            lines.append(f"| {order} | " + " | ".join(cells) + " |")
-        if name in report.zoh_errors:
-            e = report.zoh_errors[name]
-            lines.append("")
-            lines.append(f"ZOH ROM ({methods[0]}, r = {max(r.order for r in rows)}) vs the FE's backward Euler: "
-                         f"T {e.get('temperature', 0):.2e} K, TCP {e.get('displacement', 0):.2e} µm "
-                         "(time-discretisation difference of the FE step, not reduction error)")
-        lines.append("")
+    methods = _ordered_methods(report)
+    lines = [line for name in sorted({r.scenario for r in report.rows})
+             for line in _scenario_section(report, name, methods)]
     for name, message in report.failures.items():
         lines.append(f"- {name}: not reported ({message})")
     return "\n".join(lines)
