@@ -426,6 +426,8 @@ class HeatProblem:
         self._joints.append(Joint(region_a, region_b, conductance))
 
     # ---------------------------------------------------------------- assembly
+    # Long: one loop per load kind (convection, fluxes, sources, radiation), each adding its matrix, its input
+    # column and its heat-flow ledger entry to shared state; together they show the column order of B.
     def assemble(self) -> ThermalSystem:
         """Assemble M, A, B once and return the :class:`ThermalSystem`.
 
@@ -435,8 +437,6 @@ class HeatProblem:
             Capacity matrix M (J/K), conductance matrix A (W/K), input matrix B
             (W per input unit: °C, K/m or W), on the thermal nodes.
         """
-        # About 80 lines: one loop per load kind (convection, fluxes, sources, radiation), each adding its
-        # matrix, its input column and its heat-flow ledger entry; together they show the column order.
         mesh = self.mesh
         pairs = joint_facets(mesh, self._joints)
         if pairs:

@@ -275,6 +275,9 @@ class ThermalSolver:
         else:
             self._trail = (dt, [T, T_new])
 
+    # Complex: 22 (radon) — four optional recorders (outputs, energy ledger, fields, progress), each tested at
+    # the start and at every output time of the one time loop whose state they share; split, the loop's state
+    # would have to travel through every piece, on the solver's hot path.
     def run(self, T0: float | np.ndarray, times_s: np.ndarray, schedule: InputSchedule,
             outputs: OutputOperator | None = None, field_times_s: Sequence[float] = (),
             max_step_s: float | None = None, progress: Callable[[int, int], None] | None = None,
@@ -310,8 +313,6 @@ class ThermalSolver:
         TransientResult
             Output history (the outputs' units), final temperature and kept fields (°C), ledger.
         """
-        # Long, and complexity 22 (radon): four optional recorders (outputs, energy ledger, fields, progress)
-        # each tested at the start and at every output time of the one time loop; they share its state.
         times = _output_times(times_s)
         T = _initial_field(T0, self.system.n_nodes)
         intervals = np.diff(times)

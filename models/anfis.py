@@ -408,24 +408,11 @@ class ANFISRegressor(RegressorMixin, BaseEstimator):
             )
             if epoch == epochs or train_hist[-1] <= self.error_goal or stalled:
                 break
-            J = _premise_jacobian(Z, ls.wbar, ls.f, ls.F, centers, sigmas, rule_mfs)
-            if self.premise_update == "jang":
-                step = _adapt_step(step, train_hist, self.step_increase, self.step_decrease)
-                gradient = J.T @ (ls.F - y)
-                norm = np.linalg.norm(gradient)
-                if norm == 0.0:
-                    break
-                centers, sigmas = self._moved(centers, sigmas, -step * gradient / norm)
-                ls = evaluate(centers, sigmas)
-            else:
-                H, g = _projected_normal_equations(J, ls.F - y, ls)
-                # the first step is no longer than Jang's initial step κ₀ (step_size)
-                moved = self._levenberg_marquardt_step(
-                    H, g, ls.sse, centers, sigmas, damping, evaluate, float(self.step_size) if epoch == 0 else None
-                )
-                if moved is None:
-                    break
-                centers, sigmas, ls, damping = moved
+            moved = self._premise_step(Z, y, ls, centers, sigmas, rule_mfs, step, damping, train_hist, evaluate,
+                                       first=epoch == 0)
+            if moved is None:
+                break
+            centers, sigmas, ls, step, damping = moved
             train_hist.append(np.sqrt(ls.sse / y.size))
             epoch += 1
         _, self.best_epoch_, self.mf_centers_, self.mf_sigmas_, self.consequents_ = best
@@ -433,6 +420,30 @@ class ANFISRegressor(RegressorMixin, BaseEstimator):
         self.training_rmse_ = np.asarray(train_hist)
         self.checking_rmse_ = np.asarray(check_hist)
         self.n_iter_ = epoch
+
+    def _premise_step(self, Z, y, ls, centers, sigmas, rule_mfs, step, damping, train_hist, evaluate, first):
+        """One premise update (Jang's normalised gradient step, or Levenberg–Marquardt on the projected problem).
+
+        Returns ``(centers, sigmas, consequent fit, step, damping)``, or None when no step improves (a zero
+        gradient, or no damping gives a lower error).
+        """
+        J = _premise_jacobian(Z, ls.wbar, ls.f, ls.F, centers, sigmas, rule_mfs)
+        if self.premise_update == "jang":
+            step = _adapt_step(step, train_hist, self.step_increase, self.step_decrease)
+            gradient = J.T @ (ls.F - y)
+            norm = np.linalg.norm(gradient)
+            if norm == 0.0:
+                return None
+            centers, sigmas = self._moved(centers, sigmas, -step * gradient / norm)
+            return centers, sigmas, evaluate(centers, sigmas), step, damping
+        H, g = _projected_normal_equations(J, ls.F - y, ls)
+        # the first step is no longer than Jang's initial step κ₀ (step_size)
+        moved = self._levenberg_marquardt_step(H, g, ls.sse, centers, sigmas, damping, evaluate,
+                                               float(self.step_size) if first else None)
+        if moved is None:
+            return None
+        centers, sigmas, ls, damping = moved
+        return centers, sigmas, ls, step, damping
 
     @staticmethod
     def _moved(centers, sigmas, delta):

@@ -228,6 +228,52 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
 
     # ------------------------------------------------------------ fit
     @one_blas_thread
+    def _checked_settings(self):
+        """``(n_poles, (τ low, τ high) s)``, each checked."""
+        n_poles = check_positive_int(self.n_poles, "n_poles")
+        if n_poles > 4:
+            raise ValueError(f"GreyBoxRegressor: n_poles must be 1-4, got {n_poles}.")
+        lo, hi = (float(v) for v in self.time_constant_bounds)
+        if not 0 < lo < hi < np.inf:
+            raise ValueError(f"GreyBoxRegressor: time_constant_bounds must be 0 < low < high s, got {self.time_constant_bounds!r}.")
+        return n_poles, (lo, hi)
+
+    @staticmethod
+    def _checked_data(X, y, sample_weight):
+        """``(X, y, weights)`` as float arrays: y 1-D with one value per row, weights finite and ≥ 0."""
+        X = check_array(X, dtype=np.float64, ensure_all_finite=False, ensure_min_samples=2)
+        y = check_array(np.asarray(y, float), ensure_2d=False, dtype=np.float64)
+        if y.ndim != 1 or len(y) != len(X):
+            raise ValueError(f"GreyBoxRegressor: y must be 1-D with one value per row of X ({len(X)}), got shape {y.shape}.")
+        w = np.ones(len(y)) if sample_weight is None else np.asarray(sample_weight, float)
+        if w.shape != y.shape or not np.all(np.isfinite(w)) or np.any(w < 0):
+            raise ValueError("GreyBoxRegressor: sample_weight must be finite, >= 0 and one per row of X.")
+        return X, y, w
+
+    def _least_squares(self, residuals, n_poles, lo, hi):
+        """The best of the deterministic restarts (:data:`_STARTS`) of the bounded fit in (log τ₁, log ratios, b)."""
+        log_lo, log_hi = np.log(lo), np.log(hi)
+        if n_poles > 1 and log_hi - log_lo <= (n_poles - 1) * np.log(_MIN_RATIO):
+            raise ValueError(f"GreyBoxRegressor: time_constant_bounds {self.time_constant_bounds!r} are too narrow "
+                             f"for {n_poles} poles {_MIN_RATIO:g}x apart.")
+        # τ₁ in [lo, hi]; each further ratio in [_MIN_RATIO, hi/lo] (the largest τ may pass hi: still stable)
+        lower = np.r_[log_lo, np.full(n_poles - 1, np.log(_MIN_RATIO))]
+        upper = np.r_[log_hi, np.full(n_poles - 1, log_hi - log_lo)]
+        if self.fit_exponent:
+            b_lo, b_hi = (float(v) for v in self.exponent_bounds)
+            lower, upper = np.r_[lower, b_lo], np.r_[upper, b_hi]
+        budget = check_positive_int(self.max_nfev, "max_nfev")
+        best = None
+        for taus in _STARTS:  # deterministic restarts: the simulation error has local minima
+            start = np.diff(np.log(taus[:n_poles]), prepend=0.0)
+            if self.fit_exponent:
+                start = np.r_[start, float(self.exponent)]
+            start = np.clip(start, lower + 1e-9, upper - 1e-9)
+            result = least_squares(residuals, start, bounds=(lower, upper), max_nfev=budget)
+            if best is None or result.cost < best.cost:
+                best = result
+        return best
+
     def fit(self, X, y, sample_weight=None):
         """Fit on a time-ordered record; ``sample_weight`` (≥ 0) weights the residuals.
 
@@ -235,20 +281,9 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         still runs through it (its inputs are known): blocked cross-validation
         holds out a middle block this way.
         """
-        n_poles = check_positive_int(self.n_poles, "n_poles")
-        if n_poles > 4:
-            raise ValueError(f"GreyBoxRegressor: n_poles must be 1-4, got {n_poles}.")
-        lo, hi = (float(v) for v in self.time_constant_bounds)
-        if not 0 < lo < hi < np.inf:
-            raise ValueError(f"GreyBoxRegressor: time_constant_bounds must be 0 < low < high s, got {self.time_constant_bounds!r}.")
-        X = check_array(X, dtype=np.float64, ensure_all_finite=False, ensure_min_samples=2)
+        n_poles, (lo, hi) = self._checked_settings()
+        X, y, w = self._checked_data(X, y, sample_weight)
         inputs, observed = self._columns(X.shape[1])
-        y = check_array(np.asarray(y, float), ensure_2d=False, dtype=np.float64)
-        if y.ndim != 1 or len(y) != len(X):
-            raise ValueError(f"GreyBoxRegressor: y must be 1-D with one value per row of X ({len(X)}), got shape {y.shape}.")
-        w = np.ones(len(y)) if sample_weight is None else np.asarray(sample_weight, float)
-        if w.shape != y.shape or not np.all(np.isfinite(w)) or np.any(w < 0):
-            raise ValueError("GreyBoxRegressor: sample_weight must be finite, >= 0 and one per row of X.")
         n_outputs, m = 1 + len(observed), 1 + len(inputs)
         n_linear = 1 + n_poles * m + len(inputs)
         n_parameters = n_outputs * n_linear + n_poles + int(bool(self.fit_exponent))
@@ -276,29 +311,9 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
             coef, Phi, _ = linear(theta)
             return ((Phi @ coef - outputs) * weights)[used].ravel()
 
-        log_lo, log_hi = np.log(lo), np.log(hi)
-        if n_poles > 1 and log_hi - log_lo <= (n_poles - 1) * np.log(_MIN_RATIO):
-            raise ValueError(f"GreyBoxRegressor: time_constant_bounds {self.time_constant_bounds!r} are too narrow "
-                             f"for {n_poles} poles {_MIN_RATIO:g}x apart.")
-        # τ₁ in [lo, hi]; each further ratio in [_MIN_RATIO, hi/lo] (the largest τ may pass hi: still stable)
-        lower = np.r_[log_lo, np.full(n_poles - 1, np.log(_MIN_RATIO))]
-        upper = np.r_[log_hi, np.full(n_poles - 1, log_hi - log_lo)]
-        if self.fit_exponent:
-            b_lo, b_hi = (float(v) for v in self.exponent_bounds)
-            lower, upper = np.r_[lower, b_lo], np.r_[upper, b_hi]
-        budget = check_positive_int(self.max_nfev, "max_nfev")
-        best = None
-        for taus in _STARTS:  # deterministic restarts: the simulation error has local minima
-            start = np.diff(np.log(taus[:n_poles]), prepend=0.0)
-            if self.fit_exponent:
-                start = np.r_[start, float(self.exponent)]
-            start = np.clip(start, lower + 1e-9, upper - 1e-9)
-            result = least_squares(residuals, start, bounds=(lower, upper), max_nfev=budget)
-            if best is None or result.cost < best.cost:
-                best = result
-        theta = best.x
-        coef, Phi, U = linear(theta)
-        lam, exponent = self._unpack(theta)
+        best = self._least_squares(residuals, n_poles, lo, hi)
+        coef, Phi, U = linear(best.x)
+        lam, exponent = self._unpack(best.x)
 
         self.time_constants_ = 1.0 / lam
         self.poles_ = -lam

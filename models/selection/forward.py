@@ -7,7 +7,88 @@ block better with it.  Several targets (drift axes) can share one sensor set.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
+
+
+@dataclass(frozen=True)
+class _Grams:
+    """Per block: the intercept-augmented candidates, targets, Grams XᵀX, XᵀY and yᵀy; weights of the objective."""
+
+    Xa: list
+    Ys: list
+    G: list
+    b: list
+    yy: list
+    w: list                 #: per block, per target: the ``normalise`` weight
+    tw: np.ndarray          #: per target: ``target_weights``
+    normalise: str
+    G_all: np.ndarray       #: Σ of the blocks' XᵀX
+    b_all: np.ndarray       #: Σ of the blocks' XᵀY
+
+
+def _checked_blocks(blocks_X, blocks_y, target_weights, folds):
+    """``(targets (n_f, a) per block, target weights (a,), held-out fold indices)``, each checked."""
+    if len(blocks_X) < 2:
+        raise ValueError("greedy leave-one-block-out selection needs at least two blocks (training scenarios)")
+    Ys = [np.asarray(y, float).reshape(len(y), -1) for y in blocks_y]
+    n_t = Ys[0].shape[1]
+    if any(Y.shape[1] != n_t for Y in Ys):
+        raise ValueError("every block needs the same number of targets")
+    tw = np.ones(n_t) if target_weights is None else np.asarray(target_weights, float).ravel()
+    if tw.shape != (n_t,):
+        raise ValueError(f"target_weights has {tw.size} values for {n_t} targets")
+    folds = list(range(len(blocks_X))) if folds is None else [int(f) for f in folds]
+    if not folds:
+        raise ValueError("no block is held out: give at least one fold")
+    return Ys, tw, folds
+
+
+def _block_weights(Ys, normalise):
+    """Per block, per target: 1 (``"none"``), 1/n_f (``"rows"``) or 1/(n_f max|y|²) (``"peak"``)."""
+    n_t = Ys[0].shape[1]
+    if normalise == "peak":
+        return [1.0 / (len(Y) * np.maximum(np.abs(Y).max(axis=0), 1e-12) ** 2) for Y in Ys]
+    if normalise == "rows":
+        return [np.full(n_t, 1.0 / len(Y)) for Y in Ys]
+    return [np.ones(n_t) for _Y in Ys]
+
+
+def _add_fold_objective(objective, g, f, S, lam, criterion):
+    """Add to ``objective`` (p+1,) the objective on held-out block ``f`` of adding each candidate to the columns
+    ``S``, summed over the targets (in place, in the order of the targets).
+
+    The fit on the other blocks with S plus candidate c comes from the Schur complement of the Gram on S
+    (``V`` = A⁻¹ G_S, ``d`` the complement), never by refitting.
+    """
+    Gt = g.G_all - g.G[f]
+    A_inv = np.linalg.inv(Gt[np.ix_(S, S)] + lam * np.diag((S != 0).astype(float)))
+    GS = Gt[S]                                      # (s, p+1)
+    V = A_inv @ GS                                  # v_c columns
+    d = np.diag(Gt) + lam - np.einsum("ij,ij->j", GS, V)
+    Gv = g.G[f]
+    if criterion == "sse":
+        GvS, Gv_SS = Gv[S], Gv[np.ix_(S, S)]
+        rr = np.diag(Gv) - 2 * np.einsum("ij,ij->j", V, GvS) + np.einsum("ij,ij->j", V, Gv_SS @ V)
+    else:
+        XS = g.Xa[f][:, S]
+        R = g.Xa[f] - XS @ V                        # residual of every candidate on X_S (block f)
+    for a in range(len(g.tw)):
+        bt = g.b_all[:, a] - g.b[f][:, a]
+        beta_S0 = A_inv @ bt[S]
+        beta_c = (bt - V.T @ bt[S]) / np.maximum(d, 1e-300)
+        if criterion == "sse":
+            bv = g.b[f][:, a]
+            e0e0 = g.yy[f][a] - 2 * beta_S0 @ bv[S] + beta_S0 @ Gv_SS @ beta_S0
+            e0x = bv - GvS.T @ beta_S0              # X_vᵀ(y − X_S β)
+            e0r = e0x - V.T @ e0x[S]
+            objective += g.tw[a] * g.w[f][a] * (e0e0 - 2 * beta_c * e0r + beta_c ** 2 * rr)
+        else:                                       # max |residual| over the block, exactly
+            e0 = g.Ys[f][:, a] - XS @ beta_S0
+            worst = np.abs(e0[:, None] - R * beta_c).max(axis=0)
+            scale = np.sqrt(g.w[f][a] * len(g.Ys[f])) if g.normalise != "none" else 1.0
+            objective += g.tw[a] * worst * scale
 
 
 def greedy_loso(blocks_X, blocks_y, k_max, ridge=1e-4, normalise="none", criterion="max",
@@ -32,70 +113,25 @@ def greedy_loso(blocks_X, blocks_y, k_max, ridge=1e-4, normalise="none", criteri
     Returns the chosen columns in order, the objective after each step, and every
     candidate's objective when used alone.
     """
-    F = len(blocks_X)
-    if F < 2:
-        raise ValueError("greedy leave-one-block-out selection needs at least two blocks (training scenarios)")
-    Ys = [np.asarray(y, float).reshape(len(y), -1) for y in blocks_y]
-    n_t = Ys[0].shape[1]
-    if any(Y.shape[1] != n_t for Y in Ys):
-        raise ValueError("every block needs the same number of targets")
-    tw = np.ones(n_t) if target_weights is None else np.asarray(target_weights, float).ravel()
-    if tw.shape != (n_t,):
-        raise ValueError(f"target_weights has {tw.size} values for {n_t} targets")
-    folds = list(range(F)) if folds is None else [int(f) for f in folds]
-    if not folds:
-        raise ValueError("no block is held out: give at least one fold")
+    Ys, tw, folds = _checked_blocks(blocks_X, blocks_y, target_weights, folds)
     p = blocks_X[0].shape[1]
     # Augment with the intercept column (index 0); Grams per block.
     Xa = [np.column_stack([np.ones(len(X)), X]) for X in blocks_X]
     G = [X.T @ X for X in Xa]
     b = [X.T @ Y for X, Y in zip(Xa, Ys)]                       # (p+1, a)
-    yy = [np.einsum("ia,ia->a", Y, Y) for Y in Ys]
-    peak = [np.maximum(np.abs(Y).max(axis=0), 1e-12) for Y in Ys]
-    if normalise == "peak":
-        w = [1.0 / (len(Y) * pk ** 2) for Y, pk in zip(Ys, peak)]
-    elif normalise == "rows":
-        w = [np.full(n_t, 1.0 / len(Y)) for Y in Ys]
-    else:
-        w = [np.ones(n_t) for _Y in Ys]
-    G_all, b_all = sum(G), sum(b)
-    diag_scale = np.mean(np.diag(G_all)[1:]) if p else 1.0
+    grams = _Grams(Xa, Ys, G, b, [np.einsum("ia,ia->a", Y, Y) for Y in Ys], _block_weights(Ys, normalise), tw,
+                   normalise, sum(G), sum(b))
+    diag_scale = np.mean(np.diag(grams.G_all)[1:]) if p else 1.0
     lam = ridge * diag_scale
     selected = [0]
     blocked = np.zeros(p + 1, bool)
     blocked[0] = True
     history, alone = [], None
     for _step in range(k_max):
-        objective = np.zeros(p + 1)
         S = np.array(selected)
+        objective = np.zeros(p + 1)
         for f in folds:
-            Gt = G_all - G[f]
-            A = Gt[np.ix_(S, S)] + lam * np.diag((S != 0).astype(float))
-            A_inv = np.linalg.inv(A)
-            GS = Gt[S]                                      # (s, p+1)
-            V = A_inv @ GS                                  # v_c columns
-            d = np.diag(Gt) + lam - np.einsum("ij,ij->j", GS, V)
-            Gv = G[f]
-            if criterion == "sse":
-                GvS, Gv_SS = Gv[S], Gv[np.ix_(S, S)]
-                rr = np.diag(Gv) - 2 * np.einsum("ij,ij->j", V, GvS) + np.einsum("ij,ij->j", V, Gv_SS @ V)
-            else:
-                XS = Xa[f][:, S]
-                R = Xa[f] - XS @ V                          # residual of every candidate on X_S (block f)
-            for a in range(n_t):
-                bt = b_all[:, a] - b[f][:, a]
-                beta_S0 = A_inv @ bt[S]
-                beta_c = (bt - V.T @ bt[S]) / np.maximum(d, 1e-300)
-                if criterion == "sse":
-                    bv = b[f][:, a]
-                    e0e0 = yy[f][a] - 2 * beta_S0 @ bv[S] + beta_S0 @ Gv_SS @ beta_S0
-                    e0x = bv - GvS.T @ beta_S0              # X_vᵀ(y − X_S β)
-                    e0r = e0x - V.T @ e0x[S]
-                    objective += tw[a] * w[f][a] * (e0e0 - 2 * beta_c * e0r + beta_c ** 2 * rr)
-                else:                                       # max |residual| over the block, exactly
-                    e0 = Ys[f][:, a] - XS @ beta_S0
-                    worst = np.abs(e0[:, None] - R * beta_c).max(axis=0)
-                    objective += tw[a] * worst * (np.sqrt(w[f][a] * len(Ys[f])) if normalise != "none" else 1.0)
+            _add_fold_objective(objective, grams, f, S, lam, criterion)
         objective[blocked] = np.inf
         if alone is None:
             alone = objective[1:].copy()

@@ -44,19 +44,15 @@ def region_influence(structure, channel_rows):
     return g
 
 
-def region_estimate(structure, evaluator, residual, names, ridge=1.0):
-    """Model-free attribution (see the module docstring) → dict with c_r(t), per-axis shares and the influence table."""
+def _observation_rows(structure, evaluator, residual, names, t_cols, d_cols, part_of):
+    """``(rows, rhs, influence)`` of the region least squares: one row per thermometer (its part) and per drift
+    or strain line (its region influence), each divided by its channel's σ; ``rhs`` holds the residual series
+    (n_rows × n_times) and ``influence`` the region influence of each drift or strain line."""
     regions = structure.region_names
-    info = structure.thermometer_info()
-    therm_names = [structure.names[i] for i in structure.thermometers]
-    part_of = dict(zip(therm_names, info["part"]))
-    t_cols = [j for j, n in enumerate(names) if n in part_of]
-    d_cols = [j for j, n in enumerate(names) if evaluator.kinds[j] in ("displacement", "strain")]
     d_rows = [structure.index[names[j]] for j in d_cols]
     g = region_influence(structure, d_rows) if d_rows else np.zeros((0, len(regions)))
     R = np.nan_to_num(residual.R)
     sig_T = evaluator.sigma.get("temperature", 0.1)
-    sig_D = evaluator.sigma.get("displacement", 1.0)
     rows, rhs = [], []
     for j in t_cols:
         a = np.zeros(len(regions))
@@ -64,15 +60,15 @@ def region_estimate(structure, evaluator, residual, names, ridge=1.0):
         rows.append(a)
         rhs.append(R[:, j] / sig_T)
     for k, j in enumerate(d_cols):
-        sig = sig_D if evaluator.kinds[j] == "displacement" else evaluator.sigma.get("strain", 1.0)
+        sig = evaluator.sigma.get("displacement", 1.0) if evaluator.kinds[j] == "displacement" else \
+            evaluator.sigma.get("strain", 1.0)
         rows.append(g[k] / sig)
         rhs.append(R[:, j] / sig)
-    if not rows:
-        return None
-    A = np.array(rows)
-    prior = max(float(np.sqrt(np.mean(R[:, t_cols] ** 2))) if t_cols else 0.0, 0.05)
-    lhs = A.T @ A + ridge * np.eye(len(regions)) / prior ** 2
-    c = np.linalg.solve(lhs, A.T @ np.array(rhs)).T            # (n_times, n_regions)
+    return rows, rhs, g
+
+
+def _drift_shares(c, g, R, names, d_cols, regions):
+    """Per drift or strain line and region: the share of the line's residual its region temperature explains."""
     shares = {}
     for k, j in enumerate(d_cols):
         r = R[:, j]
@@ -81,12 +77,30 @@ def region_estimate(structure, evaluator, residual, names, ridge=1.0):
         shares[names[j]] = {reg: {"share": float(contrib[:, i] @ r / denom),
                                   "rms": float(np.sqrt(np.mean(contrib[:, i] ** 2)))}
                             for i, reg in enumerate(regions)}
-    rms = {reg: float(np.sqrt(np.mean(c[:, i] ** 2))) for i, reg in enumerate(regions)}
-    observed = sorted({part_of[names[j]] for j in t_cols})
-    units = {names[j]: "µm" if evaluator.kinds[j] == "displacement" else "µε" for j in d_cols}
-    return {"regions": regions, "c": c, "rms_K": rms, "shares": shares, "observed_regions": observed,
+    return shares
+
+
+def region_estimate(structure, evaluator, residual, names, ridge=1.0):
+    """Model-free attribution (see the module docstring) → dict with c_r(t), per-axis shares and the influence table."""
+    regions = structure.region_names
+    info = structure.thermometer_info()
+    part_of = dict(zip([structure.names[i] for i in structure.thermometers], info["part"]))
+    t_cols = [j for j, n in enumerate(names) if n in part_of]
+    d_cols = [j for j, n in enumerate(names) if evaluator.kinds[j] in ("displacement", "strain")]
+    rows, rhs, g = _observation_rows(structure, evaluator, residual, names, t_cols, d_cols, part_of)
+    if not rows:
+        return None
+    A = np.array(rows)
+    R = np.nan_to_num(residual.R)
+    prior = max(float(np.sqrt(np.mean(R[:, t_cols] ** 2))) if t_cols else 0.0, 0.05)
+    lhs = A.T @ A + ridge * np.eye(len(regions)) / prior ** 2
+    c = np.linalg.solve(lhs, A.T @ np.array(rhs)).T            # (n_times, n_regions)
+    return {"regions": regions, "c": c, "rms_K": {reg: float(np.sqrt(np.mean(c[:, i] ** 2)))
+                                                  for i, reg in enumerate(regions)},
+            "shares": _drift_shares(c, g, R, names, d_cols, regions),
+            "observed_regions": sorted({part_of[names[j]] for j in t_cols}),
             "influence": {names[j]: dict(zip(regions, g[k].tolist())) for k, j in enumerate(d_cols)},
-            "units": units}
+            "units": {names[j]: "µm" if evaluator.kinds[j] == "displacement" else "µε" for j in d_cols}}
 
 
 def effect_attribution(model, result, nominal, names):

@@ -262,21 +262,38 @@ def benchmark(which="all", scheduler="local", out_dir=None, scenario=SCENARIO, t
     return BenchmarkResult(results, md, path, wall, metrics["top1_rate"], metrics)
 
 
+def _of_kind(results, *kinds):
+    """The case results of the given kinds (``single``, ``pair``, ``none``, ``library``, ``outside``, …)."""
+    return [r for r in results if r["kind"] in kinds]
+
+
+def _count(rows, test):
+    """``(rows passing test, rows)``."""
+    return int(sum(bool(test(r)) for r in rows)), len(rows)
+
+
+def _drift_scored(r):
+    """Whether a case's drift shrinkage is scored: it was named correctly and left a drift gap above DRIFT_GAP."""
+    return bool(r["correct"]) and (r.get("drift_gap") or 0) > DRIFT_GAP
+
+
+def _median_and_min(values):
+    """``(median, min)`` of ``values`` as floats, or ``(None, None)`` when there are none."""
+    return (float(np.median(values)), float(np.min(values))) if values else (None, None)
+
+
 def _metrics(results):
-    singles = [r for r in results if r["kind"] == "single"]
-    top1 = float(np.mean([r["correct"] for r in singles])) if singles else float("nan")
-    shrink = [r["shrink_top"]["drift_reduction"] for r in singles if r["correct"] and r.get("shrink_top")
-              and r["shrink_top"]["drift_reduction"] is not None and (r.get("drift_gap") or 0) > DRIFT_GAP]
-    none = [r for r in results if r["kind"] == "none"]
-    pairs = [r for r in results if r["kind"] == "pair"]
-    return {"top1_rate": top1, "top1_correct": int(sum(r["correct"] for r in singles)), "singles": len(singles),
-            "drift_shrink_median": float(np.median(shrink)) if shrink else None,
-            "drift_shrink_min": float(np.min(shrink)) if shrink else None,
+    singles, none, pairs = (_of_kind(results, kind) for kind in ("single", "none", "pair"))
+    shrink = [r["shrink_top"]["drift_reduction"] for r in singles if _drift_scored(r) and r.get("shrink_top")]
+    shrink = [s for s in shrink if s is not None]
+    (top1_correct, n_singles), (median, worst) = _count(singles, lambda r: r["correct"]), _median_and_min(shrink)
+    return {"top1_rate": top1_correct / n_singles if singles else float("nan"), "top1_correct": top1_correct,
+            "singles": n_singles, "drift_shrink_median": median, "drift_shrink_min": worst,
             "drift_shrink_cases": len(shrink),
-            "drift_shrink_goal_met": int(sum(s >= GOAL_DRIFT_SHRINK for s in shrink)),
-            "none_correct": int(sum(r["correct"] for r in none)), "none": len(none),
-            "pairs_both": int(sum(r["correct"] for r in pairs)),
-            "pairs_one": int(sum(r["partially"] and not r["correct"] for r in pairs)), "pairs": len(pairs)}
+            "drift_shrink_goal_met": _count(shrink, lambda s: s >= GOAL_DRIFT_SHRINK)[0],
+            "none_correct": _count(none, lambda r: r["correct"])[0], "none": len(none),
+            "pairs_both": _count(pairs, lambda r: r["correct"])[0],
+            "pairs_one": _count(pairs, lambda r: r["partially"] and not r["correct"])[0], "pairs": len(pairs)}
 
 
 def _fmt(v, spec=".2f"):
@@ -329,28 +346,37 @@ def _shrinkage_table(results):
                                  "reduction", "temperature RMS before → after (K)", "reduction"])
 
 
+def _separation_lines(r):
+    """Where a thermometer would tell a missed case's two fitted effects apart (none if not computed)."""
+    sep = r.get("separation")
+    if not sep or "error" in sep:
+        return []
+    return [(f"  - separating sensor: a thermometer on the {sep['part']} at {sep['position_m']} m "
+             f"(zone {sep['zone']}) sees the two fitted effects differ by {sep['difference_rms_K']:.3f} K "
+             f"RMS ({sep['difference_over_noise']:.1f}× noise); the best existing one, "
+             f"{sep['best_existing_sensor']}, {sep['best_existing_difference_rms_K']:.3f} K")]
+
+
+def _short_shrinkage(r):
+    """Whether a scored case's held-out drift RMS fell by less than the goal."""
+    s = r.get("shrink_top")
+    return _drift_scored(r) and bool(s) and (s["drift_reduction"] or 0) < GOAL_DRIFT_SHRINK
+
+
 def _missed_lines(results):
     missed = [r for r in results if not r["correct"]]
     lines = [] if missed else ["Every case was named correctly."]
     for r in missed:
-        lines.append(f"- **{r['case']}** → {r['top']}: {r['verdict']}")
-        sep = r.get("separation")
-        if sep and "error" not in sep:
-            lines.append(f"  - separating sensor: a thermometer on the {sep['part']} at {sep['position_m']} m "
-                         f"(zone {sep['zone']}) sees the two fitted effects differ by {sep['difference_rms_K']:.3f} K "
-                         f"RMS ({sep['difference_over_noise']:.1f}× noise); the best existing one, "
-                         f"{sep['best_existing_sensor']}, {sep['best_existing_difference_rms_K']:.3f} K")
-    singles = [r for r in results if r["kind"] == "single"]
+        lines += [f"- **{r['case']}** → {r['top']}: {r['verdict']}", *_separation_lines(r)]
+    singles = _of_kind(results, "single")
     drift_small = [r["case"] for r in singles if (r.get("drift_gap") or 0) <= DRIFT_GAP]
     if drift_small:
         lines.append(f"- drift shrinkage is not scored where the effect leaves no drift gap above {DRIFT_GAP:g}× "
                      f"max(noise, 0.1 µm tolerance) (sensor-side or small drift effects): {', '.join(drift_small)}")
-    for r in singles:
-        s = r.get("shrink_top")
-        if (r["correct"] and s and (r.get("drift_gap") or 0) > DRIFT_GAP
-                and (s["drift_reduction"] or 0) < GOAL_DRIFT_SHRINK):
-            lines.append(f"- **{r['case']}**: held-out drift RMS −{_fmt(s['drift_reduction'], '.0%')} only "
-                         f"({_fmt(s['drift_before_rms'])} → {_fmt(s['drift_after_rms'])} µm)")
+    for r in filter(_short_shrinkage, singles):
+        s = r["shrink_top"]
+        lines.append(f"- **{r['case']}**: held-out drift RMS −{_fmt(s['drift_reduction'], '.0%')} only "
+                     f"({_fmt(s['drift_before_rms'])} → {_fmt(s['drift_after_rms'])} µm)")
     return lines
 
 
@@ -442,66 +468,72 @@ _HYDRAULIC = (-0.22, -0.02, -0.5, -0.44, 0.35, 0.6)
 _FEED_GUIDES = (-0.35, 0.35, 0.0, 0.5, 0.26, 0.30)
 
 
+#: Effects the library knows, made independently (changed physics in the full FE, sensor errors).
+_LIBRARY_CASES = (
+    IndependentCase("convection_enclosure", "library", PhysicsChange(convection={"enclosure": 0.5}),
+                    library=(("convection_enclosure", (0.5,)),)),
+    IndependentCase("convection_room", "library", PhysicsChange(convection={"outside": 1.8, "front": 1.8}),
+                    library=(("convection_room", (1.8,)),)),
+    IndependentCase("joint_ram_guides", "library", PhysicsChange(joints={"carrier-ram": 0.2}),
+                    library=(("joint_ram_guides", (0.2,)),)),
+    IndependentCase("belt_drive", "library",
+                    PhysicsChange(sources=(_src("belt", "carrier", _BELT_BOX, "spindle", 60.0, 1.15),)),
+                    library=(("belt_drive", (60.0,)),), source=("carrier", _BELT_BOX, 60.0)),
+    IndependentCase("spindle_power_scale", "library",
+                    PhysicsChange(source_scale=dict.fromkeys(_SPINDLE, 1.3)),
+                    library=(("spindle_power_scale", (1.3,)),)),
+    IndependentCase("speed_exponent", "library", PhysicsChange(source_exponent=dict.fromkeys(_SPINDLE, 0.4)),
+                    library=(("speed_exponent", (0.4,)),)),
+    IndependentCase("enclosure_lag", "library", PhysicsChange(zone_lags_h={"enclosure": 8.0}),
+                    library=(("enclosure_lag", (8.0,)),)),
+    IndependentCase("sensor_lag", "library", sensors=(("thermometer_lag2", 700.0, 250.0),),
+                    library=(("sensor_lag", (950.0,)),)),
+    IndependentCase("fixture_drift", "library", sensors=(("fixture", 1.0, 2.0, 3.0, 40.0, 10.0),),
+                    library=(("fixture_drift", (1.0, 2.0, 3.0, 50.0)),)),
+)
+#: Effects outside the library: the diagnosis must not call them "explained".
+_OUTSIDE_CASES = (
+    IndependentCase("column_source", "outside",
+                    PhysicsChange(sources=(_src("column_source", "column", _COLUMN_BACK, "spindle", 40.0),)),
+                    source=("column", _COLUMN_BACK, 40.0)),
+    IndependentCase("hydraulic_unit", "outside",
+                    PhysicsChange(sources=(_src("hydraulic_unit", "column", _HYDRAULIC, "spindle", 50.0, 0.05),)),
+                    source=("column", _HYDRAULIC, 50.0)),
+    IndependentCase("feed_guides", "outside",
+                    PhysicsChange(sources=(_src("feed_guides", "base", _FEED_GUIDES, "feed_xy", 80.0, 1.0,
+                                                10000.0),)),
+                    source=("base", _FEED_GUIDES, 80.0)),
+    IndependentCase("missing_joint", "outside", PhysicsChange(joints={"column-carrier": 0.05})),
+)
+#: Two library effects at once.
+_PAIR_CASES = (
+    IndependentCase("convection_enclosure+belt_drive", "pair",
+                    PhysicsChange(convection={"enclosure": 0.5},
+                                  sources=(_src("belt", "carrier", _BELT_BOX, "spindle", 60.0, 1.15),)),
+                    library=(("convection_enclosure", (0.5,)), ("belt_drive", (60.0,)))),
+    IndependentCase("joint_ram_guides+fixture_drift", "pair", PhysicsChange(joints={"carrier-ram": 0.2}),
+                    sensors=(("fixture", 1.0, 2.0, 3.0, 40.0, 10.0),),
+                    library=(("joint_ram_guides", (0.2,)), ("fixture_drift", (1.0, 2.0, 3.0, 50.0)))),
+    IndependentCase("spindle_power_scale+sensor_lag", "pair",
+                    PhysicsChange(source_scale=dict.fromkeys(_SPINDLE, 1.3)),
+                    sensors=(("thermometer_lag2", 700.0, 250.0),),
+                    library=(("spindle_power_scale", (1.3,)), ("sensor_lag", (950.0,)))),
+)
+#: No effect, only another mesh, integrator or sampling: "no significant gap" expected.
+_CONTROL_CASES = (
+    IndependentCase("control: 35 mm mesh", "control", PhysicsChange(mesh_size_m=0.035)),
+    IndependentCase("control: Crank-Nicolson 30 s", "control",
+                    PhysicsChange(scheme="crank_nicolson", time_step_s=30.0)),
+    IndependentCase("control: 45 s sampling", "control", sampling="45s"),
+    IndependentCase("control: irregular 30-70 s sampling", "control", sampling="irregular"),
+    IndependentCase("control: clock 15 s off the minute", "control", sampling="clock_offset"),
+)
+
+
 def independent_cases(which="all"):
     """The independent cases: ``library``, ``outside``, ``pairs``, ``controls``, ``all`` or a comma list of names."""
-    lib = [
-        IndependentCase("convection_enclosure", "library", PhysicsChange(convection={"enclosure": 0.5}),
-                        library=(("convection_enclosure", (0.5,)),)),
-        IndependentCase("convection_room", "library", PhysicsChange(convection={"outside": 1.8, "front": 1.8}),
-                        library=(("convection_room", (1.8,)),)),
-        IndependentCase("joint_ram_guides", "library", PhysicsChange(joints={"carrier-ram": 0.2}),
-                        library=(("joint_ram_guides", (0.2,)),)),
-        IndependentCase("belt_drive", "library",
-                        PhysicsChange(sources=(_src("belt", "carrier", _BELT_BOX, "spindle", 60.0, 1.15),)),
-                        library=(("belt_drive", (60.0,)),), source=("carrier", _BELT_BOX, 60.0)),
-        IndependentCase("spindle_power_scale", "library",
-                        PhysicsChange(source_scale=dict.fromkeys(_SPINDLE, 1.3)),
-                        library=(("spindle_power_scale", (1.3,)),)),
-        IndependentCase("speed_exponent", "library", PhysicsChange(source_exponent=dict.fromkeys(_SPINDLE, 0.4)),
-                        library=(("speed_exponent", (0.4,)),)),
-        IndependentCase("enclosure_lag", "library", PhysicsChange(zone_lags_h={"enclosure": 8.0}),
-                        library=(("enclosure_lag", (8.0,)),)),
-        IndependentCase("sensor_lag", "library", sensors=(("thermometer_lag2", 700.0, 250.0),),
-                        library=(("sensor_lag", (950.0,)),)),
-        IndependentCase("fixture_drift", "library", sensors=(("fixture", 1.0, 2.0, 3.0, 40.0, 10.0),),
-                        library=(("fixture_drift", (1.0, 2.0, 3.0, 50.0)),)),
-    ]
-    outside = [
-        IndependentCase("column_source", "outside",
-                        PhysicsChange(sources=(_src("column_source", "column", _COLUMN_BACK, "spindle", 40.0),)),
-                        source=("column", _COLUMN_BACK, 40.0)),
-        IndependentCase("hydraulic_unit", "outside",
-                        PhysicsChange(sources=(_src("hydraulic_unit", "column", _HYDRAULIC, "spindle", 50.0, 0.05),)),
-                        source=("column", _HYDRAULIC, 50.0)),
-        IndependentCase("feed_guides", "outside",
-                        PhysicsChange(sources=(_src("feed_guides", "base", _FEED_GUIDES, "feed_xy", 80.0, 1.0,
-                                                    10000.0),)),
-                        source=("base", _FEED_GUIDES, 80.0)),
-        IndependentCase("missing_joint", "outside", PhysicsChange(joints={"column-carrier": 0.05})),
-    ]
-    pairs = [
-        IndependentCase("convection_enclosure+belt_drive", "pair",
-                        PhysicsChange(convection={"enclosure": 0.5},
-                                      sources=(_src("belt", "carrier", _BELT_BOX, "spindle", 60.0, 1.15),)),
-                        library=(("convection_enclosure", (0.5,)), ("belt_drive", (60.0,)))),
-        IndependentCase("joint_ram_guides+fixture_drift", "pair", PhysicsChange(joints={"carrier-ram": 0.2}),
-                        sensors=(("fixture", 1.0, 2.0, 3.0, 40.0, 10.0),),
-                        library=(("joint_ram_guides", (0.2,)), ("fixture_drift", (1.0, 2.0, 3.0, 50.0)))),
-        IndependentCase("spindle_power_scale+sensor_lag", "pair",
-                        PhysicsChange(source_scale=dict.fromkeys(_SPINDLE, 1.3)),
-                        sensors=(("thermometer_lag2", 700.0, 250.0),),
-                        library=(("spindle_power_scale", (1.3,)), ("sensor_lag", (950.0,)))),
-    ]
-    controls = [
-        IndependentCase("control: 35 mm mesh", "control", PhysicsChange(mesh_size_m=0.035)),
-        IndependentCase("control: Crank-Nicolson 30 s", "control",
-                        PhysicsChange(scheme="crank_nicolson", time_step_s=30.0)),
-        IndependentCase("control: 45 s sampling", "control", sampling="45s"),
-        IndependentCase("control: irregular 30-70 s sampling", "control", sampling="irregular"),
-        IndependentCase("control: clock 15 s off the minute", "control", sampling="clock_offset"),
-    ]
-    groups = {"library": lib, "outside": outside, "pairs": pairs, "controls": controls,
-              "all": lib + outside + pairs + controls}
+    groups = {"library": _LIBRARY_CASES, "outside": _OUTSIDE_CASES, "pairs": _PAIR_CASES, "controls": _CONTROL_CASES}
+    groups["all"] = sum(groups.values(), ())
     by_name = {c.name: c for c in groups["all"]}
     out = []
     for name in [w.strip() for w in str(which or "all").split(",") if w.strip()]:
@@ -592,23 +624,19 @@ def _covered(p):
 
 def independent_metrics(results):
     """The issue's goal table from the case results (see :func:`independent_benchmark`)."""
-    lib = [r for r in results if r["kind"] == "library"]
-    outside = [r for r in results if r["kind"] == "outside"]
-    controls = [r for r in results if r["kind"] == "control"]
-    sources = [r for r in results if r.get("source") is not None and r["kind"] == "outside"]
-    params = [p for r in lib + [r for r in results if r["kind"] == "pair"]
-              for p in (r.get("truth_fit") or {}).get("params", [])]
-    explained = [r["drift_reduction"] for r in lib if r["outcome"] == "explained" and r["correct"]
-                 and r["drift_reduction"] is not None and (r.get("drift_gap") or 0) > DRIFT_GAP]
+    lib, outside, controls, pairs = (_of_kind(results, kind) for kind in ("library", "outside", "control", "pair"))
+    sources = [r for r in outside if r.get("source") is not None]
+    params = [p for r in lib + pairs for p in (r.get("truth_fit") or {}).get("params", [])]
+    explained = [r["drift_reduction"] for r in lib
+                 if r["outcome"] == "explained" and _drift_scored(r) and r["drift_reduction"] is not None]
     return {
-        "library_top1": (sum(r["correct"] for r in lib), len(lib)),
-        "outside_never_explained_with_gap": (sum(not r["explained_with_gap"] for r in outside), len(outside)),
-        "sources_found": (sum(r["source"]["ok"] for r in sources), len(sources)),
-        "controls_no_gap": (sum(r["outcome"] == "no_significant_gap" for r in controls), len(controls)),
-        "interval_coverage": (sum(_covered(p) for p in params), len(params)),
-        "median_drift_reduction": float(np.median(explained)) if explained else None,
-        "pairs_both": (sum(r["correct"] for r in results if r["kind"] == "pair"),
-                       sum(r["kind"] == "pair" for r in results)),
+        "library_top1": _count(lib, lambda r: r["correct"]),
+        "outside_never_explained_with_gap": _count(outside, lambda r: not r["explained_with_gap"]),
+        "sources_found": _count(sources, lambda r: r["source"]["ok"]),
+        "controls_no_gap": _count(controls, lambda r: r["outcome"] == "no_significant_gap"),
+        "interval_coverage": _count(params, _covered),
+        "median_drift_reduction": _median_and_min(explained)[0],
+        "pairs_both": _count(pairs, lambda r: r["correct"]),
     }
 
 

@@ -12,6 +12,7 @@ from ..infra.progress import progress_bar
 # Handlers import the library inside them, never up here: start-up time (`twin --help` must not load scipy).
 # So twin.gap.benchmark's truth-run defaults are copied here (tests/test_cli_startup.py keeps them equal).
 SCENARIO = "gap_blind_24h"
+INDEPENDENT_SCENARIO = "gap_independent_24h"
 TRUTH_MESH_SIZE_M = 0.035
 
 
@@ -38,9 +39,17 @@ def cmd_diagnose(args):
 
 
 def cmd_benchmark(args):
-    from .benchmark import benchmark
+    from .benchmark import benchmark, independent_benchmark
 
-    res = benchmark(args.cases, scheduler=args.scheduler, out_dir=args.out, scenario=args.scenario,
+    if args.independent:
+        res = independent_benchmark(args.independent, scheduler=args.scheduler, out_dir=args.out,
+                                    scenario=args.scenario or INDEPENDENT_SCENARIO,
+                                    progress=progress_bar("independent cases", unit="case"), n_workers=args.workers,
+                                    overwrite=args.overwrite)
+        print(res.markdown)
+        print(f"results in {res.out_dir}/")
+        return
+    res = benchmark(args.cases, scheduler=args.scheduler, out_dir=args.out, scenario=args.scenario or SCENARIO,
                     truth_mesh_size_m=None if args.truth_mesh_size <= 0 else args.truth_mesh_size,
                     holdout_fraction=args.holdout, progress=progress_bar("blind cases", unit="case"),
                     n_workers=args.workers, overwrite=args.overwrite)
@@ -105,7 +114,12 @@ def register(sub):
     b = gsub.add_parser("benchmark", help="blind check: effects switched on in a finer, noisy truth, then diagnosed")
     b.add_argument("--cases", default="all",
                    help="all | singles | pairs | none | comma list of effects or a+b pairs (default all)")
-    b.add_argument("--scenario", default=SCENARIO, help=f"truth scenario (default {SCENARIO})")
+    b.add_argument("--independent", metavar="CASES",
+                   help="run the independent benchmark instead (truth: changed physics in the full FE, sensor "
+                        "errors and sampling written apart from the library): library | outside | pairs | controls "
+                        "| all | comma list of case names")
+    b.add_argument("--scenario", help=f"truth scenario (default {SCENARIO}; with --independent "
+                                      f"{INDEPENDENT_SCENARIO})")
     b.add_argument("--truth-mesh-size", type=float, default=TRUTH_MESH_SIZE_M,
                    help=f"truth mesh size, m (default {TRUTH_MESH_SIZE_M}; 0 = the nominal mesh)")
     b.add_argument("--holdout", type=float, default=0.3)

@@ -256,6 +256,34 @@ def split_half_sd(model, ev, result, effects):
     return np.abs(estimates[1] - estimates[0]) / 2.0
 
 
+def _read_inputs(measured, machine, scenario, column_map, holdout_fraction, initial):
+    """``(machine, scenario or None, matched record, (split, fit rows, held-out rows), initial)`` of a diagnosis,
+    each checked (clear errors for a bad hold-out fraction, record or scenario)."""
+    if not 0.05 <= float(holdout_fraction) <= 0.8:
+        raise TwinInputError(f"holdout_fraction must lie in [0.05, 0.8], got {holdout_fraction}")
+    machine = _machine(machine)
+    sc = None
+    if scenario is not None:
+        sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    record = match_record(read_measured(measured, column_map), machine)
+    rows = _check_length(record, holdout_fraction)
+    if initial is None:
+        initial = "uniform" if sc is not None and sc.initial["kind"] == "uniform" else "steady"
+    return machine, sc, record, rows, initial
+
+
+def _explain(d, drive, discovery, timings):
+    """Fill where the gap lies, the discovery beyond the library (when a gap remains) and the verdict sentence."""
+    t2 = time.perf_counter()
+    _where(d, drive)
+    timings["where_s"] = time.perf_counter() - t2
+    if discovery and d.outcome in ("partly_explained", "not_explained"):
+        t3 = time.perf_counter()
+        d.discovery = _discover(d)
+        timings["discovery_s"] = time.perf_counter() - t3
+    d.verdict = verdict.sentence(d)
+
+
 def _widen(model, ev, result, applicable):
     """Widen a named model's sds to its split-half jackknife sd where that is larger (in place)."""
     effects = [next(e for e in applicable if e.name == name) for name in result.effects]
@@ -322,16 +350,8 @@ def diagnose(measured, machine="vmc_ram", scenario=None, column_map=None, holdou
     """
     timings = {}
     t0 = time.perf_counter()
-    if not 0.05 <= float(holdout_fraction) <= 0.8:
-        raise TwinInputError(f"holdout_fraction must lie in [0.05, 0.8], got {holdout_fraction}")
-    machine = _machine(machine)
-    sc = None
-    if scenario is not None:
-        sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
-    record = match_record(read_measured(measured, column_map), machine)
-    split, fit_rows, hold_rows = _check_length(record, holdout_fraction)
-    if initial is None:
-        initial = "uniform" if sc is not None and sc.initial["kind"] == "uniform" else "steady"
+    machine, sc, record, (split, fit_rows, hold_rows), initial = _read_inputs(
+        measured, machine, scenario, column_map, holdout_fraction, initial)
     library = library_by_name(effects)
     applicable = [e for e in library if e.applicable(machine)]
     structure, be = engine(machine, library_by_name(None), backend, **(engine_options or {}))
@@ -357,21 +377,14 @@ def diagnose(measured, machine="vmc_ram", scenario=None, column_map=None, holdou
     if decision.winner is not None:
         _widen(model, ev, decision.winner, applicable)
     noise_g = {g: float(np.nanmedian(noise[idx])) for g, idx in ev.groups().items()}
+    position_note = (f"spindle and feed changes placed {position:g} of the way between samples (chosen on the "
+                     "fit part among 0, 0.5, 1)")
     d = Diagnosis(machine, record, model, ev, float(split), nominal, singles, pairs, ranking, decision, scales,
                   n_eff_hold, noise_g,
                   {g: nominal.summary["groups"][g]["hold_rms"] / max(noise_g[g], 1e-9) for g in noise_g},
-                  where.phases(drive, t), notes=list(drive.notes) + [
-                      f"spindle and feed changes placed {position:g} of the way between samples (chosen on the "
-                      "fit part among 0, 0.5, 1)"],
+                  where.phases(drive, t), notes=[*drive.notes, position_note],
                   skipped=[e.name for e in library if not e.applicable(machine)])
-    t2 = time.perf_counter()
-    _where(d, drive)
-    timings["where_s"] = time.perf_counter() - t2
-    if discovery and d.outcome in ("partly_explained", "not_explained"):
-        t3 = time.perf_counter()
-        d.discovery = _discover(d)
-        timings["discovery_s"] = time.perf_counter() - t3
-    d.verdict = verdict.sentence(d)
+    _explain(d, drive, discovery, timings)
     timings["total_s"] = time.perf_counter() - t0
     d.timings = timings
     return d

@@ -538,6 +538,99 @@ def _score(f, r, Q):
     return float(fo @ r) ** 2 / nn if nn > 1e-300 else 0.0
 
 
+def _residuals(atoms, r_fit, r_hold):
+    """``(fit, hold, coef)``: the weighted residuals once ``atoms`` are least-squares fitted on the fit part."""
+    if not atoms:
+        return r_fit, r_hold, np.zeros(0)
+    coef = _solve([a.fit for a in atoms], r_fit)
+    return (r_fit - np.column_stack([a.fit for a in atoms]) @ coef,
+            r_hold - np.column_stack([a.hold for a in atoms]) @ coef, coef)
+
+
+def _held_change(ev, proj, before_hold, after_hold):
+    """Per channel group: held-out RMS before and after, its relative reduction, and the unit."""
+    ms_before, ms_after = _group_ms(ev, before_hold, proj.hold_col), _group_ms(ev, after_hold, proj.hold_col)
+    return {g: {"before_rms": float(np.sqrt(ms_before[g])), "after_rms": float(np.sqrt(ms_after[g])),
+                "reduction": float(1 - np.sqrt(ms_after[g] / ms_before[g])) if ms_before[g] > 0 else 0.0,
+                "unit": GROUP_UNIT[g]} for g in ms_before}
+
+
+def _try_atom(dic, ev, proj, chosen, atom, current, Q, r_fit, r_hold):
+    """``(atom, residuals, ΔBIC, accepted, reasons)`` of adding ``atom`` (a source refined first) to ``chosen``."""
+    if atom.kind == "source":
+        atom = _refine(dic, atom, current[0], Q)
+    fit, hold, coef = _residuals(chosen + [atom], r_fit, r_hold)
+    ok, dbic, reasons = _judge(ev, proj, current, (fit, hold), 1)
+    outside = _out_of_range(chosen + [atom], coef)
+    if outside:
+        ok = False
+        reasons.append(f"fitted outside the physical range: {', '.join(outside)}")
+    return atom, (fit, hold), dbic, ok, reasons
+
+
+def _forward(dic, ev, proj, r_fit, r_hold, max_atoms, rejected):
+    """Greedy forward selection: at each step the shortlisted atom of best ΔBIC that passes :func:`_judge`.
+
+    Returns ``(chosen atoms, (fit, hold) residuals)``; refused candidates are appended to ``rejected``.
+    """
+    chosen, Q, current = [], np.zeros((len(r_fit), 0)), (r_fit, r_hold)
+    for _ in range(max_atoms):
+        scores = np.array([_score(a.fit, current[0], Q) for a in dic.atoms])
+        accepted = None
+        for i in _shortlist(dic.atoms, scores):
+            atom, new, dbic, ok, reasons = _try_atom(dic, ev, proj, chosen, dic.atoms[i], current, Q, r_fit, r_hold)
+            if ok and (accepted is None or dbic > accepted[2]):
+                accepted = (atom, new, dbic)
+            elif not ok:
+                rejected.append({"step": len(chosen) + 1, "name": atom.name, "reasons": reasons, "delta_bic": dbic})
+        if accepted is None:
+            break
+        atom, current, dbic = accepted
+        atom.delta_bic = dbic
+        chosen.append(atom)
+        Q, _ = np.linalg.qr(np.column_stack([a.fit for a in chosen]))
+    return chosen, current
+
+
+def _prune(ev, proj, chosen, current, r_fit, r_hold, rejected):
+    """Drop atoms until the set as a whole worsens no group against the base and stays in its physical range.
+
+    The atom out of range goes first, else the one whose removal helps most.  ``chosen`` is changed in place;
+    returns the ``(fit, hold)`` residuals of what remains.
+    """
+    while chosen:
+        out = _out_of_range(chosen, _solve([a.fit for a in chosen], r_fit))
+        if not out and not _worsened(ev, proj, r_hold, current[1]):
+            break
+        trials = []
+        for a in chosen:
+            fit, hold, _ = _residuals([b for b in chosen if b is not a], r_fit, r_hold)
+            trials.append((a.name not in out, len(_worsened(ev, proj, r_hold, hold)), float(hold @ hold), a,
+                           (fit, hold)))
+        *_, dropped, current = min(trials, key=lambda x: x[:3])
+        chosen.remove(dropped)
+        rejected.append({"step": "final", "name": dropped.name, "delta_bic": dropped.delta_bic,
+                         "reasons": ["outside its physical range after the refit" if dropped.name in out else
+                                     "the accepted set worsened a channel group on held-out data"]})
+    return current
+
+
+def _discoveries(ev, proj, model, chosen, current, r_fit, r_hold, seed):
+    """The accepted atoms as :class:`Discovery`, each with its bootstrap interval and its own held-out change."""
+    if not chosen:
+        return []
+    coef = _solve([a.fit for a in chosen], r_fit)
+    intervals = _bootstrap(ev, chosen, coef, current, model.times_s, seed)
+    items = []
+    for a, c, iv in zip(chosen, coef, intervals):
+        # held-out change of each atom: the model without it against the model with all
+        _, without, _ = _residuals([b for b in chosen if b is not a], r_fit, r_hold)
+        items.append(Discovery(a.kind, a.name, a.label, float(c * a.scale), a.unit,
+                               (float(iv[0] * a.scale), float(iv[1] * a.scale)), a.part, a.position, a.driver,
+                               a.delta_bic, _held_change(ev, proj, without, current[1])))
+    return items
+
+
 def discover(model, evaluator, base=None, kinds=KINDS, max_atoms=MAX_ATOMS, seed=0):
     """Search the residual of ``base`` (default: the nominal twin) for unmodelled effects; see the module docstring.
 
@@ -553,88 +646,16 @@ def discover(model, evaluator, base=None, kinds=KINDS, max_atoms=MAX_ATOMS, seed
     ev = evaluator
     if base is None:
         base = nominal_result(model, ev)
-    pred = base.prediction
-    dic = Dictionary(model, ev, pred, kinds)
+    dic = Dictionary(model, ev, base.prediction, kinds)
     proj = dic.project
-    r_fit = (np.nan_to_num(base.residual.R) * ev.sqrt_w)[ev.fit_mask]
-    r_hold = (np.nan_to_num(base.residual.R) * ev.sqrt_w)[ev.hold_mask]
-    ms_base = _group_ms(ev, r_hold, proj.hold_col)
-    chosen, Q = [], np.zeros((len(r_fit), 0))
-    current = (r_fit, r_hold)
+    weighted = np.nan_to_num(base.residual.R) * ev.sqrt_w
+    r_fit, r_hold = weighted[ev.fit_mask], weighted[ev.hold_mask]
     rejected = []
-    for _ in range(max_atoms):
-        scores = np.array([_score(a.fit, current[0], Q) for a in dic.atoms])
-        accepted = None
-        for i in _shortlist(dic.atoms, scores):
-            atom = dic.atoms[i]
-            if atom.kind == "source":
-                atom = _refine(dic, atom, current[0], Q)
-            cols = [a.fit for a in chosen] + [atom.fit]
-            coef = _solve(cols, r_fit)
-            new = (r_fit - np.column_stack(cols) @ coef,
-                   r_hold - np.column_stack([a.hold for a in chosen] + [atom.hold]) @ coef)
-            ok, dbic, reasons = _judge(ev, proj, current, new, 1)
-            outside = _out_of_range(chosen + [atom], coef)
-            if outside:
-                ok = False
-                reasons.append(f"fitted outside the physical range: {', '.join(outside)}")
-            if ok and (accepted is None or dbic > accepted[2]):
-                accepted = (atom, new, dbic)
-            elif not ok:
-                rejected.append({"step": len(chosen) + 1, "name": atom.name, "reasons": reasons, "delta_bic": dbic})
-        if accepted is None:
-            break
-        atom, current, dbic = accepted
-        atom.delta_bic = dbic
-        chosen.append(atom)
-        Q, _ = np.linalg.qr(np.column_stack([a.fit for a in chosen]))
-    # the set as a whole must not worsen any group against the base, nor leave a physical range after a refit:
-    # drop the atom out of range, else the one whose removal helps most
-    while chosen:
-        out = _out_of_range(chosen, _solve([a.fit for a in chosen], r_fit))
-        if not out and not _worsened(ev, proj, r_hold, current[1]):
-            break
-        trials = []
-        for a in chosen:
-            rest = [b for b in chosen if b is not a]
-            if rest:
-                co = _solve([b.fit for b in rest], r_fit)
-                hold = r_hold - np.column_stack([b.hold for b in rest]) @ co
-                fit = r_fit - np.column_stack([b.fit for b in rest]) @ co
-            else:
-                fit, hold = r_fit, r_hold
-            trials.append((a.name not in out, len(_worsened(ev, proj, r_hold, hold)), float(hold @ hold), a,
-                           (fit, hold)))
-        *_, dropped, current = min(trials, key=lambda x: x[:3])
-        chosen.remove(dropped)
-        rejected.append({"step": "final", "name": dropped.name, "delta_bic": dropped.delta_bic,
-                         "reasons": ["outside its physical range after the refit" if dropped.name in out else
-                                     "the accepted set worsened a channel group on held-out data"]})
-    items = []
-    if chosen:
-        coef = _solve([a.fit for a in chosen], r_fit)
-        intervals = _bootstrap(ev, chosen, coef, current, model.times_s, seed)
-        # held-out change of each atom: the model without it against the model with all
-        for j, (a, c, iv) in enumerate(zip(chosen, coef, intervals)):
-            others = [b for b in chosen if b is not a]
-            if others:
-                co = _solve([b.fit for b in others], r_fit)
-                without = r_hold - np.column_stack([b.hold for b in others]) @ co
-            else:
-                without = r_hold
-            ms_without = _group_ms(ev, without, proj.hold_col)
-            ms_with = _group_ms(ev, current[1], proj.hold_col)
-            held = {g: {"before_rms": float(np.sqrt(ms_without[g])), "after_rms": float(np.sqrt(ms_with[g])),
-                        "reduction": float(1 - np.sqrt(ms_with[g] / ms_without[g])) if ms_without[g] > 0 else 0.0,
-                        "unit": GROUP_UNIT[g]} for g in ms_with}
-            items.append(Discovery(a.kind, a.name, a.label, float(c * a.scale), a.unit,
-                                   (float(iv[0] * a.scale), float(iv[1] * a.scale)), a.part, a.position, a.driver,
-                                   a.delta_bic, held))
-    ms_after = _group_ms(ev, current[1], proj.hold_col)
-    held_out = {g: {"before_rms": float(np.sqrt(ms_base[g])), "after_rms": float(np.sqrt(ms_after[g])),
-                    "reduction": float(1 - np.sqrt(ms_after[g] / ms_base[g])) if ms_base[g] > 0 else 0.0,
-                    "unit": GROUP_UNIT[g]} for g in ms_base}
-    return DiscoveryResult(items, held_out, base.name, len(dic.atoms), time.perf_counter() - t0, rejected)
+    chosen, current = _forward(dic, ev, proj, r_fit, r_hold, max_atoms, rejected)
+    current = _prune(ev, proj, chosen, current, r_fit, r_hold, rejected)
+    items = _discoveries(ev, proj, model, chosen, current, r_fit, r_hold, seed)
+    return DiscoveryResult(items, _held_change(ev, proj, r_hold, current[1]), base.name, len(dic.atoms),
+                           time.perf_counter() - t0, rejected)
 
 
 def _bootstrap(ev, chosen, coef, current, times_s, seed):

@@ -150,7 +150,7 @@ def _stats(R, fit_rows, hold_rows):
 def effective_samples(residual, evaluator, rows):
     """Effectively independent residual samples on ``rows`` (see the module docstring)."""
     total = 0.0
-    for g, idx in evaluator.groups().items():
+    for idx in evaluator.groups().values():
         R = residual.R[rows][:, idx]
         per = []
         for j in range(R.shape[1]):
@@ -240,61 +240,58 @@ class FitResult:
                 for lab, v, s, u in zip(self.labels, self.values, self.sd, self.units)]
 
 
+def _fit_linear(model, evaluator, co):
+    """``(values, Jacobian, model runs)`` of effects linear in their parameters: one run per parameter gives the
+    sensitivities, then a bounded linear least squares on the nuisance-projected, centred, weighted design."""
+    base = model.predict()
+    deltas = co.hi - co.lo
+    G = []
+    for j in range(len(co.params)):
+        v = co.nominal_values.copy()
+        v[j] += deltas[j]
+        G.append((model.predict(co.split(v)).values - base.values) / deltas[j])
+
+    def predict(values):
+        d = values - co.nominal_values
+        Y = base.values + sum(dj * Gj for dj, Gj in zip(d, G))
+        return Prediction(Y, base.nuisance, None, None, None)
+
+    r0 = evaluator.fit_vector(predict(co.nominal_values))
+    A = np.column_stack([r0 - evaluator.fit_vector(predict(co.nominal_values + e)) for e in np.eye(len(co.params))])
+    lower = np.array([p.lower for _, p in co.params]) - co.nominal_values
+    upper = np.array([p.upper for _, p in co.params]) - co.nominal_values
+    sol = lsq_linear(A, r0, bounds=(lower, upper), method="bvls")
+    return co.nominal_values + sol.x, A, len(co.params)
+
+
+def _fit_nonlinear(model, evaluator, co, start, max_nfev):
+    """``(values, Jacobian in parameter units, model runs)``: bounded trust-region fits from the best starts."""
+    cache = {}
+
+    def fun(u):
+        key = tuple(np.round(u, 12))
+        if key not in cache:
+            cache[key] = evaluator.fit_vector(model.predict(co.split(co.values(u))))
+        return cache[key]
+
+    best = None
+    for u0 in _starting_points(co, start, fun):
+        sol = least_squares(fun, u0, bounds=(0.0, 1.0), method="trf", x_scale=1.0, diff_step=1e-3,
+                            max_nfev=max_nfev, xtol=1e-6, ftol=1e-8)
+        if best is None or sol.cost < best.cost:
+            best = sol
+    values = co.values(best.x)
+    J = _jacobian(lambda v: evaluator.fit_vector(model.predict(co.split(v))), values, co)
+    return values, J, len(cache) + len(values)
+
+
 def fit_effects(model, evaluator, effects, start=None, max_nfev=60):
     """Fit the parameters of ``effects`` (one or several, jointly) → :class:`FitResult`."""
     t0 = time.perf_counter()
-    machine = model.structure.machine
-    co = Coordinates(effects, machine)
+    co = Coordinates(effects, model.structure.machine)
     linear = all(e.linear for e in effects)
-    nfev = 0
-    if linear:
-        base = model.predict()
-        deltas = co.hi - co.lo
-        G = []
-        for j in range(len(co.params)):
-            v = co.nominal_values.copy()
-            v[j] += deltas[j]
-            G.append((model.predict(co.split(v)).values - base.values) / deltas[j])
-            nfev += 1
-
-        def predict(values):
-            d = values - co.nominal_values
-            Y = base.values + sum(dj * Gj for dj, Gj in zip(d, G))
-            return Prediction(Y, base.nuisance, None, None, None)
-
-        # bounded linear LS on the nuisance-projected, centred, weighted design
-        r0 = evaluator.fit_vector(predict(co.nominal_values))
-        cols = []
-        for j in range(len(co.params)):
-            e = np.zeros(len(co.params))
-            e[j] = 1.0
-            cols.append(r0 - evaluator.fit_vector(predict(co.nominal_values + e)))
-        A = np.column_stack(cols)
-        lower = np.array([p.lower for _, p in co.params]) - co.nominal_values
-        upper = np.array([p.upper for _, p in co.params]) - co.nominal_values
-        sol = lsq_linear(A, r0, bounds=(lower, upper), method="bvls")
-        values = co.nominal_values + sol.x
-        J = A
-    else:
-        cache = {}
-
-        def fun(u):
-            key = tuple(np.round(u, 12))
-            if key not in cache:
-                cache[key] = evaluator.fit_vector(model.predict(co.split(co.values(u))))
-            return cache[key]
-
-        best = None
-        for u0 in _starting_points(co, start, fun):
-            sol = least_squares(fun, u0, bounds=(0.0, 1.0), method="trf", x_scale=1.0, diff_step=1e-3,
-                                max_nfev=max_nfev, xtol=1e-6, ftol=1e-8)
-            if best is None or sol.cost < best.cost:
-                best = sol
-        values = co.values(best.x)
-        nfev = len(cache)
-        # Jacobian in parameter units
-        J = _jacobian(lambda v: evaluator.fit_vector(model.predict(co.split(v))), values, co)
-        nfev += len(values)
+    values, J, nfev = (_fit_linear(model, evaluator, co) if linear else
+                       _fit_nonlinear(model, evaluator, co, start, max_nfev))
     pred = model.predict(co.split(values))
     res = evaluator.residual(pred)
     n_eff = effective_samples(res, evaluator, evaluator.fit_rows)

@@ -256,41 +256,57 @@ def _groups(d):
     return [g for g in ("temperature", "air", "displacement", "strain") if g in d.evaluator.groups()]
 
 
-def _data_section(d, figures):
-    rec, ev = d.record.report, d.evaluator
+def _record_lines(d):
+    """What the record holds: sampling and gaps, sensors used and missing, empty and ignored channels, NaNs, inputs."""
+    rec = d.record.report
     nans = ", ".join(f"{k} {v} (longest run {rec['longest_nan_run_s'][k]:g} s)" for k, v in rec["nan_counts"].items())
     longest = f", the longest {max(g['length_s'] for g in rec['gaps']):g} s" if rec["gaps"] else ""
+    spindle = "measured" if rec["has_spindle"] else "from the scenario"
+    return [(f"- {rec['rows']} rows over {rec['span_h']:.2f} h, sampling {rec['sampling_interval_s']:g} s"
+             f" ({'regular' if rec['sampling_regular'] else 'irregular'}); {rec['n_gaps']} gap(s){longest}"),
+            _grid_line(d),
+            f"- sensors used ({len(d.names)}): {', '.join(d.names)}",
+            f"- sensors of the machine not in the data: {', '.join(rec['sensors_missing']) or 'none'}",
+            f"- channels with no value at all (left out): {', '.join(rec['channels_empty']) or 'none'}",
+            f"- ignored channels: {', '.join(rec['channels_ignored']) or 'none'}",
+            f"- NaNs (masked out of the residuals): {nans or 'none'}",
+            (f"- inputs: spindle {spindle}; feeds {', '.join(rec['feeds']) or 'none'}; ambient from "
+             f"{', '.join(rec['air_inputs']) or 'the scenario'}")]
+
+
+def _grid_line(d):
+    """The twin's time grid and backend."""
     backend = d.model.backend
-    L = ["## Data", "",
-         f"- {rec['rows']} rows over {rec['span_h']:.2f} h, sampling {rec['sampling_interval_s']:g} s"
-         f" ({'regular' if rec['sampling_regular'] else 'irregular'}); {rec['n_gaps']} gap(s){longest}",
-         f"- twin on a {d.model.drive.step_s:g} s grid ({backend.name} backend"
-         + (f", {backend.order} states" if hasattr(backend, "order") else "")
-         + "), spindle and feeds as piecewise-constant signals integrated exactly over each step, "
-           "interpolated to the measured times",
-         f"- sensors used ({len(d.names)}): {', '.join(d.names)}",
-         f"- sensors of the machine not in the data: {', '.join(rec['sensors_missing']) or 'none'}",
-         f"- channels with no value at all (left out): {', '.join(rec['channels_empty']) or 'none'}",
-         f"- ignored channels: {', '.join(rec['channels_ignored']) or 'none'}",
-         f"- NaNs (masked out of the residuals): {nans or 'none'}",
-         f"- inputs: spindle {'measured' if rec['has_spindle'] else 'from the scenario'}; feeds "
-         f"{', '.join(rec['feeds']) or 'none'}; ambient from {', '.join(rec['air_inputs']) or 'the scenario'}",
-         f"- split: fit on t ≤ {d.split_s / 3600:.2f} h, held out after ({int(ev.hold_rows.sum())} rows); "
-         f"effective independent held-out samples n_eff = {d.n_eff_hold:.0f}",
-         "- noise level (median per group, from second differences): "
-         + ", ".join(f"{GROUP_LABEL[g]} {d.noise[g]:.3g} {GROUP_UNIT[g]}" for g in _groups(d)),
-         "- timing floor (held-out RMS change of the nominal twin when the input change times move by ± half a "
-         "sample): " + ", ".join(f"{GROUP_LABEL[g]} {d.scales.timing_group[g]:.3g} {GROUP_UNIT[g]}"
-                                  for g in _groups(d))]
-    L += [f"- note: {note}" for note in d.notes]
+    states = f", {backend.order} states" if hasattr(backend, "order") else ""
+    return (f"- twin on a {d.model.drive.step_s:g} s grid ({backend.name} backend{states}), spindle and feeds as "
+            "piecewise-constant signals integrated exactly over each step, interpolated to the measured times")
+
+
+def _split_lines(d):
+    """The fit/held-out split, the noise level and the timing floor per channel group."""
+    noise = ", ".join(f"{GROUP_LABEL[g]} {d.noise[g]:.3g} {GROUP_UNIT[g]}" for g in _groups(d))
+    floor = ", ".join(f"{GROUP_LABEL[g]} {d.scales.timing_group[g]:.3g} {GROUP_UNIT[g]}" for g in _groups(d))
+    return [(f"- split: fit on t ≤ {d.split_s / 3600:.2f} h, held out after ({int(d.evaluator.hold_rows.sum())} "
+             f"rows); effective independent held-out samples n_eff = {d.n_eff_hold:.0f}"),
+            f"- noise level (median per group, from second differences): {noise}",
+            ("- timing floor (held-out RMS change of the nominal twin when the input change times move by ± half a "
+             f"sample): {floor}")]
+
+
+def _offset_lines(d):
+    """The constant sensor offsets and the initial-state nuisance of the nominal fit."""
     off = d.nominal.residual.offsets
-    big = [(n, o, GROUP_UNIT[k]) for n, o, k in zip(d.names, off, ev.kinds) if abs(o) > 0.25]
-    L += [f"- constant offsets (estimated on the fit part, every model): largest |offset| "
-          f"{max(np.abs(off)):.3g}; " + (", ".join(f"{n} {o:+.2f} {u}" for n, o, u in big[:12]) or "all small")
-          + " (thermometer accuracy, probe zero, ambient level)",
-          "- initial state (nuisance, nominal): "
-          + ", ".join(f"{k} {v:+.3g}" for k, v in d.nominal.residual.nuisance.items()), ""]
-    return L
+    big = [(n, o, GROUP_UNIT[k]) for n, o, k in zip(d.names, off, d.evaluator.kinds) if abs(o) > 0.25]
+    listed = ", ".join(f"{n} {o:+.2f} {u}" for n, o, u in big[:12]) or "all small"
+    nuisance = ", ".join(f"{k} {v:+.3g}" for k, v in d.nominal.residual.nuisance.items())
+    return [(f"- constant offsets (estimated on the fit part, every model): largest |offset| {max(np.abs(off)):.3g}; "
+             f"{listed} (thermometer accuracy, probe zero, ambient level)"),
+            f"- initial state (nuisance, nominal): {nuisance}"]
+
+
+def _data_section(d, figures):
+    return ["## Data", "", *_record_lines(d), *_split_lines(d), *(f"- note: {note}" for note in d.notes),
+            *_offset_lines(d), ""]
 
 
 def _where_section(d, figures):

@@ -30,6 +30,15 @@ from .engine import _factor
 RADIATIVE_COEFFICIENT = 4 * 5.670374419e-8 * 293.15 ** 3
 
 
+def _recorded_rows(machine):
+    """``(fe_rows, air_rows)``: the machine's non-camera FE output rows, and its air channels' rows among the
+    channels that follow the FE outputs."""
+    n_fe = machine.outputs.n_outputs
+    fe_rows = [j for j, c in enumerate(machine.channels) if c.kind != "camera" and j < n_fe]
+    air_rows = [j - n_fe for j, c in enumerate(machine.channels) if c.kind == "air"]
+    return fe_rows, air_rows
+
+
 class Structure:
     """See the module docstring.  Build with :func:`build_structure`."""
 
@@ -43,23 +52,19 @@ class Structure:
         self._B = [sp.csc_matrix(thermal.input_matrix)]
         self.system_terms = {}
         self.fields = {}
-        channels = [c for c in machine.channels if c.kind != "camera"]
+        self.fe_rows, self.air_rows = _recorded_rows(machine)
         n_fe = machine.outputs.n_outputs
-        self.fe_rows = [j for j, c in enumerate(machine.channels) if c.kind != "camera" and j < n_fe]
-        self.air_rows = [j - n_fe for j, c in enumerate(machine.channels) if c.kind == "air"]
         self.channels = [machine.channels[j] for j in self.fe_rows] + [machine.channels[n_fe + j]
                                                                        for j in self.air_rows]
-        assert len(self.channels) == len(channels)
-        op = machine.outputs
+        assert len(self.channels) == sum(c.kind != "camera" for c in machine.channels)
         scale = np.array([machine.channels[j].scale for j in self.fe_rows])
-        self.output_matrix = sp.csr_matrix(op.matrix[self.fe_rows].multiply(scale[:, None]))
-        self.output_offset = op.offset[self.fe_rows] * scale
+        self.output_matrix = sp.csr_matrix(machine.outputs.matrix[self.fe_rows].multiply(scale[:, None]))
+        self.output_offset = machine.outputs.offset[self.fe_rows] * scale
         self.names = [c.name for c in self.channels]
         self.kinds = [c.kind for c in self.channels]
         self.index = {n: i for i, n in enumerate(self.names)}
-        self.thermometers = [i for i, c in enumerate(self.channels) if c.kind == "temperature"]
-        self.displacements = [i for i, c in enumerate(self.channels) if c.kind == "displacement"]
-        self.air = [i for i, c in enumerate(self.channels) if c.kind == "air"]
+        self.thermometers, self.displacements, self.air = (
+            [i for i, k in enumerate(self.kinds) if k == kind] for kind in ("temperature", "displacement", "air"))
         self._node_region = None
         self._thermometer_info = None
 

@@ -179,29 +179,39 @@ class Verdict:
         return out
 
 
-def decide(nominal, ranking, sc):
-    """:class:`Verdict` from the nominal result and the ranked fits (see the module docstring)."""
-    nominal_gap = group_ratios(nominal, sc)
-    flagged = flagged_sensors(nominal, sc)
-    best = ranking[0] if ranking else None
+def _outcome(nominal, ranking, sc):
+    """``(winner or None, outcome)``: no gap, or the parsimonious admissible model and whether it leaves a gap."""
     if not leaves_a_gap(nominal, sc):
-        winner, outcome = None, "no_significant_gap"
-    else:
-        winner = parsimonious(ranking, nominal, sc)
-        if winner is None:
-            outcome = "not_explained"
-        else:
-            outcome = "partly_explained" if leaves_a_gap(winner, sc) else "explained"
-    model = winner or best
+        return None, "no_significant_gap"
+    winner = parsimonious(ranking, nominal, sc)
+    if winner is None:
+        return None, "not_explained"
+    return winner, "partly_explained" if leaves_a_gap(winner, sc) else "explained"
+
+
+def _runner_up(ranking, winner, best):
+    """The best single-effect fit sharing no effect with the winner; without a winner, the best after ``best``."""
     if winner is not None:
         others = [r for r in ranking if not set(r.effects) & set(winner.effects) and len(r.effects) == 1]
     else:
         others = [r for r in ranking if r is not best]
-    return Verdict(outcome, winner, best, others[0] if others else None, nominal_gap, flagged,
-                   group_ratios(model, sc) if model is not None else {},
-                   flagged_sensors(model, sc) if model is not None else [],
-                   worsened_groups(model, nominal, sc) if model is not None else [],
-                   materiality(model, nominal, sc) if model is not None else float("nan"))
+    return others[0] if others else None
+
+
+def _checks_after(model, nominal, sc):
+    """``(group ratios, flagged sensors, worsened groups, materiality)`` of ``model`` (empty when None)."""
+    if model is None:
+        return {}, [], [], float("nan")
+    return (group_ratios(model, sc), flagged_sensors(model, sc), worsened_groups(model, nominal, sc),
+            materiality(model, nominal, sc))
+
+
+def decide(nominal, ranking, sc):
+    """:class:`Verdict` from the nominal result and the ranked fits (see the module docstring)."""
+    best = ranking[0] if ranking else None
+    winner, outcome = _outcome(nominal, ranking, sc)
+    return Verdict(outcome, winner, best, _runner_up(ranking, winner, best), group_ratios(nominal, sc),
+                   flagged_sensors(nominal, sc), *_checks_after(winner or best, nominal, sc))
 
 
 # ============================================================================= written forms
@@ -261,41 +271,60 @@ def _held_out_line(d, model):
     return "held-out RMS " + ", ".join(out)
 
 
+def _no_gap_text(d):
+    """The verdict when the nominal twin leaves no significant gap."""
+    worst_sensor = max(sensor_ratios(d.nominal, d.scales).values())
+    return ("no significant gap: the nominal twin's held-out residual is within noise, tolerance and timing "
+            f"floor in every channel group (at most {max(d.decision.nominal_gap.values()):.1f} × σ_g) and at every "
+            f"sensor (at most {worst_sensor:.1f} × σ_j)")
+
+
+def _rejection_reasons(v):
+    """Why the best candidate was not named: its ΔBIC, materiality or the groups it worsens."""
+    why = []
+    if v.best.delta_bic <= MIN_DELTA_BIC:
+        why.append(f"ΔBIC {v.best.delta_bic:.1f} ≤ {MIN_DELTA_BIC:g}")
+    if v.material < MIN_MATERIAL:
+        why.append(f"materiality {v.material:.2f} < {MIN_MATERIAL:g}")
+    if v.worsened:
+        why.append(f"worsens {', '.join(v.worsened)}")
+    return "; ".join(why) or "its pair rule"
+
+
+def _not_explained_text(v):
+    """The verdict when no library model is admissible."""
+    text = (f"gap not explained by the library: nominal held-out residual up to {max(v.nominal_gap.values()):.1f} × σ_g "
+            f"({', '.join(f'{g} {r:.1f}' for g, r in v.nominal_gap.items())})")
+    if v.nominal_flagged:
+        text += "; sensors " + ", ".join(f"{n} {r:.1f} × σ" for n, r in v.nominal_flagged[:4])
+    if v.best is not None:
+        text += f"; best candidate {v.best.name} rejected ({_rejection_reasons(v)})"
+    return text
+
+
+def _explained_text(d):
+    """The verdict when a library model is named: its values, held-out change, evidence and any remainder."""
+    v = d.decision
+    ev = v.evidence()
+    values = ", ".join(f"{p['name']} = {p['value']:.3g} (90 %: {p['interval90'][0]:.3g} … "
+                       f"{p['interval90'][1]:.3g}) {p['unit']}" for p in parameters(v.winner))
+    head = "gap explained by" if v.outcome == "explained" else "gap partly explained by"
+    text = f"{head} {v.winner.name} ({values}); {_held_out_line(d, v.winner)}"
+    text += f"; ΔBIC {ev['delta_bic_vs_nominal']:.1f} vs nominal"
+    if "runner_up" in ev:
+        text += (f", {ev['delta_bic_vs_runner_up']:.1f} vs the runner-up {ev['runner_up']} "
+                 f"(log10 evidence ratio {ev['log10_ratio_vs_runner_up']:.1f})")
+    if v.outcome == "partly_explained":
+        text += f"; what remains: {_remainder(d)}"
+    return text
+
+
 def sentence(d):
     """The one-paragraph verdict of a :class:`~twin.gap.diagnose.Diagnosis`."""
-    v, sc = d.decision, d.scales
-    worst_group = max(v.nominal_gap.values())
-    worst_sensor = max(sensor_ratios(d.nominal, sc).values())
-    if v.outcome == "no_significant_gap":
-        return ("no significant gap: the nominal twin's held-out residual is within noise, tolerance and timing "
-                f"floor in every channel group (at most {worst_group:.1f} × σ_g) and at every sensor (at most "
-                f"{worst_sensor:.1f} × σ_j)")
-    ev = v.evidence()
-    if v.outcome == "not_explained":
-        text = (f"gap not explained by the library: nominal held-out residual up to {worst_group:.1f} × σ_g "
-                f"({', '.join(f'{g} {r:.1f}' for g, r in v.nominal_gap.items())})")
-        if v.nominal_flagged:
-            text += "; sensors " + ", ".join(f"{n} {r:.1f} × σ" for n, r in v.nominal_flagged[:4])
-        if v.best is not None:
-            why = []
-            if v.best.delta_bic <= MIN_DELTA_BIC:
-                why.append(f"ΔBIC {v.best.delta_bic:.1f} ≤ {MIN_DELTA_BIC:g}")
-            if v.material < MIN_MATERIAL:
-                why.append(f"materiality {v.material:.2f} < {MIN_MATERIAL:g}")
-            if v.worsened:
-                why.append(f"worsens {', '.join(v.worsened)}")
-            text += f"; best candidate {v.best.name} rejected ({'; '.join(why) or 'its pair rule'})"
-    else:
-        values = ", ".join(f"{p['name']} = {p['value']:.3g} (90 %: {p['interval90'][0]:.3g} … "
-                           f"{p['interval90'][1]:.3g}) {p['unit']}" for p in parameters(v.winner))
-        head = "gap explained by" if v.outcome == "explained" else "gap partly explained by"
-        text = f"{head} {v.winner.name} ({values}); {_held_out_line(d, v.winner)}"
-        text += f"; ΔBIC {ev['delta_bic_vs_nominal']:.1f} vs nominal"
-        if "runner_up" in ev:
-            text += (f", {ev['delta_bic_vs_runner_up']:.1f} vs the runner-up {ev['runner_up']} "
-                     f"(log10 evidence ratio {ev['log10_ratio_vs_runner_up']:.1f})")
-        if v.outcome == "partly_explained":
-            text += f"; what remains: {_remainder(d)}"
+    outcome = d.decision.outcome
+    if outcome == "no_significant_gap":
+        return _no_gap_text(d)
+    text = _not_explained_text(d.decision) if outcome == "not_explained" else _explained_text(d)
     if d.discovery is not None and getattr(d.discovery, "items", None):
         text += "; discovered beyond the library: " + "; ".join(d.discovery.summary())
     return text

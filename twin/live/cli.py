@@ -63,46 +63,56 @@ async def replay_session(dataset, thermometers, observer, speed, room_air="T15",
         return await task, wall
 
 
-def cmd_live(args):
+def _run_replay(args):
+    """Serve ``--replay`` on a local server and observe it: ``(stats, thermometers, dataset)``."""
     import asyncio
     from pathlib import Path
 
     import numpy as np
 
+    from ..core.dataset import Dataset
+
+    if args.endpoint or args.node_map:
+        raise TwinInputError("twin live: give either --replay DATASET or --endpoint with --node-map, not both")
+    if args.speed <= 0 or not np.isfinite(args.speed):
+        raise TwinInputError(f"--speed must be a positive number, got {args.speed}")
+    dataset = Dataset.read(args.replay)
+    thermometers = split_names(args.thermometers) or list(DEFAULT_THERMOMETERS)
+    _replay_columns(dataset, args.replay, [args.spindle, args.room_air, *thermometers])
+    observer = _observer(args, thermometers)
+    stats, wall = asyncio.run(replay_session(dataset, thermometers, observer, args.speed, args.room_air,
+                                             args.spindle, args.port, args.log, source=args.replay))
+    print(f"replayed {len(dataset)} samples of {Path(args.replay).name} at {args.speed:g}× in {wall:.1f} s")
+    return stats, thermometers, dataset
+
+
+def _run_endpoint(args):
+    """Observe a running machine at ``--endpoint`` through ``--node-map``: ``(stats, thermometers, None)``."""
+    import asyncio
+
+    import numpy as np
+
+    from .client import LiveClient
+    from .nodemap import load_node_map
+
+    if not (args.endpoint and args.node_map):
+        raise TwinInputError("twin live: give --endpoint opc.tcp://… with --node-map FILE.toml (or --replay DATASET)")
+    node_map = load_node_map(args.node_map)
+    thermometers = split_names(args.thermometers) or list(node_map.thermometers)
+    try:
+        observer = _observer(args, thermometers)
+    except TwinInputError as exc:
+        raise TwinInputError(f"{args.node_map}: {exc}") from None
+    client = LiveClient(args.endpoint, node_map, observer, args.log, late_after_s=args.late_after)
+    return asyncio.run(client.run(max_wall_s=args.duration or np.inf)), thermometers, None
+
+
+def _print_summary(stats, thermometers, dataset):
+    """What was fused, the last estimate with its band, and (replay) the error against the dataset's Z."""
+    import numpy as np
+
     from .observer import AXES
 
-    if args.log:
-        from ..infra.outdir import check_output_file
-        check_output_file(args.log, args.overwrite)
-    if args.replay:
-        if args.endpoint or args.node_map:
-            raise TwinInputError("twin live: give either --replay DATASET or --endpoint with --node-map, not both")
-        if args.speed <= 0 or not np.isfinite(args.speed):
-            raise TwinInputError(f"--speed must be a positive number, got {args.speed}")
-        from ..core.dataset import Dataset
-
-        dataset = Dataset.read(args.replay)
-        thermometers = split_names(args.thermometers) or list(DEFAULT_THERMOMETERS)
-        _replay_columns(dataset, args.replay, [args.spindle, args.room_air, *thermometers])
-        observer = _observer(args, thermometers)
-        stats, wall = asyncio.run(replay_session(dataset, thermometers, observer, args.speed, args.room_air,
-                                                 args.spindle, args.port, args.log, source=args.replay))
-        print(f"replayed {len(dataset)} samples of {Path(args.replay).name} at {args.speed:g}× in {wall:.1f} s")
-    else:
-        if not (args.endpoint and args.node_map):
-            raise TwinInputError("twin live: give --endpoint opc.tcp://… with --node-map FILE.toml (or --replay DATASET)")
-        from .client import LiveClient
-        from .nodemap import load_node_map
-
-        node_map = load_node_map(args.node_map)
-        thermometers = split_names(args.thermometers) or list(node_map.thermometers)
-        try:
-            observer = _observer(args, thermometers)
-        except TwinInputError as exc:
-            raise TwinInputError(f"{args.node_map}: {exc}") from None
-        client = LiveClient(args.endpoint, node_map, observer, args.log, late_after_s=args.late_after)
-        stats = asyncio.run(client.run(max_wall_s=args.duration or np.inf))
-        dataset = None
     rate = stats.samples / stats.wall_s if stats.wall_s else 0.0
     print(f"fused {stats.samples} samples in {stats.wall_s:.1f} s ({rate:.0f} samples/s) from "
           f"{', '.join(thermometers)} + spindle speed + room air; late {stats.late}, missing readings "
@@ -117,6 +127,14 @@ def cmd_live(args):
         truth = np.interp(t, dataset.time_s, dataset["Z"])
         print(f"Z against the dataset's Z: RMS {np.sqrt(np.mean((z - truth) ** 2)):.2f} µm, "
               f"max {np.abs(z - truth).max():.2f} µm")
+
+
+def cmd_live(args):
+    if args.log:
+        from ..infra.outdir import check_output_file
+        check_output_file(args.log, args.overwrite)
+    stats, thermometers, dataset = _run_replay(args) if args.replay else _run_endpoint(args)
+    _print_summary(stats, thermometers, dataset)
     if args.log:
         print(f"log written to {args.log}")
 

@@ -140,9 +140,48 @@ class LiveClient:
             nodes[key] = node
         return nodes
 
+    async def _subscribe(self, client, nodes):
+        """Monitor every input node (status, value and timestamp changes; no sampling delay, deep queues)."""
+        from asyncua import ua
+
+        sub = await client.create_subscription(self.publish_ms, self)
+        trigger = ua.DataChangeFilter(Trigger=ua.DataChangeTrigger.StatusValueTimestamp)
+        requests = []
+        for handle, key in enumerate(self.keys, start=1):
+            params = ua.MonitoringParameters(ClientHandle=handle, SamplingInterval=0.0, QueueSize=10000,
+                                             DiscardOldest=True, Filter=trigger)
+            requests.append(ua.MonitoredItemCreateRequest(
+                ItemToMonitor=ua.ReadValueId(NodeId=nodes[key].nodeid, AttributeId=ua.AttributeIds.Value),
+                MonitoringMode=ua.MonitoringMode.Reporting, RequestedParameters=params))
+        await sub.create_monitored_items(requests)
+        self._subscribed = True
+        log.info("live: subscribed to %d nodes on %s", len(self.keys), self.endpoint)
+
+    async def _take_queued(self):
+        """Move what the subscription queued into the sample buffers (waits up to 50 ms for the first item)."""
+        try:
+            key, t, value = await asyncio.wait_for(self._queue.get(), timeout=0.05)
+        except asyncio.TimeoutError:
+            return
+        self._add(key, t, value)
+        while not self._queue.empty():
+            self._add(*self._queue.get_nowait())
+
+    async def _fuse_ready(self):
+        """Fuse every complete sample (logging each); the newest estimate, or None."""
+        last = None
+        for t in self._ready(time.monotonic()):
+            e = self._fuse(t)
+            if e is not None:
+                last = e
+                if self.csv is not None:
+                    self.csv.write(e)
+            await asyncio.sleep(0)       # a backlog must not starve the connection's keep-alive
+        return last
+
     async def _session(self, stop):
         """One connection: subscribe, then fuse samples until ``stop()`` or the connection is lost."""
-        from asyncua import Client, ua
+        from asyncua import Client
 
         client = Client(self.endpoint, timeout=self.timeout_s, watchdog_intervall=max(0.2, self.timeout_s / 4))
         self._lost, self._subscribed = asyncio.Event(), False
@@ -155,36 +194,12 @@ class LiveClient:
         try:
             nodes = await self._check_nodes(client)
             self._key_of = {nodes[k].nodeid: k for k in self.keys}
-            out_keys = [k for k in self.map.outputs]
+            out_keys = list(self.map.outputs)
             out_nodes = [nodes[k] for k in out_keys]
-            sub = await client.create_subscription(self.publish_ms, self)
-            trigger = ua.DataChangeFilter(Trigger=ua.DataChangeTrigger.StatusValueTimestamp)
-            requests = []
-            for handle, key in enumerate(self.keys, start=1):
-                params = ua.MonitoringParameters(ClientHandle=handle, SamplingInterval=0.0, QueueSize=10000,
-                                                 DiscardOldest=True, Filter=trigger)
-                requests.append(ua.MonitoredItemCreateRequest(
-                    ItemToMonitor=ua.ReadValueId(NodeId=nodes[key].nodeid, AttributeId=ua.AttributeIds.Value),
-                    MonitoringMode=ua.MonitoringMode.Reporting, RequestedParameters=params))
-            await sub.create_monitored_items(requests)
-            self._subscribed = True
-            log.info("live: subscribed to %d nodes on %s", len(self.keys), self.endpoint)
+            await self._subscribe(client, nodes)
             while not stop() and not self._lost.is_set():
-                try:
-                    key, t, value = await asyncio.wait_for(self._queue.get(), timeout=0.05)
-                    self._add(key, t, value)
-                    while not self._queue.empty():
-                        self._add(*self._queue.get_nowait())
-                except asyncio.TimeoutError:
-                    pass
-                last = None
-                for t in self._ready(time.monotonic()):
-                    e = self._fuse(t)
-                    if e is not None:
-                        last = e
-                        if self.csv is not None:
-                            self.csv.write(e)
-                    await asyncio.sleep(0)       # a backlog must not starve the connection's keep-alive
+                await self._take_queued()
+                last = await self._fuse_ready()
                 if last is not None and out_nodes:      # nodes show the newest estimate (one write per batch)
                     await client.write_values(out_nodes, [self._output(last, k) for k in out_keys])
             if self._lost.is_set():

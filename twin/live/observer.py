@@ -133,6 +133,32 @@ class _ModalKalmanFilter(KalmanFilter):
         return float(innovation @ cho_solve(factor, innovation))
 
 
+def _checked_thermometers(rom, thermometers):
+    """The thermometer names as a list, each a surface thermometer output of ``rom`` (else a clear error)."""
+    thermometers = list(thermometers)
+    if not thermometers:
+        raise TwinInputError("the observer needs at least one thermometer")
+    kinds = dict(zip(rom.output_names, rom.output_kinds))
+    for name in thermometers:
+        if kinds.get(name) != "temperature":
+            known = [n for n, k in kinds.items() if k == "temperature"]
+            raise TwinInputError(f"thermometer {name!r} is not a surface thermometer of the ROM of "
+                                 f"{rom.machine!r}; thermometers: {', '.join(known)}")
+    return thermometers
+
+
+def _disturbance_sigmas(rom, input_names, ambient_sigma_K, power_sigma_fraction):
+    """Standard deviation of the slow error of each disturbed plant input: W for a heat source, K for an air."""
+    sigmas = []
+    for name in input_names:
+        if name.startswith("power:"):
+            src = next(s for s in rom.sources if f"power:{s['name']}" == name)
+            sigmas.append(power_sigma_fraction * src["coefficient_W"])
+        else:
+            sigmas.append(ambient_sigma_K)
+    return sigmas
+
+
 class DriftObserver:
     """Kalman observer of the ROM driven by spindle speed and room air, fusing ≤ a few thermometers.
 
@@ -147,15 +173,7 @@ class DriftObserver:
     def __init__(self, rom, thermometers, model_error_K=MODEL_ERROR_K, ambient_sigma_K=AMBIENT_SIGMA_K,
                  power_sigma_fraction=POWER_SIGMA_FRACTION, disturbance_time_s=DISTURBANCE_TIME_S,
                  covariance_scale=COVARIANCE_SCALE):
-        thermometers = list(thermometers)
-        if not thermometers:
-            raise TwinInputError("the observer needs at least one thermometer")
-        kinds = dict(zip(rom.output_names, rom.output_kinds))
-        for name in thermometers:
-            if kinds.get(name) != "temperature":
-                known = [n for n, k in kinds.items() if k == "temperature"]
-                raise TwinInputError(f"thermometer {name!r} is not a surface thermometer of the ROM of "
-                                     f"{rom.machine!r}; thermometers: {', '.join(known)}")
+        thermometers = _checked_thermometers(rom, thermometers)
         self.rom, self.thermometers = rom, thermometers
         ss = rom.plant_state_space()
         self.input_names = list(ss.input_names)
@@ -171,14 +189,8 @@ class DriftObserver:
         A[:n, :n], A[:n, n:n + md] = ss.A, ss.B @ E
         A[np.arange(n, n + md), np.arange(n, n + md)] = -1.0 / disturbance_time_s
         self._A, self._B = A, np.vstack([ss.B, np.zeros((md + p, m))])
+        scale = _disturbance_sigmas(rom, [self.input_names[j] for j in dist], ambient_sigma_K, power_sigma_fraction)
         # process-noise intensities (unit² per s)
-        scale = []
-        for name in (self.input_names[j] for j in dist):
-            if name.startswith("power:"):
-                src = next(s for s in rom.sources if f"power:{s['name']}" == name)
-                scale.append(power_sigma_fraction * src["coefficient_W"])
-            else:
-                scale.append(ambient_sigma_K)
         Qc = np.zeros((N, N))
         r = rom.order
         lags = np.array([rom.zone_lags_s[z] for z in rom.lagged_zones])
@@ -186,6 +198,7 @@ class DriftObserver:
         Qc[np.arange(n, n + md), np.arange(n, n + md)] = 2 * np.square(scale) / disturbance_time_s
         self._scale = float(covariance_scale)
         self._Qc, self._disturbance_var = self._scale * Qc, np.square(scale)
+        kinds = dict(zip(rom.output_names, rom.output_kinds))
 
         def rows(names):
             idx = [rom.output_index(nm) for nm in names]

@@ -661,11 +661,47 @@ def build_rom(machine, order=DEFAULT_ORDER, method="krylov", points=None, kinds=
     return rom
 
 
+def _reduced_outputs(machine, Vq, keep):
+    """``(C, D, offset)`` of the kept channels (rows ``keep`` of the machine's channels) in modal coordinates.
+
+    FE outputs read the modes (C); air channels feed through from the inputs (D); each row is scaled to its
+    channel's unit.
+    """
+    n_fe = machine.outputs.n_outputs
+    scale = np.array([machine.channels[j].scale for j in keep])
+    rows_fe = [j for j in keep if j < n_fe]
+    rows_air = [j - n_fe for j in keep if j >= n_fe]
+    C = np.zeros((len(keep), Vq.shape[1]))
+    D = np.zeros((len(keep), machine.thermal.n_inputs))
+    c = np.zeros(len(keep))
+    n_kept_fe = len(rows_fe)
+    if rows_fe:
+        C[:n_kept_fe] = np.asarray(sp.csr_matrix(machine.outputs.matrix)[rows_fe] @ Vq)
+        c[:n_kept_fe] = machine.outputs.offset[rows_fe]
+    if rows_air:
+        D[n_kept_fe:] = machine.feedthrough[rows_air]
+    return C * scale[:, None], D * scale[:, None], c * scale
+
+
+def _basis_quality(M, V, Vq):
+    """``(uniform state, uniform residual, orthonormality error)`` of an M-orthonormal basis.
+
+    The uniform state holds the modal coordinates of a uniform 1 °C field; the residual is the M-norm of
+    what the basis misses of it, relative; the orthonormality error is max |VᵀMV − I|.
+    """
+    ones = np.ones(M.shape[0])
+    uniform = Vq.T @ (M @ ones)
+    gap = ones - Vq @ uniform
+    residual = float(np.sqrt((gap @ (M @ gap)) / (ones @ (M @ ones))))
+    orth = float(np.abs(V.T @ (M @ V) - np.eye(V.shape[1])).max())
+    return uniform, residual, orth
+
+
 def reduce_with_basis(machine, V, method="krylov", kinds=DEFAULT_KINDS, keep_basis=False):
     """The :class:`ReducedModel` of a machine for an M-orthonormal basis V (n, r)."""
     start = time.perf_counter()
     system = machine.thermal
-    M, A = sp.csr_matrix(system.mass), sp.csr_matrix(system.stiffness)
+    A = sp.csr_matrix(system.stiffness)
     Ar = V.T @ (A @ V)
     Ar = (Ar + Ar.T) / 2
     lam, Q = np.linalg.eigh(Ar)
@@ -676,28 +712,8 @@ def reduce_with_basis(machine, V, method="krylov", kinds=DEFAULT_KINDS, keep_bas
     B = sp.csr_matrix(system.input_matrix)
     Bz = np.asarray((B.T @ Vq).T)
     keep = [j for j, c in enumerate(machine.channels) if c.kind in kinds]
-    n_fe = machine.outputs.n_outputs
-    scale = np.array([machine.channels[j].scale for j in keep])
-    C_fe = sp.csr_matrix(machine.outputs.matrix)
-    rows_fe = [j for j in keep if j < n_fe]
-    rows_air = [j - n_fe for j in keep if j >= n_fe]
-    C = np.zeros((len(keep), len(lam)))
-    D = np.zeros((len(keep), system.n_inputs))
-    c = np.zeros(len(keep))
-    n_kept_fe = len(rows_fe)
-    if rows_fe:
-        C[:n_kept_fe] = np.asarray(C_fe[rows_fe] @ Vq)
-        c[:n_kept_fe] = machine.outputs.offset[rows_fe]
-    if rows_air:
-        D[n_kept_fe:] = machine.feedthrough[rows_air]
-    C *= scale[:, None]
-    D *= scale[:, None]
-    c *= scale
-    ones = np.ones(system.n_nodes)
-    uniform = Vq.T @ (M @ ones)
-    gap = ones - Vq @ uniform
-    residual = float(np.sqrt((gap @ (M @ gap)) / (ones @ (M @ ones))))
-    orth = float(np.abs(V.T @ (M @ V) - np.eye(V.shape[1])).max())
+    C, D, c = _reduced_outputs(machine, Vq, keep)
+    uniform, residual, orth = _basis_quality(sp.csr_matrix(system.mass), V, Vq)
     seconds = time.perf_counter() - start
     info = dict(n_nodes=int(system.n_nodes), build_seconds=seconds, points_per_s=[],
                 slowest_time_constant_s=float(1.0 / lam[0]), fastest_time_constant_s=float(1.0 / lam[-1]),
