@@ -8,6 +8,9 @@ Run from the repository root:
     python bench/bench_gap.py --independent column_source --out runs/gap_independent
                                                 # cases of the independent benchmark (comma list or
                                                 # library/outside/pairs/controls/all), report printed
+    python bench/bench_gap.py --merge runs/gap_independent/*/
+                                                # the goal table of cases run apart (each folder written
+                                                # by `twin gap benchmark --independent CASE --out DIR`)
 
 The record is ``gap_blind_24h`` (24 h, 1 min sampling, 1441 rows, 36 sensor
 channels) with one effect of the library switched on in the truth (default
@@ -29,6 +32,21 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
+def merged_independent(folders):
+    """The independent benchmark's report over result folders of cases run apart (wall time: the sum)."""
+    import json
+
+    from twin.gap.benchmark import format_independent, independent_metrics
+
+    results, wall, settings = [], 0.0, None
+    for folder in folders:
+        document = json.loads((Path(folder) / "independent.json").read_text(encoding="utf-8"))
+        results += document["results"]
+        wall += document["wall_seconds"]
+        settings = settings or dict(document["settings"], scheduler="cases run apart (wall time summed)")
+    return format_independent(results, independent_metrics(results), wall, settings)
+
+
 def main(argv=None):
     from twin.gap.benchmark import SCENARIO, TRUTH_HIDDEN, TRUTH_MESH_SIZE_M, TRUTH_VALUES, _machine
     from twin.gap.diagnose import diagnose
@@ -43,7 +61,11 @@ def main(argv=None):
     p.add_argument("--no-render", action="store_true")
     p.add_argument("--independent", metavar="CASES", help="run cases of the independent benchmark instead")
     p.add_argument("--out", help="with --independent: output folder (independent.md, independent.json)")
+    p.add_argument("--merge", nargs="+", metavar="DIR", help="print the independent goal table of result folders")
     args = p.parse_args(argv)
+    if args.merge:
+        print(merged_independent(args.merge))
+        return
     if args.independent:
         from twin.gap.benchmark import independent_benchmark
 

@@ -44,3 +44,4 @@ def test_cli_defaults_agree_with_the_library():
 
     assert cli_rom.DEFAULT_ORDER == reduction.DEFAULT_ORDER
     assert (cli_gap.SCENARIO, cli_gap.TRUTH_MESH_SIZE_M) == (benchmark.SCENARIO, benchmark.TRUTH_MESH_SIZE_M)
+    assert cli_gap.INDEPENDENT_SCENARIO == benchmark.INDEPENDENT_SCENARIO

@@ -79,3 +79,12 @@ def test_blind_benchmark_report_tables():
     assert "| belt_drive | 0.93 → 0.11 | 2.29 → 0.34 | −88% | 0.565 → 0.078 | −86% |" in md
     assert "- **none** → air_pocket: gap explained by air_pocket" in md
     assert "| none | 0 | 0 |" in md
+
+
+def test_cli_runs_the_independent_benchmark_and_refuses_an_unknown_case_before_any_work(tmp_path, capsys):
+    from twin.cli import main
+
+    out = tmp_path / "independent"
+    assert main(["gap", "benchmark", "--independent", "column_source,teleport", "--out", str(out)]) == 2
+    assert "unknown independent case 'teleport'" in capsys.readouterr().err
+    assert not out.exists()

@@ -9,6 +9,7 @@ import pytest
 from test_models_greybox import ambient, duty, simulate
 
 from twin.cli import main
+from twin.compensation.protocol import stability_problem
 from twin.compensation.store import CompensationModel
 from twin.compensation.train import evaluate, train
 from twin.core.dataset import ChannelInfo, Dataset
@@ -103,3 +104,19 @@ def test_unstable_grey_fit_is_refused_unless_allowed(tmp_path, capsys):
     assert "UNSTABLE MODEL REFUSED" in capsys.readouterr().err
     assert main(common + ["--allow-unstable"]) == 0
     assert "WARNING: UNSTABLE MODEL SAVED" in capsys.readouterr().err
+
+
+def test_a_prediction_that_diverges_on_a_training_record_is_named():
+    """The divergence check alone (a >= 0): an MLR fitted on a 1 K swing, then asked about a record whose
+    temperature swings 100 K while its drift stays within 1 µm, predicts ~100× the measured change."""
+    t = np.arange(200) * 60.0
+    small = Dataset(t, np.column_stack([20 + np.sin(t / 2000.0), np.sin(t / 2000.0)]),
+                    [ChannelInfo("T1", "degC", "temperature"), ChannelInfo("Z", "um", "displacement")],
+                    {"kind": "synthetic", "scenario": "small"})
+    wide = Dataset(t, np.column_stack([20 + 100 * np.sin(t / 2000.0), np.sin(t / 2000.0)]), small.channels,
+                   {"kind": "synthetic", "scenario": "wide"})
+    cm = train([small], "T1", "Z", model="mlr")
+    assert stability_problem(cm, [small]) is None
+    problem = stability_problem(cm, [wide])
+    assert problem is not None and problem.startswith("mlr: the prediction diverges on its own training data")
+    assert "against max |measured change|" in problem and "um" in problem
