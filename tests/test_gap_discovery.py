@@ -6,6 +6,7 @@ the column's back wall, driven by the spindle) assembled and run by
 that shares nothing with the discovery's reduced sensitivities.
 """
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -27,6 +28,7 @@ from twin.gap.effects import library_by_name
 from twin.gap.fit import Evaluator, nominal_result
 from twin.gap.measured import match_record
 from twin.gap.model import GapModel
+from twin.gap.report import _discovery_section
 from twin.gap.signals import Interpolator, noise_level, uniform_grid
 
 SCENARIO = "gap_quick_8h"
@@ -115,6 +117,8 @@ def test_discovers_the_column_source_within_0_2_m_and_30_percent(nominal, setup,
     assert found.as_dict()["items"][0]["value"] == found.items[0].value
     png = render_discoveries(found, nominal, tmp_path / "discovered.png")
     assert png is not None and (tmp_path / "discovered.png").stat().st_size > 10_000
+    section = _discovery_section(SimpleNamespace(discovery=found), {"render_discoveries": png.name})
+    assert f"![discovered sources]({png.name})" in section and any("W" in line for line in section)
 
 
 def test_unknown_kind_is_a_clear_error(setup):

@@ -84,7 +84,7 @@ import scipy.sparse as sp
 from ..errors import TwinInputError
 from ..infra.sweep import cached
 from ..rom.reduction import krylov_basis, slowest_rate
-from .effects import _scaled_definition, _system_difference
+from .effects import scaled_definition, system_difference
 from .engine import m_orthonormal_union
 from .fit import GROUP_UNIT, effective_samples, nominal_result
 
@@ -395,7 +395,7 @@ class Dictionary:
         s = self.structure
 
         def modal_terms():           # two assemblies (≈ 2 s): once per process and structure
-            dA, dB = _system_difference(s, definition)
+            dA, dB = system_difference(s, definition)
             dB = sp.hstack([dB, sp.csc_matrix((dB.shape[0], s.n_inputs - dB.shape[1]))]).tocsc() \
                 if dB.shape[1] < s.n_inputs else dB
             return self.rom.VQ.T @ (dA @ self.rom.VQ), self.rom.modal(dB)
@@ -412,13 +412,13 @@ class Dictionary:
             if rule.name in self.structure.machine.mesh.facet_groups:
                 self._system_atom("convection", f"convection:{rule.name}",
                                   f"convection coefficient of group {rule.name!r}",
-                                  _scaled_definition(d, groups=(rule.name,)))
+                                  scaled_definition(d, groups=(rule.name,)))
 
     def _joints(self, _):
         d = self.structure.machine.definition
         for a, b, _ in d.joints:
             self._system_atom("joint", f"joint:{a}-{b}", f"contact conductance of the {a}–{b} joint",
-                              _scaled_definition(d, joint=(a, b)))
+                              scaled_definition(d, joint=(a, b)))
 
     def _expansion(self, _):
         s = self.structure

@@ -113,7 +113,8 @@ class Effect:
 
 
 # ============================================================================= system effects
-def _scaled_definition(definition, groups=(), joint=None, factor=2.0):
+def scaled_definition(definition, groups=(), joint=None, factor=2.0):
+    """A copy of a machine definition with the convection of ``groups`` and the conductance of ``joint`` × factor."""
     convection = [replace(r, coefficient=r.coefficient * factor) if r.name in groups else r
                   for r in definition.convection]
     joints = [(a, b, h * factor) if joint is not None and {a, b} == set(joint) else (a, b, h)
@@ -121,7 +122,8 @@ def _scaled_definition(definition, groups=(), joint=None, factor=2.0):
     return replace(definition, convection=convection, joints=joints)
 
 
-def _system_difference(structure, definition):
+def system_difference(structure, definition):
+    """(dA, dB): the changes of the thermal stiffness (W/K) and input matrix from reassembling on ``definition``."""
     changed = reassemble(structure.machine, definition)
     if list(changed.thermal.input_names) != list(structure.machine.thermal.input_names):
         raise RuntimeError("internal: a system change altered the inputs")
@@ -149,8 +151,8 @@ class ConvectionScale(Effect):
         return any(r.name in self.hidden["groups"] for r in machine.definition.convection)
 
     def prepare(self, structure):
-        d = _scaled_definition(structure.machine.definition, groups=self.hidden["groups"])
-        structure.add_system_term(self.name, *_system_difference(structure, d))
+        d = scaled_definition(structure.machine.definition, groups=self.hidden["groups"])
+        structure.add_system_term(self.name, *system_difference(structure, d))
 
     def coefficients(self, theta, structure):
         return {self.name: float(theta[0]) - 1.0}
@@ -176,8 +178,8 @@ class JointConductance(Effect):
         return any({a, b} == set(self.hidden["joint"]) for a, b, _ in machine.definition.joints)
 
     def prepare(self, structure):
-        d = _scaled_definition(structure.machine.definition, joint=self.hidden["joint"])
-        structure.add_system_term(self.name, *_system_difference(structure, d))
+        d = scaled_definition(structure.machine.definition, joint=self.hidden["joint"])
+        structure.add_system_term(self.name, *system_difference(structure, d))
 
     def coefficients(self, theta, structure):
         return {self.name: float(theta[0]) - 1.0}

@@ -21,6 +21,7 @@ from ..core.dataset import json_default
 from ..infra.outdir import atomic_directory
 from ..infra.plots import save_figure
 from ..infra.tables import markdown_table
+from .discovery import render_discoveries
 from .fit import GROUP_UNIT
 from .verdict import parameters
 from .verdict import to_json as verdict_json
@@ -223,6 +224,10 @@ def render_figures(d, tmp):
             machine, tmp / "render_effect.png", node_values=field, scalar_label="temperature change (K)",
             cmap="coolwarm", clim=(-lim, lim),
             title=f"{d.winner.name}: temperature change at t = {win['field_time_s'] / 3600:.1f} h").name
+    if d.discovery is not None:
+        png = render_discoveries(d.discovery, machine, tmp / "render_discoveries.png")
+        if png is not None:
+            out["render_discoveries"] = Path(png).name
     return out
 
 
@@ -404,7 +409,9 @@ def _which_section(d, figures):
 def _discovery_section(d, figures):
     if d.discovery is None:
         return []
-    return ["## Beyond the library (effect discovery)", ""] + [f"- {line}" for line in d.discovery.summary()] + [""]
+    figure = [f"![discovered sources]({figures['render_discoveries']})", ""] if "render_discoveries" in figures else []
+    return ["## Beyond the library (effect discovery)", ""] + [f"- {line}" for line in d.discovery.summary()] + [""] \
+        + figure
 
 
 def _shrink_section(d, figures):

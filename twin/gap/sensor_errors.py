@@ -64,12 +64,6 @@ def dead_time(t, y, delay_s):
     return out.reshape(y.shape)
 
 
-def offsets(kinds, sd, seed):
-    """Constant calibration offsets (k,) for channels of the given kinds: N(0, sd[kind]), 0 for kinds not in ``sd``."""
-    rng = np.random.default_rng(seed)
-    return np.array([rng.normal(0.0, sd[k]) if k in sd else 0.0 for k in kinds])
-
-
 def sample_times(duration_s, kind, seed=0):
     """Logger times over [0, duration]: ``"45s"`` / any ``"<n>s"`` regular, ``"irregular"`` (30–70 s steps,
     seeded), ``"clock_offset"`` (every 60 s, 15 s after the minute)."""

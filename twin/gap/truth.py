@@ -32,7 +32,7 @@ from meshes.cachefiles import user_cache_dir
 
 from ..core.dataset import ChannelInfo, Dataset, project_version
 from ..core.machine import build_machine, reassemble
-from ..core.machine_definition import HeatSource
+from ..core.machine_definition import HeatSource, load_machine
 from ..core.noise import apply_noise
 from ..core.scenario import Scenario, load_scenario
 from ..core.simulate import simulate
@@ -177,8 +177,6 @@ def _content_key(scenario, change, machine, seed, noise):
 
 
 def _machine_file(machine):
-    from ..core.machine_definition import load_machine
-
     return load_machine(machine).source
 
 
