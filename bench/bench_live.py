@@ -49,7 +49,7 @@ POOLED_MIN, RECORD_MIN = 0.95, 0.80
 
 def observer_factory(rom, names, setting=None):
     """A function making a fresh observer: the shipped settings, or ``setting`` = (discrepancy, window s)."""
-    from twin.live.observer import ADAPTATION, NOISE, Adaptation, DriftObserver
+    from twin.live.observer import ADAPTATION, NOISE, DriftObserver
 
     if setting is None:
         return lambda: DriftObserver(rom, names)

@@ -80,20 +80,22 @@ def test_observer_tracks_fe_truth_with_an_unmodelled_effect(rom):
 
 def test_band_is_not_overconfident_on_an_effect_kind_outside_the_calibration(rom):
     """A joint conductance is no effect kind of the training records the band was calibrated on
-    (twin.live.protocol.TRAINING); step_speed is no training scenario.  On its full-FE record (carrier–ram joint
-    × 0.3, 60 s) the 95 % band covers ≥ 85 % of the samples over 4 thermometer noise draws, and is not so wide as
-    to say nothing (mean half-width ≤ 5 µm on a drift of ~30 µm)."""
+    (twin.live.protocol.TRAINING).  On the full-FE record of six_part_cycle (9000 rpm, the feeds the observer
+    does not read) with the carrier–ram joint × 0.3, 60 s, the 95 % band covers ≥ 90 % of the samples over 4
+    thermometer noise draws (Z error ~0.9 µm RMS; the band passes down to ~0.4 of its width of 2026-11-25, so a
+    band that shrank to the size of the errors fails), and is not so wide as to say nothing (mean half-width
+    ≤ 5 µm on a drift of ~35 µm)."""
     from twin.gap.truth import PhysicsChange
     from twin.live.protocol import readings
 
-    truth = _fe_truth("step_speed", PhysicsChange(joints={"carrier-ram": 0.3}))
+    truth = _fe_truth("six_part_cycle", PhysicsChange(joints={"carrier-ram": 0.3}))
     inside, bands = [], []
     for seed in range(1, 5):
         T, air = readings(truth, THERMOMETERS, seed)
         drift, band = DriftObserver(rom, THERMOMETERS).run(truth.time_s, truth["spindle"], air, T)
         inside.append(np.abs(drift[:, 2] - truth["Z"]) <= band[:, 2])
         bands.append(band[:, 2])
-    assert np.mean(inside) >= 0.85, np.mean(inside)
+    assert np.mean(inside) >= 0.90, np.mean(inside)
     assert np.mean(bands) <= 5.0, np.mean(bands)
 
 
@@ -140,7 +142,7 @@ def test_structured_filter_equals_the_generic_one(rom):
     obs = DriftObserver(rom, THERMOMETERS)
     obs.start(0.0, 20.0)
     model = obs.model
-    F, G, Q = obs._transition(10.0)
+    F, G, Q = obs._transition(10.0, obs._u)
     args = (F, G, model.H, model.J, Q, model.R)
     fast = ModalKalmanFilter(rom.order, *args, None, model.couplings)
     consider = ModalKalmanFilter(rom.order, *args, model.consider, model.couplings)
@@ -176,7 +178,7 @@ def rom_with_basis(machine):
     return cached_rom(machine, 80, keep_basis=True)
 
 
-def _chosen_csv(path, machine, rows):
+def _chosen_csv(path, rows):
     """A ``chosen_sensors.csv`` like ``twin place`` writes, axis Z, with (name, position) rows."""
     lines = ["axis,method,K,rank,name,kind,part,x_m,y_m,z_m"]
     lines += [f"Z,greedy-loso,{len(rows)},{k},{name},surface,x,{p[0]},{p[1]},{p[2]}"
@@ -192,7 +194,7 @@ def test_observer_on_placement_points_is_the_observer_on_those_thermometers(tmp_
 
     position = {c.name: c.position for c in machine.channels}
     chosen = ["T05", "T12", "T18", "T20"]
-    csv = _chosen_csv(tmp_path / "chosen_sensors.csv", machine, [(f"s{n}", position[n]) for n in chosen])
+    csv = _chosen_csv(tmp_path / "chosen_sensors.csv", [(f"s{n}", position[n]) for n in chosen])
     placed = read_placement(tmp_path)
     assert placed.names == [f"s{n}" for n in chosen] and csv.exists()
     rom = placement_rom(rom_with_basis, machine, placed)
@@ -210,7 +212,7 @@ def test_observer_on_placement_points_is_the_observer_on_those_thermometers(tmp_
 def test_placement_location_off_the_machine_is_a_clear_error(tmp_path, machine, rom_with_basis):
     from twin.live.placement import placement_rom, read_placement
 
-    csv = _chosen_csv(tmp_path / "chosen.csv", machine, [("s000001", (0.0, 0.28, 0.89)), ("s000002", (3.0, 0.0, 0.0))])
+    csv = _chosen_csv(tmp_path / "chosen.csv", [("s000001", (0.0, 0.28, 0.89)), ("s000002", (3.0, 0.0, 0.0))])
     with pytest.raises(TwinInputError, match=r"chosen.csv: point thermometer s000002 at \(3.0, 0.0, 0.0\) m lies "
                                              r"outside the mesh"):
         placement_rom(rom_with_basis, machine, read_placement(csv))
@@ -221,6 +223,27 @@ def test_placement_location_off_the_machine_is_a_clear_error(tmp_path, machine, 
         read_placement(csv)
 
 
+@pytest.mark.slow          # two machine builds and a server start-up through the CLI: 30–70 s under load
+def test_twin_live_takes_the_thermometers_a_placement_chose(tmp_path, machine, monkeypatch, capsys):
+    """``twin live --replay … --thermometers-from chosen.csv``: the chosen locations are fused (the dataset names
+    them as ``twin place`` datasets do); a location off the machine is one line naming the file and the point."""
+    from twin.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    position = {c.name: c.position for c in machine.channels}
+    good = _chosen_csv(tmp_path / "good.csv", [("s_a", position["T18"]), ("s_b", position["T09"])])
+    bad = _chosen_csv(tmp_path / "bad.csv", [("s_a", position["T18"]), ("s_c", (0.0, 3.0, 0.5))])
+    t = np.arange(40) * 10.0
+    rows = [f"{ti:g},9000,20,{20 + 1e-3 * ti:.4f},{20 + 5e-4 * ti:.4f}" for ti in t]
+    (tmp_path / "rec.csv").write_text("time_s,spindle_rpm,T15_degC,s_a_degC,s_b_degC\n" + "\n".join(rows) + "\n")
+    assert main(["live", "--replay", "rec.csv", "--thermometers-from", "bad.csv"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "bad.csv: point thermometer s_c at (0.0, 3.0, 0.5) m lies outside" in err
+    assert main(["live", "--replay", "rec.csv", "--thermometers-from", str(good), "--speed", "2000"]) == 0
+    out = capsys.readouterr().out
+    assert "fused 40 samples" in out and "from s_a, s_b + spindle speed + room air" in out
+
+
 def test_choose_thermometers_among_placement_points(tmp_path, machine, rom_with_basis):
     """choose_thermometers picks among point outputs added to the ROM as among its own thermometers; a point
     at a machine thermometer's position is worth exactly that thermometer."""
@@ -228,7 +251,7 @@ def test_choose_thermometers_among_placement_points(tmp_path, machine, rom_with_
     from twin.live.placement import placement_rom, read_placement
 
     position = {c.name: c.position for c in machine.channels}
-    placed = read_placement(_chosen_csv(tmp_path / "c.csv", machine, [("pT18", position["T18"]),
+    placed = read_placement(_chosen_csv(tmp_path / "c.csv", [("pT18", position["T18"]),
                                                                       ("pT03", position["T03"])]))
     rom = placement_rom(rom_with_basis, machine, placed)
     assert choose_thermometers(rom, 1, "Z", ["pT03", "pT18"], step_s=900.0) == \
@@ -239,10 +262,9 @@ def test_camera_spots_share_one_offset(rom_with_basis, machine):
     """An S65 thermal camera has one offset for all its spots (twin.core.noise): the observer gives the spots one
     offset state together and every DS18S20 thermometer one of its own."""
     from twin.live.model import ObserverModel
-
-    position = {c.name: c.position for c in machine.channels}
     from twin.rom.points import with_point_thermometers
 
+    position = {c.name: c.position for c in machine.channels}
     rom = with_point_thermometers(rom_with_basis, machine, ["cam1", "cam2"], [position["T03"], position["T05"]])
     model = ObserverModel(rom, ["T18", "cam1", "cam2"], sensors={"cam1": "S65", "cam2": "S65"})
     offsets = model.H[:, model.n + model.q:]

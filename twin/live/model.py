@@ -8,21 +8,28 @@ State (continuous time)::
     y_T = C_T [z, w] + D_T u + c_T + b + v,      drift = C_XYZ [z, w] + D_XYZ u + c_XYZ
 
 Each disturbance dⱼ is a first-order Gauss–Markov process (stationary σⱼ, correlation time τ_d, intensity
-2σⱼ²/τ_d) acting on the plant through a fixed column cⱼ (a column of the ROM's input matrix) scaled by an
-*excitation* eⱼ(t) known at each step — so that a wrong parameter acts as strongly as the physics it
-multiplies, and not at all when that physics is idle:
+2σⱼ²/τ_d; the air offset a random constant) acting on the plant through a fixed column cⱼ (a column of the
+ROM's input matrix, or a modal coordinate) scaled by an *excitation* eⱼ(t) known at each step.
+
+**Estimated** disturbances (the readings update them, so they move the estimate):
+
+* ``power:<source>`` — the unknown part of each source's power, eⱼ = 1, σ = :attr:`NoiseModel.source_power` ×
+  its reference power for a source whose driver the observer reads (the spindle), :attr:`NoiseModel.unread_power`
+  × it for one it does not read (the feed drives: its whole power is unknown);
+* ``ambient:<zone>`` of every zone driven by the room air reading — the zone air's slow difference from the
+  reading (air pockets, a door, stratification), eⱼ = 1, σ = :attr:`NoiseModel.ambient_K`.
+
+**Considered** disturbances (Schmidt–Kalman consider states: the covariance carries their uncertainty, so the
+band does, but the readings never update them — a parameter error the filter should not chase with a few
+thermometers; each acts as strongly as the physics it multiplies, and not at all when that physics is idle):
 
 * ``convection:<zone>`` — the relative error δ of the zone's film coefficients (σ :attr:`NoiseModel.convection`;
   the gap diagnosis finds × 0.5 … 2 on real machines).  The extra heat flow δ·h·(T_air − T) is, for a surface
   of uniform temperature, the ambient input of the zone moved by δ·(T_air − T̄): eⱼ = T_air − T̄ with T̄ the
   zone's convection-weighted mean surface temperature, exact in the ROM: T̄ = bᵀz / bᵀz₁ (b the zone's
-  ambient column, z₁ the uniform 1 °C state), evaluated on the present estimate (an extended-Kalman step);
-* ``power:<source>`` of a source whose driver the observer reads (the spindle) — the relative error of its
-  power model (σ :attr:`NoiseModel.power`, ± 30–50 % in the gap diagnosis): eⱼ = the modelled power, W;
-* ``power:<source>`` of a source whose driver it does not read (the feed drives) — the source's whole power as
-  an unknown input, eⱼ = 1, σ = :attr:`NoiseModel.unread_power` × its reference power, W;
-* ``ambient:<zone>`` of every zone driven by the room air reading — the zone air's difference from the
-  reading (air pockets, a door, stratification), eⱼ = 1, σ = :attr:`NoiseModel.ambient_K`;
+  ambient column, z₁ the uniform 1 °C state), evaluated on the present estimate;
+* ``power_model:<source>`` of a source whose driver the observer reads — the relative error of its power model
+  (σ :attr:`NoiseModel.power_model`, ± 30–50 % in the gap diagnosis): eⱼ = the modelled power, W;
 * ``air:offset`` — the room air thermometer's constant offset (DS18S20 accuracy ±0.5 °C, uniform): the air of
   every zone driven by the reading is the reading minus it, eⱼ = 1;
 * ``discrepancy:<k>`` — heat the model puts in the wrong place (a joint conductance, a source it lacks, an
@@ -34,8 +41,9 @@ multiplies, and not at all when that physics is idle:
   axis's steady response to such a source (:func:`discrepancy_modes`).
 
 The lagged air w follows its lag with σ :attr:`NoiseModel.ambient_K`; the offsets b are constant with the
-DS18S20 accuracy ±0.5 °C (uniform) as prior.  Measurement noise R per thermometer: the DS18S20 quantisation
-(0.0625²/12 K²), the ROM's reduction error and :attr:`NoiseModel.model_error_K`.
+sensor's accuracy as prior (DS18S20 ±0.5 °C uniform, one each; the S65 camera's spots share one, ±2 °C).
+Measurement noise R per thermometer: the sensor's quantisation (DS18S20 0.0625²/12 K²) or noise (S65 0.08 K),
+the ROM's reduction error and :attr:`NoiseModel.model_error_K`.
 
 Discretisation is exact per sample interval (ZOH; Van Loan for the noise, :func:`models.kalman.discretize`).
 The coupling block of the transition matrix is linear in the excitations (the disturbances' own dynamics do
@@ -277,7 +285,7 @@ class ObserverModel:
         The lagged air and every disturbance but the misplaced heat couple densely; a misplaced-heat
         disturbance drives its one modal coordinate; the offsets drive nothing.
         """
-        r, lagged = self.rom.order, self.n - self.rom.order
+        lagged = self.n - self.rom.order
         single = [(lagged + j, int(np.flatnonzero(d.column)[0])) for j, d in enumerate(self.disturbances)
                   if d.excitation == "heat"]
         dense = [c for c in range(lagged + self.q) if c not in {col for col, _ in single}]
@@ -334,21 +342,25 @@ class ObserverModel:
         self.R = np.array([reading[s] for s in self.sensors]) + ROM_ERROR_K ** 2 + nm.model_error_K ** 2
         self.feeds = bool(np.any(self._H_feed) or np.any(self._L_feed) or np.any(self._Lf_feed))
 
+    def _of_kind(self, excitation):
+        """Positions (in the disturbances) and disturbances whose excitation is ``excitation``."""
+        picked = [(j, d) for j, d in enumerate(self.disturbances) if d.excitation == excitation]
+        return np.array([j for j, _ in picked], int), [d for _, d in picked]
+
     def _excitation_layout(self):
         """Index arrays that form the excitations in a few vector operations per step."""
-        rom, kinds = self.rom, [d.excitation for d in self.disturbances]
-        self._power = np.array([j for j, k in enumerate(kinds) if k == "power"], int)
-        self._power_inputs = np.array([d.index for d in self.disturbances if d.excitation == "power"], int)
-        conv = [d for d in self.disturbances if d.excitation == "convection"]
-        self._conv = np.array([j for j, k in enumerate(kinds) if k == "convection"], int)
+        rom = self.rom
+        self._power, powered = self._of_kind("power")
+        self._power_inputs = np.array([d.index for d in powered], int)
+        self._conv, conv = self._of_kind("convection")
         b = rom.input_matrix[:, [d.index for d in conv]]
         self._conv_rows = (b / (rom.uniform_state @ b)).T           # zone mean surface temperature from z
         self._conv_hA = rom.uniform_state @ b                       # W/K per zone
-        self._conv_lagged = np.array([rom.order + d.lagged for d in conv if d.lagged >= 0], int)
-        self._conv_read = np.array([self.input_names.index(rom.input_names[d.index]) for d in conv
-                                    if d.lagged < 0], int)
         self._conv_is_lagged = np.array([d.lagged >= 0 for d in conv], bool)
-        self._heat = np.array([j for j, k in enumerate(kinds) if k == "heat"], int)
+        self._conv_lagged = np.array([rom.order + d.lagged for d in conv], int)[self._conv_is_lagged]
+        read = [self.input_names.index(rom.input_names[d.index]) if d.lagged < 0 else -1 for d in conv]
+        self._conv_read = np.array(read, int)[~self._conv_is_lagged]
+        self._heat = self._of_kind("heat")[0]
         self._all_power = np.array([j for j, x in enumerate(self.input_names) if x.startswith("power:")], int)
 
     # ------------------------------------------------------------------ per step

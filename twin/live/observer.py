@@ -2,10 +2,11 @@
 
 :class:`DriftObserver` runs a Kalman filter (:class:`models.kalman.KalmanFilter`, with a covariance step
 specialised to the model's structure) on :class:`twin.live.model.ObserverModel`: the ROM's plant state space
-augmented with the disturbances the nominal twin may get wrong (convection, source powers, zone airs, …) and
-the thermometers' offsets.  Each sample is a prediction over the interval since the previous one (inputs held
-as the machine reported them) and a measurement update with the thermometers read (NaN readings are
-skipped).  The estimated drift is Gaussian: its 95 % band is ±1.96 σ of the posterior.
+augmented with the disturbances the nominal twin may get wrong — estimated ones (source powers, zone airs,
+thermometer offsets) and considered ones whose uncertainty only widens the band (convection and power-model
+errors, the room-air offset, misplaced heat).  Each sample is a prediction over the interval since the
+previous one (the sample's inputs held over it) and a measurement update with the thermometers read (NaN
+readings are skipped).  The estimated drift is Gaussian: its 95 % band is ±1.96 σ of the posterior.
 
 **Adaptive widening.**  When the thermometers disagree with the model more than its covariance allows, the
 model is off in a way its disturbances do not describe.  The normalised innovation squared (NIS, χ² with as
@@ -20,6 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
 from ..errors import TwinInputError
 from ..rom.reduction import ReducedModel
 from .filtering import ModalKalmanFilter
@@ -133,8 +135,9 @@ class DriftObserver:
         Returns
         -------
         Estimate or None
-            None until a room air reading has started the observer.  The inputs over the interval since
-            the previous sample are the previous sample's (held, as the machine reported them).
+            None until a room air reading has started the observer.  The inputs over the interval since the
+            previous sample are this sample's readings, held (a record of the twin holds left limits: the
+            speed over the interval that ends at the sample).
 
         Raises
         ------
@@ -151,7 +154,7 @@ class DriftObserver:
             raise TwinInputError(f"observer: sample time {time_s} s is not after the previous {self.time_s} s")
         else:
             dt = float(time_s) - self.time_s
-            self._set_input(spindle_rpm, room_C)
+            self._u = self._inputs(spindle_rpm, room_C)
             self._predict(dt)
             self.time_s = float(time_s)
         model = self.model
@@ -164,26 +167,39 @@ class DriftObserver:
             self._adapt(nis / used, dt)
         return self._estimate(L, Lf, used)
 
-    def expected_readings(self, time_s: float) -> np.ndarray:
-        """The thermometer readings (°C, (p,)) the model predicts at ``time_s`` (s, after the present sample)."""
-        model = self.model
-        F, G, _ = self._transition(float(time_s) - self.time_s)
-        x = F @ self._kf.x + G @ self._u
-        return model.output_rows(model.excitations(x, self._u))[0] @ x + model.J @ self._u
+    def expected_readings(self, time_s: float, spindle_rpm: float, room_C: float) -> np.ndarray:
+        """The thermometer readings the model predicts for the next sample, without changing the observer.
 
-    def _transition(self, dt):
-        """``(F, G, Q)`` of the step of ``dt`` s from the present estimate (its excitations)."""
+        Parameters
+        ----------
+        time_s : float
+            Machine time of the next sample, s (after the present one).
+        spindle_rpm, room_C : float
+            Its spindle speed (rpm) and room air (°C), held over the interval up to it.
+
+        Returns
+        -------
+        numpy.ndarray
+            (p,) readings, °C, offsets included.
+        """
+        model, u = self.model, self._inputs(spindle_rpm, room_C)
+        F, G, _ = self._transition(float(time_s) - self.time_s, u)
+        x = F @ self._kf.x + G @ u
+        return model.output_rows(model.excitations(x, u))[0] @ x + model.J @ u
+
+    def _transition(self, dt, u):
+        """``(F, G, Q)`` of the step of ``dt`` s with the inputs ``u`` from the present estimate (its excitations)."""
         model = self.model
         n, q = model.n, model.q
         F0, dF, G, Q = model.matrices(dt)
         F = F0.copy()
-        F[:n, n:n + q] = dF * model.excitations(self._kf.x, self._u)
+        F[:n, n:n + q] = dF * model.excitations(self._kf.x, u)
         return F, G, Q
 
     def _predict(self, dt):
         """The prediction over ``dt`` s, with the disturbances' process noise widened by the NIS."""
         kf, n, q = self._kf, self.model.n, self.model.q
-        F, G, Q = self._transition(dt)
+        F, G, Q = self._transition(dt, self._u)
         if self.inflation != 1.0:
             Q = Q.copy()
             Q[n:n + q, n:n + q] *= self.inflation
@@ -199,15 +215,17 @@ class DriftObserver:
         self._nis = keep * self._nis + (1.0 - keep) * nis_per_reading
         self.inflation = float(min(a.limit, max(1.0, self._nis) ** a.power))
 
-    def _set_input(self, spindle_rpm, room_C):
-        """[u, 1] for a sample; the power part is cached per speed (machines run at a few speeds)."""
-        if np.isfinite(spindle_rpm) and np.isfinite(room_C):
-            power = self._power.get(spindle_rpm)
-            if power is None:
-                if len(self._power) > 4096:
-                    self._power.clear()
-                power = self._power[spindle_rpm] = np.r_[self.model.plant_inputs(spindle_rpm, 0.0)[0], 1.0]
-            self._u = power + room_C * self._room
+    def _inputs(self, spindle_rpm, room_C):
+        """[u, 1] for a sample (the present inputs if either reading is NaN); the power part is cached per speed
+        (machines run at a few speeds)."""
+        if not (np.isfinite(spindle_rpm) and np.isfinite(room_C)):
+            return self._u
+        power = self._power.get(spindle_rpm)
+        if power is None:
+            if len(self._power) > 4096:
+                self._power.clear()
+            power = self._power[spindle_rpm] = np.r_[self.model.plant_inputs(spindle_rpm, 0.0)[0], 1.0]
+        return power + room_C * self._room
 
     def _estimate(self, L, Lf, used):
         kf, u, model = self._kf, self._u, self.model
@@ -313,5 +331,5 @@ def _final_band(observer, rpm, step_s, horizon_s):
     e = observer.step(0.0, rpm, 20.0, np.full(len(observer.thermometers), np.nan))
     for step in range(1, int(horizon_s / step_s) + 1):
         t = step * step_s
-        e = observer.step(t, rpm, 20.0, observer.expected_readings(t))
+        e = observer.step(t, rpm, 20.0, observer.expected_readings(t, rpm, 20.0))
     return e.band_um
