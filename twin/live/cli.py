@@ -12,6 +12,8 @@ from ..infra.cli_common import add_overwrite, split_names
 from ..rom.cli import DEFAULT_ORDER
 
 if TYPE_CHECKING:
+    import argparse
+
     from ..core.dataset import Dataset
     from .client import LiveStats
     from .observer import DriftObserver
@@ -23,7 +25,18 @@ DEFAULT_SPEED = 600.0
 
 
 def free_port(host: str = "127.0.0.1") -> int:
-    """A TCP port nothing listens on now on ``host`` (the OS picks it)."""
+    """A TCP port nothing listens on now (the OS picks it).
+
+    Parameters
+    ----------
+    host : str
+        The address the port is for.
+
+    Returns
+    -------
+    int
+        The port number.
+    """
     import socket
 
     with socket.socket() as s:
@@ -173,7 +186,7 @@ def _print_summary(stats, thermometers, dataset):
               f"max {np.abs(z - truth).max():.2f} µm")
 
 
-def cmd_live(args) -> None:
+def cmd_live(args: argparse.Namespace) -> None:
     """``twin live``: replay (``--replay``) or observe a machine (``--endpoint``); print the summary."""
     if args.log:
         from ..infra.outdir import check_output_file
@@ -184,7 +197,7 @@ def cmd_live(args) -> None:
         print(f"log written to {args.log}")
 
 
-def register(sub) -> None:
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``live`` command to the ``twin`` subparsers ``sub``."""
     p = sub.add_parser("live", help="run the drift observer on a machine's OPC UA sensors (or a replayed dataset)")
     p.add_argument("--endpoint", help="OPC UA server, opc.tcp://HOST:PORT/…")

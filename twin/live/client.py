@@ -30,6 +30,9 @@ from .nodemap import AXES, NodeMap
 from .replay import machine_time
 
 if TYPE_CHECKING:
+    from asyncua import Node, ua
+    from asyncua.common.subscription import DataChangeNotif
+
     from .observer import DriftObserver, Estimate
 
 log = logging.getLogger("thermal_twin")
@@ -144,12 +147,12 @@ class LiveClient:
         self._queue, self._subscribed, self.csv = None, False, None
 
     # ------------------------------------------------------------------ subscription callbacks
-    def datachange_notification(self, node, value, data) -> None:
+    def datachange_notification(self, node: Node, value: float | None, data: DataChangeNotif) -> None:
         """asyncua's callback for a monitored value: queue (key, machine time s, value)."""
         stamp = data.monitored_item.Value.SourceTimestamp
         self._queue.put_nowait((self._key_of[node.nodeid], machine_time(stamp), value))
 
-    def status_change_notification(self, status) -> None:
+    def status_change_notification(self, status: ua.StatusChangeNotification) -> None:
         """asyncua's callback for a subscription status change (the session is gone): reconnect."""
         self._lost.set()
 

@@ -56,6 +56,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from models.kalman import discretize
 
@@ -446,8 +447,8 @@ class ObserverModel:
         P0[n + q:, n + q:] = np.diag(self._offset_variances)
         return x0, P0
 
-    def plant_inputs(self, spindle_rpm, room_C, feed_mm_min=None) -> np.ndarray:
-        """Plant inputs (k, m) for spindle speeds (rpm) and room air (°C), every read zone at the room air."""
+    def plant_inputs(self, spindle_rpm: ArrayLike, room_C: ArrayLike, feed_mm_min: dict | None = None) -> np.ndarray:
+        """Plant inputs (k, m) for spindle speeds (rpm), room air (°C; every read zone at it) and feeds (mm/min)."""
         rpm = np.atleast_1d(np.asarray(spindle_rpm, float))
         room = np.broadcast_to(np.asarray(room_C, float), rpm.shape)
         ambient = {z: room for z in self.rom.measured_zones}

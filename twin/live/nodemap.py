@@ -60,7 +60,18 @@ class NodeMap:
         return [*self.inputs.items(), *self.thermometers.items()]
 
     def where(self, key: str) -> str:
-        """``file: [section] key = 'node'`` for an error message."""
+        """Where a key is, for an error message.
+
+        Parameters
+        ----------
+        key : str
+            An input, thermometer or output key.
+
+        Returns
+        -------
+        str
+            ``file: [section] key = 'node'``.
+        """
         for section in ("inputs", "thermometers", "outputs"):
             table = getattr(self, section)
             if key in table:

@@ -21,6 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import TwinInputError
 from ..rom.reduction import ReducedModel
@@ -118,7 +119,7 @@ class DriftObserver:
         self._nis, self.inflation = 1.0, 1.0
         return self
 
-    def step(self, time_s: float, spindle_rpm: float, room_C: float, temperatures_C) -> Estimate | None:
+    def step(self, time_s: float, spindle_rpm: float, room_C: float, temperatures_C: ArrayLike) -> Estimate | None:
         """Fuse one sample: thermometer readings (°C, NaN = missing) in the order of :attr:`thermometers`.
 
         Parameters
@@ -246,7 +247,8 @@ class DriftObserver:
                                  "full field; Estimate.temperatures_C has the ROM thermometers")
         return self.rom.basis @ self._kf.x[:self.rom.order]
 
-    def run(self, times_s, spindle_rpm, room_C, temperatures_C) -> tuple[np.ndarray, np.ndarray]:
+    def run(self, times_s: ArrayLike, spindle_rpm: ArrayLike, room_C: ArrayLike,
+            temperatures_C: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Filter a whole record.
 
         Parameters

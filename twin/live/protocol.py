@@ -20,7 +20,9 @@ room air thermometer the observer reads.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -28,6 +30,9 @@ from ..core.dataset import Dataset
 from ..core.machine_definition import HeatSource
 from ..core.noise import apply_noise
 from ..gap.truth import PhysicsChange, physics_truth
+
+if TYPE_CHECKING:
+    from .observer import DriftObserver
 
 #: Room-air channel of the records (°C): the observer's air input.
 ROOM_AIR = "T15"
@@ -91,12 +96,34 @@ SETS = {"training": (TRAINING, TRAINING_SEEDS), "held-out": (HELD_OUT, HELD_OUT_
 
 
 def truth(case: Case, machine: str = "vmc_ram") -> Dataset:
-    """The noise-free full-FE record of ``case`` (cached under the user cache folder)."""
+    """The noise-free full-FE record of ``case`` (cached under the user cache folder).
+
+    Parameters
+    ----------
+    case : Case
+        Scenario and physics change.
+    machine : str
+        The machine (name or TOML path).
+
+    Returns
+    -------
+    Dataset
+        Spindle speed (rpm), feeds (mm/min), thermometers and air (°C), drift (µm), strains (µε).
+    """
     return physics_truth(case.scenario, case.change, machine=machine, noise=False)
 
 
 def readings(record: Dataset, names: list[str], seed: int) -> tuple[np.ndarray, np.ndarray]:
     """The thermometers ``names`` and the room air of ``record`` as DS18S20s read them (offsets, 0.0625 °C steps).
+
+    Parameters
+    ----------
+    record : Dataset
+        A noise-free record with the thermometer channels and the room air :data:`ROOM_AIR` (°C).
+    names : list of str
+        The thermometer channels.
+    seed : int
+        Seed of the draw (offsets and quantisation of every sensor, the room air's included).
 
     Returns
     -------
@@ -143,7 +170,8 @@ class RecordScore:
     samples: int
 
 
-def score(case: Case, observer_factory, thermometers: list[str], seeds: tuple) -> RecordScore:
+def score(case: Case, observer_factory: Callable[[], DriftObserver], thermometers: list[str],
+          seeds: tuple) -> RecordScore:
     """Run a fresh observer (``observer_factory()``) on the truth of ``case`` once per noise seed; pool the scores.
 
     Parameters

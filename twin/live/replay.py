@@ -14,6 +14,7 @@ import datetime as _dt
 import time
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .nodemap import NodeMap
 
@@ -25,12 +26,34 @@ OUTPUT_NODES = {f"{a}{key}": f"{a}_{name}" for a in "XYZ"
 
 
 def timestamp(time_s: float) -> _dt.datetime:
-    """The source timestamp (UTC) of machine time ``time_s`` (s after :data:`EPOCH`)."""
+    """The source timestamp of a machine time.
+
+    Parameters
+    ----------
+    time_s : float
+        Machine time, s after :data:`EPOCH`.
+
+    Returns
+    -------
+    datetime.datetime
+        UTC timestamp.
+    """
     return EPOCH + _dt.timedelta(seconds=float(time_s))
 
 
 def machine_time(stamp: _dt.datetime) -> float:
-    """Machine time (s after :data:`EPOCH`) of a source timestamp (naive timestamps are taken as UTC)."""
+    """The machine time of a source timestamp.
+
+    Parameters
+    ----------
+    stamp : datetime.datetime
+        Source timestamp (a naive one is taken as UTC).
+
+    Returns
+    -------
+    float
+        Machine time, s after :data:`EPOCH`.
+    """
     if stamp.tzinfo is None:
         stamp = stamp.replace(tzinfo=_dt.timezone.utc)
     return (stamp - EPOCH).total_seconds()
@@ -107,7 +130,7 @@ class ReplayServer:
         """Stop the server."""
         await self.server.stop()
 
-    async def publish(self, time_s: float, values, names: list[str] | None = None) -> None:
+    async def publish(self, time_s: float, values: ArrayLike, names: list[str] | None = None) -> None:
         """Publish one sample: ``values`` of ``names`` (default every channel) stamped with machine time ``time_s`` (s)."""
         from asyncua import ua
 
@@ -122,7 +145,7 @@ class ReplayServer:
         """The value (µm) a client wrote to an output node (``Z``, ``Z_band``, ``Z_compensation`` …)."""
         return await self.nodes[OUTPUT_NODES[key]].read_value()
 
-    async def replay(self, time_s, values, speed: float = 1.0, start: int = 0) -> float:
+    async def replay(self, time_s: ArrayLike, values: ArrayLike, speed: float = 1.0, start: int = 0) -> float:
         """Publish rows ``start…`` of ``values`` at their machine times, ``speed`` × faster than real time.
 
         Parameters
