@@ -5,9 +5,18 @@
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from ..errors import TwinInputError
 from ..infra.cli_common import add_overwrite, split_names
 from ..rom.cli import DEFAULT_ORDER
+
+if TYPE_CHECKING:
+    import argparse
+
+    from ..core.dataset import Dataset
+    from .client import LiveStats
+    from .observer import DriftObserver
 
 #: The observer's thermometers unless told: :func:`twin.live.observer.choose_thermometers` for vmc_ram
 #: (order 80, Z axis, k = 6; model-based, no record used).
@@ -15,8 +24,19 @@ DEFAULT_THERMOMETERS = ("T18", "T26", "T23", "T22", "T16", "T09")
 DEFAULT_SPEED = 600.0
 
 
-def free_port(host="127.0.0.1"):
-    """A TCP port nothing listens on now (the OS picks it)."""
+def free_port(host: str = "127.0.0.1") -> int:
+    """A TCP port nothing listens on now (the OS picks it).
+
+    Parameters
+    ----------
+    host : str
+        The address the port is for.
+
+    Returns
+    -------
+    int
+        The port number.
+    """
     import socket
 
     with socket.socket() as s:
@@ -24,25 +44,64 @@ def free_port(host="127.0.0.1"):
         return s.getsockname()[1]
 
 
-def _observer(args, thermometers):
+def _observer(args, default):
+    """``(observer, thermometers)``: the ROM's observer reading ``--thermometers``, else the placement's chosen
+    set (``--thermometers-from``), else ``default``."""
     from ..core.machine import build_machine
     from ..rom.reduction import cached_rom
     from .observer import DriftObserver
+    from .placement import placement_rom, read_placement
 
-    rom = cached_rom(build_machine(args.machine), args.order)
-    return DriftObserver(rom, thermometers)
+    machine = build_machine(args.machine)
+    if args.thermometers_from:
+        placed = read_placement(args.thermometers_from, args.placement_axis)
+        rom = placement_rom(cached_rom(machine, args.order, keep_basis=True), machine, placed)
+        thermometers = split_names(args.thermometers) or placed.names
+        return DriftObserver(rom, thermometers, sensors=placed.sensors), thermometers
+    thermometers = split_names(args.thermometers) or list(default)
+    return DriftObserver(cached_rom(machine, args.order), thermometers), thermometers
 
 
 def _replay_columns(dataset, path, names):
+    """The dataset's ``names`` columns (k, len(names)), or an error naming the file and the missing channel."""
     missing = [n for n in names if n not in dataset]
     if missing:
         raise TwinInputError(f"{path}: no channel {missing[0]!r} to replay; channels: {', '.join(dataset.names)}")
     return dataset.matrix(names)
 
 
-async def replay_session(dataset, thermometers, observer, speed, room_air="T15", spindle="spindle", port=None,
-                         log_path=None, host="127.0.0.1", source="dataset"):
-    """Serve ``dataset`` on a local replay server and run the live client against it; returns (stats, wall s)."""
+async def replay_session(dataset: Dataset, thermometers: list[str], observer: DriftObserver, speed: float,
+                         room_air: str = "T15", spindle: str = "spindle", port: int | None = None,
+                         log_path: str | None = None, host: str = "127.0.0.1",
+                         source: str = "dataset") -> tuple[LiveStats, float]:
+    """Serve ``dataset`` on a local replay server and run the live client against it.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The record replayed (its channels ``spindle`` (rpm), ``room_air`` (°C) and the thermometers (°C)).
+    thermometers : list of str
+        The observer's thermometers, channels of ``dataset``.
+    observer : DriftObserver
+        The observer the client runs.
+    speed : float
+        Replay speed, machine s per wall s.
+    room_air, spindle : str
+        The dataset channels of the room air and the spindle speed.
+    port : int, optional
+        Server port (default: a free one).
+    log_path : str, optional
+        The client's CSV log.
+    host : str
+        Address of the server.
+    source : str
+        The dataset's file, named in errors.
+
+    Returns
+    -------
+    tuple
+        The client's :class:`~twin.live.client.LiveStats` and the wall seconds the replay took.
+    """
     import asyncio
 
     from .client import LiveClient
@@ -77,9 +136,8 @@ def _run_replay(args):
     if args.speed <= 0 or not np.isfinite(args.speed):
         raise TwinInputError(f"--speed must be a positive number, got {args.speed}")
     dataset = Dataset.read(args.replay)
-    thermometers = split_names(args.thermometers) or list(DEFAULT_THERMOMETERS)
+    observer, thermometers = _observer(args, DEFAULT_THERMOMETERS)
     _replay_columns(dataset, args.replay, [args.spindle, args.room_air, *thermometers])
-    observer = _observer(args, thermometers)
     stats, wall = asyncio.run(replay_session(dataset, thermometers, observer, args.speed, args.room_air,
                                              args.spindle, args.port, args.log, source=args.replay))
     print(f"replayed {len(dataset)} samples of {Path(args.replay).name} at {args.speed:g}× in {wall:.1f} s")
@@ -98,9 +156,8 @@ def _run_endpoint(args):
     if not (args.endpoint and args.node_map):
         raise TwinInputError("twin live: give --endpoint opc.tcp://… with --node-map FILE.toml (or --replay DATASET)")
     node_map = load_node_map(args.node_map)
-    thermometers = split_names(args.thermometers) or list(node_map.thermometers)
     try:
-        observer = _observer(args, thermometers)
+        observer, thermometers = _observer(args, node_map.thermometers)
     except TwinInputError as exc:
         raise TwinInputError(f"{args.node_map}: {exc}") from None
     client = LiveClient(args.endpoint, node_map, observer, args.log, late_after_s=args.late_after)
@@ -129,7 +186,8 @@ def _print_summary(stats, thermometers, dataset):
               f"max {np.abs(z - truth).max():.2f} µm")
 
 
-def cmd_live(args):
+def cmd_live(args: argparse.Namespace) -> None:
+    """``twin live``: replay (``--replay``) or observe a machine (``--endpoint``); print the summary."""
     if args.log:
         from ..infra.outdir import check_output_file
         check_output_file(args.log, args.overwrite)
@@ -139,8 +197,8 @@ def cmd_live(args):
         print(f"log written to {args.log}")
 
 
-def register(sub):
-    """Add the ``live`` command."""
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``live`` command to the ``twin`` subparsers ``sub``."""
     p = sub.add_parser("live", help="run the drift observer on a machine's OPC UA sensors (or a replayed dataset)")
     p.add_argument("--endpoint", help="OPC UA server, opc.tcp://HOST:PORT/…")
     p.add_argument("--node-map", help="TOML file: [inputs] spindle_speed, room_air; [thermometers]; [outputs]")
@@ -149,8 +207,14 @@ def register(sub):
     p.add_argument("--speed", type=float, default=DEFAULT_SPEED,
                    help=f"replay speed, machine seconds per wall second (default {DEFAULT_SPEED:g})")
     p.add_argument("--port", type=int, help="replay server port (default: a free one on 127.0.0.1)")
-    p.add_argument("--thermometers", help="comma-separated ROM thermometers the observer fuses (default: the node "
-                                          f"map's; replay: {','.join(DEFAULT_THERMOMETERS)})")
+    p.add_argument("--thermometers", help="comma-separated ROM thermometers the observer fuses (default: the "
+                                          "placement's chosen set with --thermometers-from, else the node map's; "
+                                          f"replay: {','.join(DEFAULT_THERMOMETERS)})")
+    p.add_argument("--thermometers-from", metavar="PLACEMENT",
+                   help="thermometers at the locations a placement study chose: a `twin place` result folder or its "
+                        "chosen_sensors.csv (the ROM gets a point-temperature output at each)")
+    p.add_argument("--placement-axis", default="Z", help="with --thermometers-from: the drift axis whose chosen set "
+                                                         "is read (default Z)")
     p.add_argument("--room-air", default="T15", help="replay: the dataset channel of the room air (default T15)")
     p.add_argument("--spindle", default="spindle", help="replay: the dataset channel of the spindle speed, rpm")
     p.add_argument("--machine", default="vmc_ram", help="machine name or TOML path (default vmc_ram)")

@@ -21,45 +21,77 @@ import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import TwinInputError
-from .nodemap import AXES
+from .nodemap import AXES, NodeMap
 from .replay import machine_time
+
+if TYPE_CHECKING:
+    from asyncua import Node, ua
+    from asyncua.common.subscription import DataChangeNotif
+
+    from .observer import DriftObserver, Estimate
 
 log = logging.getLogger("thermal_twin")
 
 
 @dataclass
 class LiveStats:
-    """What a live session did."""
+    """What a live session did.
 
-    samples: int = 0               #: samples fused
-    late: int = 0                  #: values that arrived after their sample was fused (dropped)
-    missing: int = 0               #: thermometer readings missing (NaN or not received) in fused samples
-    reconnects: int = 0            #: connections re-established after a loss
+    Attributes
+    ----------
+    samples : int
+        Samples fused.
+    late : int
+        Values that arrived after their sample was fused (dropped).
+    missing : int
+        Thermometer readings missing (NaN or not received) in fused samples.
+    reconnects : int
+        Connections re-established after a loss.
+    wall_s : float
+        Wall time of the session, s.
+    last : Estimate or None
+        The last estimate (:class:`~twin.live.observer.Estimate`).
+    history : list
+        (machine time s, drift (3,) µm, 95 % half-band (3,) µm) per fused sample.
+    """
+
+    samples: int = 0
+    late: int = 0
+    missing: int = 0
+    reconnects: int = 0
     wall_s: float = 0.0
-    last: object = None            #: the last :class:`~twin.live.observer.Estimate`
-    history: list = field(default_factory=list)   #: (time_s, drift (3,), band (3,)) per sample
+    last: Estimate | None = None
+    history: list = field(default_factory=list)
 
 
 class CsvLog:
-    """The estimates as CSV (µm, units in the headers), written to ``<path>.part`` and renamed at close."""
+    """The estimates as CSV (µm, units in the headers), written to ``<path>.part`` and renamed at close.
 
-    def __init__(self, path):
+    Parameters
+    ----------
+    path : str or Path
+        The log file.
+    """
+
+    def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         self.part = self.path.with_name(self.path.name + ".part")
         self.file = open(self.part, "w", encoding="utf-8")
         cols = ["time_s"] + [f"{a}_{k}_um" for a in AXES for k in ("estimate", "band95", "compensation")]
         self.file.write(",".join(cols + ["thermometers_used"]) + "\n")
 
-    def write(self, e):
+    def write(self, e: Estimate) -> None:
+        """Append one estimate: time (s), per axis the estimate, band and compensation (µm), readings used."""
         row = [f"{e.time_s:.10g}"] + [f"{v:.6g}" for a in range(3)
                                       for v in (e.drift_um[a], e.band_um[a], -e.drift_um[a])]
         self.file.write(",".join(row + [str(e.used)]) + "\n")
 
-    def close(self, keep=True):
+    def close(self, keep: bool = True) -> None:
         """Rename the log into place, or remove it (``keep=False``: nothing was fused)."""
         self.file.flush()
         os.fsync(self.file.fileno())
@@ -71,10 +103,36 @@ class CsvLog:
 
 
 class LiveClient:
-    """Run ``observer`` (:class:`~twin.live.observer.DriftObserver`) on the sensors of ``node_map`` at ``endpoint``."""
+    """Run an observer on the sensors of a node map at an OPC UA endpoint (see the module docstring).
 
-    def __init__(self, endpoint, node_map, observer, log_path=None, late_after_s=1.0, backoff_s=0.2,
-                 max_backoff_s=5.0, timeout_s=10.0, publish_ms=20):
+    Parameters
+    ----------
+    endpoint : str
+        ``opc.tcp://host:port/…``.
+    node_map : NodeMap
+        The sensor, thermometer and output nodes.
+    observer : DriftObserver
+        The observer; its thermometers must all be in ``node_map``.
+    log_path : str or Path, optional
+        CSV log of every fused sample.
+    late_after_s : float
+        Wall seconds to wait for a sample's missing readings before fusing it.
+    backoff_s, max_backoff_s : float
+        First and longest wait before a reconnection, s (doubling in between).
+    timeout_s : float
+        Request timeout of the OPC UA client, s.
+    publish_ms : int
+        Publishing interval of the subscription, ms.
+
+    Raises
+    ------
+    TwinInputError
+        If the node map lacks a node for one of the observer's thermometers.
+    """
+
+    def __init__(self, endpoint: str, node_map: NodeMap, observer: DriftObserver, log_path: str | Path | None = None,
+                 late_after_s: float = 1.0, backoff_s: float = 0.2, max_backoff_s: float = 5.0, timeout_s: float = 10.0,
+                 publish_ms: int = 20) -> None:
         self.endpoint, self.map, self.observer = endpoint, node_map, observer
         missing = [t for t in observer.thermometers if t not in node_map.thermometers]
         if missing:
@@ -89,11 +147,13 @@ class LiveClient:
         self._queue, self._subscribed, self.csv = None, False, None
 
     # ------------------------------------------------------------------ subscription callbacks
-    def datachange_notification(self, node, value, data):
+    def datachange_notification(self, node: Node, value: float | None, data: DataChangeNotif) -> None:
+        """asyncua's callback for a monitored value: queue (key, machine time s, value)."""
         stamp = data.monitored_item.Value.SourceTimestamp
         self._queue.put_nowait((self._key_of[node.nodeid], machine_time(stamp), value))
 
-    def status_change_notification(self, status):
+    def status_change_notification(self, status: ua.StatusChangeNotification) -> None:
+        """asyncua's callback for a subscription status change (the session is gone): reconnect."""
         self._lost.set()
 
     # ------------------------------------------------------------------ sample assembly
@@ -181,7 +241,7 @@ class LiveClient:
 
     async def _session(self, stop):
         """One connection: subscribe, then fuse samples until ``stop()`` or the connection is lost."""
-        from asyncua import Client
+        from asyncua import Client, ua
 
         client = Client(self.endpoint, timeout=self.timeout_s, watchdog_intervall=max(0.2, self.timeout_s / 4))
         self._lost, self._subscribed = asyncio.Event(), False
@@ -207,7 +267,7 @@ class LiveClient:
         finally:
             try:
                 await asyncio.wait_for(client.disconnect(), timeout=1.0)
-            except Exception:              # the server may already be gone: nothing to close politely
+            except (ConnectionError, OSError, asyncio.TimeoutError, ua.UaError):   # the server is gone already
                 client.disconnect_socket()
 
     @staticmethod
@@ -217,8 +277,16 @@ class LiveClient:
             return float(e.band_um[axis])
         return float(-e.drift_um[axis] if key.endswith("_compensation") else e.drift_um[axis])
 
-    async def run(self, until_time_s=np.inf, max_wall_s=np.inf):
-        """Run until a sample at machine time ≥ ``until_time_s`` is fused or ``max_wall_s`` have passed."""
+    async def run(self, until_time_s: float = np.inf, max_wall_s: float = np.inf) -> LiveStats:
+        """Run until a sample at machine time ≥ ``until_time_s`` (s) is fused or ``max_wall_s`` wall s have passed.
+
+        Connection losses are retried with backoff; a wrong node map raises at once.
+
+        Returns
+        -------
+        LiveStats
+            What the session did.
+        """
         from asyncua import ua
 
         self._queue = asyncio.Queue()

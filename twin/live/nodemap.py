@@ -36,26 +36,50 @@ OUTPUT_KEYS = tuple(f"{a}{s}" for a in AXES for s in ("", "_band", "_compensatio
 
 @dataclass
 class NodeMap:
-    """Node ids (strings) of the inputs, thermometers and outputs; ``source`` names the file."""
+    """Node ids (OPC UA strings) of the inputs, thermometers and outputs.
+
+    Attributes
+    ----------
+    inputs : dict
+        ``spindle_speed`` (rpm) and ``room_air`` (°C) → node id.
+    thermometers : dict
+        ROM thermometer name → node id (°C).
+    outputs : dict
+        ``Z``, ``Z_band``, ``Z_compensation`` … → node id (µm).
+    source : str
+        The file the map was read from (named in errors).
+    """
 
     inputs: dict
     thermometers: dict
     outputs: dict = field(default_factory=dict)
     source: str = "<node map>"
 
-    def sensors(self):
+    def sensors(self) -> list[tuple[str, str]]:
         """(key, node id) of every node read: the inputs, then the thermometers."""
         return [*self.inputs.items(), *self.thermometers.items()]
 
-    def where(self, key):
-        """``file: [section] key = 'node'`` for an error message."""
+    def where(self, key: str) -> str:
+        """Where a key is, for an error message.
+
+        Parameters
+        ----------
+        key : str
+            An input, thermometer or output key.
+
+        Returns
+        -------
+        str
+            ``file: [section] key = 'node'``.
+        """
         for section in ("inputs", "thermometers", "outputs"):
             table = getattr(self, section)
             if key in table:
                 return f"{self.source}: [{section}] {key} = {table[key]!r}"
         return f"{self.source}: {key}"
 
-    def to_toml(self):
+    def to_toml(self) -> str:
+        """The map as the TOML text :func:`load_node_map` reads."""
         lines = []
         for section in ("inputs", "thermometers", "outputs"):
             lines += [f"[{section}]"] + [f'{k} = "{v}"' for k, v in getattr(self, section).items()] + [""]
@@ -63,19 +87,27 @@ class NodeMap:
 
 
 def _node_id(text, where):
+    """``text`` if it parses as an OPC UA node id, else an error naming ``where``."""
     from asyncua import ua
 
     if not isinstance(text, str):
         raise TwinInputError(f"{where}: a node id must be a string like \"ns=2;s=T01\", got {text!r}")
     try:
         ua.NodeId.from_string(text)
-    except Exception:
+    except ua.UaStringParsingError:          # what asyncua raises for any malformed node id string
         raise TwinInputError(f"{where} = {text!r}: not an OPC UA node id (use \"ns=2;s=T01\")") from None
     return text
 
 
-def load_node_map(path):
-    """Read and check a node map TOML file (see the module docstring)."""
+def load_node_map(path: str | Path) -> NodeMap:
+    """Read and check a node map TOML file (see the module docstring).
+
+    Raises
+    ------
+    TwinInputError
+        Naming the file, section, key and value: invalid TOML, an unknown section or key, a missing input, no
+        thermometer, a node id that does not parse.
+    """
     path = Path(path)
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))

@@ -1,335 +1,270 @@
 """A real-time state observer on the ROM: a few thermometers + spindle speed + room air → field and TCP drift.
 
-The model is the ROM's plant state space (:meth:`twin.rom.reduction.ReducedModel.plant_state_space`:
-reduced modal coordinates z plus the air of the lagged zones, e.g. the enclosure), augmented for
-what the nominal twin does not know::
+:class:`DriftObserver` runs a Kalman filter (:class:`models.kalman.KalmanFilter`, with a covariance step
+specialised to the model's structure) on :class:`twin.live.model.ObserverModel`: the ROM's plant state space
+augmented with the disturbances the nominal twin may get wrong — estimated ones (source powers, zone airs,
+thermometer offsets) and considered ones whose uncertainty only widens the band (convection and power-model
+errors, the room-air offset, misplaced heat).  Each sample is a prediction over the interval since the
+previous one (the sample's inputs held over it) and a measurement update with the thermometers read (NaN
+readings are skipped).  The estimated drift is Gaussian: its 95 % band is ±1.96 σ of the posterior.
 
-    x = [ z (r) | w lagged air (l), °C | d input disturbances (m_d) | b thermometer offsets (p), °C ]
-
-    ż = −Λ z + B (u + E d),  ẇ = (u_room − w)/τ + ν_w,  ḋ = −d/τ_d + ν_d,  ḃ = 0
-    y_T = C_T [z, w] + D_T (u + E d) + c_T + b + v,     drift = C_XYZ [z, w] + D_XYZ (u + E d) + c_XYZ
-
-u are the plant inputs made from what the machine publishes: spindle speed (rpm → the power of the
-spindle-driven sources through the ROM's power models), the feeds (0 unless given) and the room air
-(°C, for every zone that does not lag).  It is discretised exactly (ZOH for the inputs, Van Loan for
-the process noise, :func:`models.kalman.discretize`) for each sample interval met, and filtered with
-:class:`models.kalman.KalmanFilter` (NaN readings are skipped).  Covariances, and where they come from:
-
-* thermometer offsets b: DS18S20 accuracy ±0.5 °C uniform (:data:`twin.core.noise.MODELS`) → prior
-  variance 0.5²/3 K², constant in time: the filter learns each offset against the model while the
-  machine is near its known start state, instead of treating a constant offset as white noise;
-* R (per thermometer): the DS18S20 resolution 0.0625 °C as quantisation noise 0.0625²/12 K², plus
-  the ROM's reduction error against the full FE, 2.43e-3 K worst over the shipped scenarios
-  (docs/rom_fmu.md, r = 80), as a variance; plus :data:`MODEL_ERROR_K` for thermometer-level model
-  error not carried by the input disturbances below (a chosen value, not fitted);
-* d: one first-order Gauss–Markov process ḋ = −d/τ_d + ν (stationary σ, correlation time
-  :data:`DISTURBANCE_TIME_S`, intensity 2σ²/τ_d) per zone ambient (σ = :data:`AMBIENT_SIGMA_K`) and
-  per heat source (σ = :data:`POWER_SIGMA_FRACTION` of its reference power): the unmodelled effects
-  of the gap diagnosis (wrong convection, air pockets, wrong power models) act like slowly varying
-  biased inputs; bounded (not random walks), so directions the thermometers cannot see keep a finite
-  band and the gain settles;
-* lagged air w: σ = :data:`AMBIENT_SIGMA_K` about its first-order lag (intensity 2σ²/τ of the lag).
-
-The estimated drift is Gaussian: its 95 % band is ±1.96 σ.  Everything is arrays after construction.
-A step costs the covariance recursion of the ~100-state model (block-structured, see
-:class:`_ModalKalmanFilter`) until the gain settles, then a few matrix–vector products.  The sizes above
-give the noise model's shape; its size is one common factor on every covariance,
-:data:`COVARIANCE_SCALE`, fitted on training records for 95 % Z coverage (it changes the band, not the
-estimates; docs/live.md has the rule and the held-out coverage).
+**Adaptive widening.**  When the thermometers disagree with the model more than its covariance allows, the
+model is off in a way its disturbances do not describe.  The normalised innovation squared (NIS, χ² with as
+many degrees of freedom as readings) is averaged over a window of machine time (:attr:`Adaptation.window_s`,
+exponential forgetting); while that average ā exceeds 1, the process noise of the disturbances is multiplied
+by ā^:attr:`Adaptation.power` (covariance matching: a model error the filter does not expect inflates the
+uncertainty it propagates), which widens the band and lets the filter follow.  ā = 1 leaves the filter as
+designed.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve
+from numpy.typing import ArrayLike
 
-from models.kalman import KalmanFilter, discretize
-
-from ..core.noise import MODELS
 from ..errors import TwinInputError
+from ..rom.reduction import ReducedModel
+from .filtering import ModalKalmanFilter
+from .model import AXES, NoiseModel, ObserverModel
 
-AXES = ("X", "Y", "Z")
 Z95 = 1.959963984540054
-#: Thermometer accuracy, resolution (°C) of the DS18S20 model the twin's records use.
-OFFSET_C = MODELS["DS18S20"]["offset_per_sensor"]
-RESOLUTION_C = MODELS["DS18S20"]["resolution"]
-#: Worst ROM (r = 80) − FE thermometer error over the shipped scenarios, K (docs/rom_fmu.md).
-ROM_ERROR_K = 2.43e-3
-#: Thermometer-level error of the nominal twin against a machine with unmodelled effects, K (rms).
-MODEL_ERROR_K = 0.05
-#: Standard deviation of each unmodelled zone-ambient error (and of the lagged air about its lag), K.
-AMBIENT_SIGMA_K = 1.0
-#: Standard deviation of each unmodelled heat-source error, fraction of its reference power.
-POWER_SIGMA_FRACTION = 0.3
-#: Correlation time of the input disturbances (first-order Gauss–Markov), s.
-DISTURBANCE_TIME_S = 4 * 3600.0
-#: Prior standard deviation of the start state about the idle steady state in the room air, K.
-START_SPREAD_K = 0.3
-#: Common factor on every covariance above (process noise, measurement noise, prior), fitted on training
-#: records by ``python bench/bench_live.py --calibrate`` (see :func:`covariance_scale_for_coverage`).
-#: Scaling all covariances by one factor leaves the Kalman gain, hence the estimates, unchanged and
-#: scales the band by its square root: the shape of the noise model is chosen, its size is fitted.
-COVARIANCE_SCALE = 0.1638
-#: Relative change of the Kalman gain per second of like steps below which it counts as stationary, 1/s.
-GAIN_TOLERANCE = 1e-7
+
+
+@dataclass(frozen=True)
+class Adaptation:
+    """The NIS-driven widening of the process noise (see the module docstring).
+
+    Attributes
+    ----------
+    window_s : float
+        Time constant of the exponential average of NIS per reading, s of machine time (0: no adaptation).
+    power : float
+        Exponent of the inflation ā^power applied to the disturbances' process noise, 1.
+    limit : float
+        Largest inflation factor, 1.
+    """
+
+    window_s: float = 0.0
+    power: float = 1.0
+    limit: float = 1e4
 
 
 @dataclass
 class Estimate:
-    """The observer's estimate at one sample time."""
+    """The observer's estimate at one sample time.
 
-    time_s: float
-    drift_um: np.ndarray        #: (3,) X, Y, Z drift, µm
-    band_um: np.ndarray         #: (3,) half-width of the 95 % band, µm
-    temperatures_C: np.ndarray  #: (k,) every ROM thermometer (:attr:`DriftObserver.field_names`), °C
-    used: int                   #: thermometer readings fused
-
-
-class _ModalKalmanFilter(KalmanFilter):
-    """:class:`~models.kalman.KalmanFilter` whose covariance step uses the structure of the observer's model.
-
-    The transition matrix is block upper triangular with a diagonal first block (the ROM's modal
-    coordinates are decoupled first-order filters: e^{−λh}), F = [[diag a, F₁₂], [0, F₂₂]], so
-    F P Fᵀ costs O(r² c) with c the few other states instead of O(n³).  The measurement update is the
-    symmetrised standard form P − K S Kᵀ (O(n² p)); the Joseph form of the base class costs two n³
-    products, which dominated the step.  Same numbers as the base class to rounding (tested).
+    Attributes
+    ----------
+    time_s : float
+        Machine time, s.
+    drift_um : numpy.ndarray
+        (3,) X, Y, Z drift, µm.
+    band_um : numpy.ndarray
+        (3,) half-width of the 95 % band, µm.
+    temperatures_C : numpy.ndarray
+        (k,) every ROM thermometer (:attr:`DriftObserver.field_names`), °C.
+    used : int
+        Thermometer readings fused.
+    inflation : float
+        The adaptive factor on the disturbances' process noise at this sample, 1.
     """
 
-    def __init__(self, order, *args):
-        super().__init__(*args)
-        self.order, self.gain = order, None     # gain: K of the last update that used every measurement
-
-    def predict(self, u):
-        r, F, P = self.order, self.F, self.P
-        a, F12, F22 = np.diag(F)[:r], F[:r, r:], F[r:, r:]
-        P11, P12, P22 = P[:r, :r], P[:r, r:], P[r:, r:]
-        T11 = a[:, None] * P11 + F12 @ P12.T
-        T12 = a[:, None] * P12 + F12 @ P22
-        T21, T22 = F22 @ P12.T, F22 @ P22
-        top = np.hstack([T11 * a[None, :] + T12 @ F12.T, T12 @ F22.T])
-        bottom = np.hstack([T21 * a[None, :] + T22 @ F12.T, T22 @ F22.T])
-        P = np.vstack([top, bottom]) + self.Q
-        self.P = 0.5 * (P + P.T)
-        self.x = F @ self.x + self.G @ np.asarray(u, float)
-        return self
-
-    def update(self, y, u):
-        y = np.asarray(y, float)
-        seen = np.isfinite(y)
-        self.gain = None
-        if not seen.any():
-            return np.nan
-        H = self.H[seen]
-        innovation = y[seen] - H @ self.x - self.J[seen] @ np.asarray(u, float)
-        HP = H @ self.P
-        S = HP @ H.T + self.R[np.ix_(seen, seen)]
-        factor = cho_factor(0.5 * (S + S.T))
-        K = cho_solve(factor, HP).T
-        self.gain = K if seen.all() else None
-        self.x = self.x + K @ innovation
-        P = self.P - K @ HP
-        self.P = 0.5 * (P + P.T)
-        return float(innovation @ cho_solve(factor, innovation))
-
-
-def _checked_thermometers(rom, thermometers):
-    """The thermometer names as a list, each a surface thermometer output of ``rom`` (else a clear error)."""
-    thermometers = list(thermometers)
-    if not thermometers:
-        raise TwinInputError("the observer needs at least one thermometer")
-    kinds = dict(zip(rom.output_names, rom.output_kinds))
-    for name in thermometers:
-        if kinds.get(name) != "temperature":
-            known = [n for n, k in kinds.items() if k == "temperature"]
-            raise TwinInputError(f"thermometer {name!r} is not a surface thermometer of the ROM of "
-                                 f"{rom.machine!r}; thermometers: {', '.join(known)}")
-    return thermometers
-
-
-def _disturbance_sigmas(rom, input_names, ambient_sigma_K, power_sigma_fraction):
-    """Standard deviation of the slow error of each disturbed plant input: W for a heat source, K for an air."""
-    sigmas = []
-    for name in input_names:
-        if name.startswith("power:"):
-            src = next(s for s in rom.sources if f"power:{s['name']}" == name)
-            sigmas.append(power_sigma_fraction * src["coefficient_W"])
-        else:
-            sigmas.append(ambient_sigma_K)
-    return sigmas
+    time_s: float
+    drift_um: np.ndarray
+    band_um: np.ndarray
+    temperatures_C: np.ndarray
+    used: int
+    inflation: float = 1.0
 
 
 class DriftObserver:
-    """Kalman observer of the ROM driven by spindle speed and room air, fusing ≤ a few thermometers.
+    """Kalman observer of the ROM driven by spindle speed and room air, fusing a few thermometers.
 
     Parameters
     ----------
-    rom : :class:`~twin.rom.reduction.ReducedModel`
-    thermometers : names of ROM thermometer outputs that are measured (``T03`` …)
-    model_error_K, ambient_sigma_K, power_sigma_fraction, disturbance_time_s, covariance_scale : see the
-        module constants
+    rom : ReducedModel
+        The machine's ROM (its thermometer outputs may include placement points,
+        :func:`twin.rom.points.with_point_thermometers`).
+    thermometers : list of str
+        Names of the ROM thermometer outputs that are measured (``T18`` …), in the order of the readings.
+    noise : NoiseModel
+        Sizes of the noise model (default: :data:`NOISE`).
+    adaptation : Adaptation
+        The NIS-driven widening (default: :data:`ADAPTATION`).
+    sensors : dict, optional
+        Thermometer name → sensor model (``DS18S20``, the default, or ``S65`` for thermal-camera spots), which
+        sets its offset prior and reading noise (:class:`~twin.live.model.ObserverModel`).
     """
 
-    def __init__(self, rom, thermometers, model_error_K=MODEL_ERROR_K, ambient_sigma_K=AMBIENT_SIGMA_K,
-                 power_sigma_fraction=POWER_SIGMA_FRACTION, disturbance_time_s=DISTURBANCE_TIME_S,
-                 covariance_scale=COVARIANCE_SCALE):
-        thermometers = _checked_thermometers(rom, thermometers)
-        self.rom, self.thermometers = rom, thermometers
-        ss = rom.plant_state_space()
-        self.input_names = list(ss.input_names)
-        n, m = ss.A.shape[0], ss.B.shape[1]
-        # input disturbances on every zone ambient and heat source the plant takes (not the gradient)
-        dist = [j for j, name in enumerate(self.input_names) if name != "ambient_gradient"]
-        E = np.zeros((m, len(dist)))
-        E[dist, np.arange(len(dist))] = 1.0
-        p, md = len(thermometers), len(dist)
-        N = n + md + p
-        self._sizes = (n, md, p)
-        A = np.zeros((N, N))
-        A[:n, :n], A[:n, n:n + md] = ss.A, ss.B @ E
-        A[np.arange(n, n + md), np.arange(n, n + md)] = -1.0 / disturbance_time_s
-        self._A, self._B = A, np.vstack([ss.B, np.zeros((md + p, m))])
-        scale = _disturbance_sigmas(rom, [self.input_names[j] for j in dist], ambient_sigma_K, power_sigma_fraction)
-        # process-noise intensities (unit² per s)
-        Qc = np.zeros((N, N))
-        r = rom.order
-        lags = np.array([rom.zone_lags_s[z] for z in rom.lagged_zones])
-        Qc[np.arange(r, n), np.arange(r, n)] = 2 * ambient_sigma_K ** 2 / lags
-        Qc[np.arange(n, n + md), np.arange(n, n + md)] = 2 * np.square(scale) / disturbance_time_s
-        self._scale = float(covariance_scale)
-        self._Qc, self._disturbance_var = self._scale * Qc, np.square(scale)
-        kinds = dict(zip(rom.output_names, rom.output_kinds))
-
-        def rows(names):
-            idx = [rom.output_index(nm) for nm in names]
-            H = np.hstack([ss.C[idx], ss.D[idx] @ E, np.zeros((len(idx), p))])
-            return H, np.hstack([ss.D[idx], ss.offset[idx, None]])
-
-        H, J = rows(thermometers)
-        H[:, n + md:] = np.eye(p)
-        self._H, self._J = H, J
-        self.field_names = [nm for nm, k in kinds.items() if k == "temperature"]
-        self._L, self._M = rows(list(AXES))
-        self._Lf, self._Mf = rows(self.field_names)
-        self._R = self._scale * np.full(p, RESOLUTION_C ** 2 / 12 + ROM_ERROR_K ** 2 + model_error_K ** 2)
-        self._steps, self._power = {}, {}
-        self._room = self.plant_inputs(0.0, 1.0)[0] - self.plant_inputs(0.0, 0.0)[0]
-        self._kf = None
+    def __init__(self, rom: ReducedModel, thermometers: list[str], noise: NoiseModel | None = None,
+                 adaptation: Adaptation | None = None, sensors: dict | None = None) -> None:
+        self.model = ObserverModel(rom, thermometers, NOISE if noise is None else noise, sensors)
+        self.adaptation = ADAPTATION if adaptation is None else adaptation
+        self.rom, self.thermometers = rom, self.model.thermometers
+        self.field_names = self.model.field_names
+        self._power, self._kf = {}, None
+        self._room = np.r_[self.model.plant_inputs(0.0, 1.0)[0] - self.model.plant_inputs(0.0, 0.0)[0], 0.0]
         self.time_s = None
 
-    # ------------------------------------------------------------------ inputs
-    def plant_inputs(self, spindle_rpm, room_C, feed_mm_min=None):
-        """Plant inputs (k, m_p) and the augmented row [u, 1] for spindle speed (rpm) and room air (°C) arrays."""
-        rpm = np.atleast_1d(np.asarray(spindle_rpm, float))
-        room = np.broadcast_to(np.asarray(room_C, float), rpm.shape)
-        ambient = {z: room for z in self.rom.measured_zones}
-        return self.rom.plant_inputs_from_conditions(rpm, feed_mm_min, ambient, 0.0)
-
-    def _model(self, dt):
-        key = round(float(dt), 6)
-        if key not in self._steps:
-            if len(self._steps) > 64:          # irregular sampling: keep the cache bounded
-                self._steps.clear()
-            F, G, Q = discretize(self._A, self._B, key, self._Qc)
-            self._steps[key] = (F, np.hstack([G, np.zeros((len(F), 1))]), Q)
-        return self._steps[key]
-
     # ------------------------------------------------------------------ filtering
-    def start(self, time_s, spindle_rpm, room_C):
-        """Start from the idle steady state in the room air at ``time_s`` (spread :data:`START_SPREAD_K`)."""
-        n, md, p = self._sizes
-        u = self.plant_inputs(0.0, room_C)[0]
-        x0 = np.zeros(n + md + p)
-        x0[:n] = self.rom.plant_steady_state(u)
-        s = np.r_[self.rom.uniform_state, np.ones(n - self.rom.order)]
-        P0 = np.zeros((len(x0), len(x0)))
-        P0[:n, :n] = START_SPREAD_K ** 2 * np.outer(s, s) + (0.1 * START_SPREAD_K) ** 2 * np.diag(
-            np.r_[np.full(self.rom.order, s[:self.rom.order] @ s[:self.rom.order] / self.rom.order),
-                  np.ones(n - self.rom.order)])
-        P0[n + md:, n + md:] = np.eye(p) * OFFSET_C ** 2 / 3
-        P0[n:n + md, n:n + md] = np.diag(self._disturbance_var)
-        F, G, Q = self._model(1.0)
-        kf = _ModalKalmanFilter(self.rom.order, F, G, self._H, self._J, Q, self._R)
-        self._kf = kf.reset(x0, self._scale * P0)
-        self._gain = self._frozen = None
-        self.time_s, self._u = float(time_s), np.r_[u, 1.0]
+    def start(self, time_s: float, room_C: float) -> DriftObserver:
+        """Start from the idle steady state in the room air ``room_C`` (°C) at ``time_s`` (s)."""
+        model = self.model
+        x0, P0 = model.prior(room_C)
+        F, _, G, Q = model.matrices(1.0)
+        self._kf = ModalKalmanFilter(self.rom.order, F, G, model.H, model.J, Q, model.R, model.consider,
+                                     model.couplings).reset(x0, P0)
+        self.time_s, self._u = float(time_s), np.r_[model.plant_inputs(0.0, room_C)[0], 1.0]
+        self._nis, self.inflation = 1.0, 1.0
         return self
 
-    def step(self, time_s, spindle_rpm, room_C, temperatures_C):
-        """Fuse one sample: thermometer readings (°C, NaN = missing) in the order of ``thermometers``.
+    def step(self, time_s: float, spindle_rpm: float, room_C: float, temperatures_C: ArrayLike) -> Estimate | None:
+        """Fuse one sample: thermometer readings (°C, NaN = missing) in the order of :attr:`thermometers`.
 
-        The inputs over the interval since the previous sample are taken as the previous sample's
-        (held, as the machine reported them); a sample not later than the previous one is refused.
-        A NaN speed or room air keeps the previous input.  Returns ``None`` until a room air reading
-        has started the observer.
+        Parameters
+        ----------
+        time_s : float
+            Machine time of the sample, s; must be after the previous sample's.
+        spindle_rpm : float
+            Spindle speed, rpm (NaN: keep the previous input).
+        room_C : float
+            Room air, °C (NaN: keep the previous input).
+        temperatures_C : array_like
+            (p,) thermometer readings, °C.
 
-        Once the gain has settled (relative change < :data:`GAIN_TOLERANCE` between two steps of the
-        same interval with every thermometer read), the filter runs on that stationary gain and
-        covariance — the covariance recursion would return them unchanged — and leaves it at the
-        first sample with another interval or a missing reading.
+        Returns
+        -------
+        Estimate or None
+            None until a room air reading has started the observer.  The inputs over the interval since the
+            previous sample are this sample's readings, held (a record of the twin holds left limits: the
+            speed over the interval that ends at the sample).
+
+        Raises
+        ------
+        TwinInputError
+            If the sample is not later than the previous one.
         """
         y = np.asarray(temperatures_C, float).reshape(len(self.thermometers))
-        seen = np.isfinite(y)
-        kf = self._kf
-        if kf is None:
+        if self._kf is None:
             if not np.isfinite(room_C):
                 return None                    # no room air yet: nothing to start from
-            self.start(time_s, spindle_rpm, room_C)
-            kf, pattern = self._kf, None
+            self.start(time_s, room_C)
+            dt = None
         elif time_s <= self.time_s:
             raise TwinInputError(f"observer: sample time {time_s} s is not after the previous {self.time_s} s")
         else:
-            dt = round(float(time_s) - self.time_s, 6)
-            pattern = (dt, seen.all())
-            F, G, Q = self._model(dt)
+            dt = float(time_s) - self.time_s
+            self._u = self._inputs(spindle_rpm, room_C)
+            self._predict(dt)
             self.time_s = float(time_s)
-            if self._frozen is not None and self._frozen[0] == pattern:
-                kf.x = F @ kf.x + G @ self._u
-                self._set_input(spindle_rpm, room_C)
-                kf.x = kf.x + self._frozen[1] @ (y - self._H @ kf.x - self._J @ self._u)
-                u = self._u
-                return Estimate(self.time_s, self._L @ kf.x + self._M @ u, self._frozen[2],
-                                self._Lf @ kf.x + self._Mf @ u, int(seen.sum()))
-            self._frozen = None
-            kf.F, kf.G, kf.Q = F, G, Q
-            kf.predict(self._u)
-        self._set_input(spindle_rpm, room_C)
-        kf.update(y, self._u)
-        if pattern is not None and pattern[1]:
-            gain = kf.gain
-            last = self._gain
-            if last is not None and last[0] == pattern and \
-                    np.abs(gain - last[1]).max() <= GAIN_TOLERANCE * pattern[0] * np.abs(gain).max():
-                self._frozen = (pattern, gain, self._estimate(seen).band_um)
-            self._gain = (pattern, gain)
-        return self._estimate(seen)
+        model = self.model
+        H, L, Lf = model.output_rows(model.excitations(self._kf.x, self._u)) if model.feeds else (
+            model.H, model.L, model.Lf)
+        self._kf.H = H
+        nis = self._kf.update(y, self._u)
+        used = int(np.isfinite(y).sum())
+        if dt is not None and used:
+            self._adapt(nis / used, dt)
+        return self._estimate(L, Lf, used)
 
-    def _set_input(self, spindle_rpm, room_C):
-        """[u, 1] for a sample; the power part is cached per speed (machines run at a few speeds)."""
-        if np.isfinite(spindle_rpm) and np.isfinite(room_C):
-            power = self._power.get(spindle_rpm)
-            if power is None:
-                if len(self._power) > 4096:
-                    self._power.clear()
-                power = self._power[spindle_rpm] = self.plant_inputs(spindle_rpm, 0.0)[0]
-            self._u = np.r_[power + room_C * self._room, 1.0]
+    def expected_readings(self, time_s: float, spindle_rpm: float, room_C: float) -> np.ndarray:
+        """The thermometer readings the model predicts for the next sample, without changing the observer.
 
-    def _estimate(self, seen):
-        kf, u = self._kf, self._u
-        sd = np.sqrt(np.maximum(((self._L @ kf.P) * self._L).sum(axis=1), 0.0))
-        return Estimate(self.time_s, self._L @ kf.x + self._M @ u, Z95 * sd, self._Lf @ kf.x + self._Mf @ u,
-                        int(seen.sum()))
+        Parameters
+        ----------
+        time_s : float
+            Machine time of the next sample, s (after the present one).
+        spindle_rpm, room_C : float
+            Its spindle speed (rpm) and room air (°C), held over the interval up to it.
 
-    def field(self):
-        """The full FE temperature field (°C per thermal node) of the present state; needs a ROM built with
-        ``keep_basis=True`` (:func:`twin.rom.reduction.build_rom`)."""
+        Returns
+        -------
+        numpy.ndarray
+            (p,) readings, °C, offsets included.
+        """
+        model, u = self.model, self._inputs(spindle_rpm, room_C)
+        F, G, _ = self._transition(float(time_s) - self.time_s, u)
+        x = F @ self._kf.x + G @ u
+        return model.output_rows(model.excitations(x, u))[0] @ x + model.J @ u
+
+    def _transition(self, dt, u):
+        """``(F, G, Q)`` of the step of ``dt`` s with the inputs ``u`` from the present estimate (its excitations)."""
+        model = self.model
+        n, q = model.n, model.q
+        F0, dF, G, Q = model.matrices(dt)
+        F = F0.copy()
+        F[:n, n:n + q] = dF * model.excitations(self._kf.x, u)
+        return F, G, Q
+
+    def _predict(self, dt):
+        """The prediction over ``dt`` s, with the disturbances' process noise widened by the NIS."""
+        kf, n, q = self._kf, self.model.n, self.model.q
+        F, G, Q = self._transition(dt, self._u)
+        if self.inflation != 1.0:
+            Q = Q.copy()
+            Q[n:n + q, n:n + q] *= self.inflation
+        kf.F, kf.G, kf.Q = F, G, Q
+        kf.predict(self._u)
+
+    def _adapt(self, nis_per_reading, dt):
+        """Average the NIS per reading over the window and set the inflation of the next prediction."""
+        a = self.adaptation
+        if a.window_s <= 0:
+            return
+        keep = np.exp(-dt / a.window_s)
+        self._nis = keep * self._nis + (1.0 - keep) * nis_per_reading
+        self.inflation = float(min(a.limit, max(1.0, self._nis) ** a.power))
+
+    def _inputs(self, spindle_rpm, room_C):
+        """[u, 1] for a sample (the present inputs if either reading is NaN); the power part is cached per speed
+        (machines run at a few speeds)."""
+        if not (np.isfinite(spindle_rpm) and np.isfinite(room_C)):
+            return self._u
+        power = self._power.get(spindle_rpm)
+        if power is None:
+            if len(self._power) > 4096:
+                self._power.clear()
+            power = self._power[spindle_rpm] = np.r_[self.model.plant_inputs(spindle_rpm, 0.0)[0], 1.0]
+        return power + room_C * self._room
+
+    def _estimate(self, L, Lf, used):
+        kf, u, model = self._kf, self._u, self.model
+        sd = np.sqrt(np.maximum(((L @ kf.P) * L).sum(axis=1), 0.0))
+        return Estimate(self.time_s, L @ kf.x + model.M @ u, Z95 * sd, Lf @ kf.x + model.Mf @ u, used,
+                        self.inflation)
+
+    def field(self) -> np.ndarray:
+        """The full FE temperature field (°C per thermal node) of the present state.
+
+        Raises
+        ------
+        TwinInputError
+            If the ROM was built without its basis (``keep_basis=True`` in :func:`twin.rom.reduction.build_rom`).
+        """
         if self.rom.basis is None:
             raise TwinInputError("this ROM has no basis (build it with keep_basis=True) to map the state to the "
                                  "full field; Estimate.temperatures_C has the ROM thermometers")
         return self.rom.basis @ self._kf.x[:self.rom.order]
 
-    def run(self, times_s, spindle_rpm, room_C, temperatures_C):
-        """Filter a whole record; returns (drift (N, 3) µm, 95 % half-band (N, 3) µm)."""
+    def run(self, times_s: ArrayLike, spindle_rpm: ArrayLike, room_C: ArrayLike,
+            temperatures_C: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Filter a whole record.
+
+        Parameters
+        ----------
+        times_s : array_like
+            (k,) sample times, s, increasing.
+        spindle_rpm, room_C : array_like
+            (k,) spindle speed (rpm) and room air (°C).
+        temperatures_C : array_like
+            (k, p) thermometer readings, °C.
+
+        Returns
+        -------
+        tuple of numpy.ndarray
+            The drift (k, 3) and the half-width of its 95 % band (k, 3), µm.
+        """
         T = np.asarray(temperatures_C, float)
         drift, band = np.empty((len(times_s), 3)), np.empty((len(times_s), 3))
         for k, t in enumerate(times_s):
@@ -338,27 +273,47 @@ class DriftObserver:
         return drift, band
 
 
-def covariance_scale_for_coverage(errors, bands, level=0.95):
-    """Factor on every covariance that makes ``level`` of the training errors fall inside the scaled band.
-
-    ``errors`` (µm) are estimate − truth and ``bands`` (µm) the 95 % half-widths of observers run with
-    scale 1 on training records (pooled).  The band scales with the square root of the factor and the
-    estimates do not change, so the factor is the squared ``level`` quantile of |error| / band.
-    """
-    ratio = np.abs(np.asarray(errors, float)) / np.asarray(bands, float)
-    return float(np.quantile(ratio, level) ** 2)
+#: The noise model's sizes (:class:`~twin.live.model.NoiseModel`): set from the physics, but for the misplaced
+#: heat κ = 0.05, chosen on the training records by the rule of ``python bench/bench_live.py --calibrate``
+#: (docs/live.md, "Calibration protocol").
+NOISE = NoiseModel(discrepancy=0.05)
+#: The adaptive widening (:class:`Adaptation`): a 1 h window, chosen with κ on the training records.
+ADAPTATION = Adaptation(window_s=3600.0)
 
 
-def choose_thermometers(rom, k=6, axis="Z", candidates=None, step_s=300.0, horizon_s=4 * 3600.0):
+def choose_thermometers(rom: ReducedModel, k: int = 6, axis: str = "Z", candidates: list[str] | None = None,
+                        step_s: float = 300.0, horizon_s: float = 4 * 3600.0) -> list[str]:
     """Greedy choice of ``k`` ROM thermometers that minimise the observer's posterior std of ``axis``.
 
     Model-based (no record is used, so no scenario is favoured): for each candidate added to the set
-    chosen so far, the covariance recursion of :class:`DriftObserver` is run for ``horizon_s`` at
-    ``step_s`` with every thermometer read, starting from the observer's prior, at full spindle speed;
-    the candidate giving the smallest final drift std is kept.  Returns the names in order of choice.
+    chosen so far, the observer runs for ``horizon_s`` at ``step_s`` at full spindle speed in 20 °C air, reading
+    what the nominal model predicts (so the innovations are zero and the covariance follows the model); the
+    candidate giving the smallest final drift std is kept.
+
+    Parameters
+    ----------
+    rom : ReducedModel
+        The ROM; placement points added with :func:`twin.rom.points.with_point_thermometers` are candidates too.
+    k : int
+        How many thermometers to choose.
+    axis : str
+        ``X``, ``Y`` or ``Z``.
+    candidates : list of str, optional
+        ROM thermometer outputs to choose among (default: every one).
+    step_s, horizon_s : float
+        Sample interval and length of the model run, s.
+
+    Returns
+    -------
+    list of str
+        The names in order of choice.
     """
     names = [n for n, kd in zip(rom.output_names, rom.output_kinds) if kd == "temperature"] \
         if candidates is None else list(candidates)
+    if axis not in AXES:
+        raise TwinInputError(f"axis must be one of {', '.join(AXES)}, got {axis!r}")
+    if not 0 < k <= len(names):
+        raise TwinInputError(f"cannot choose {k} thermometers among {len(names)} candidates")
     rpm, chosen = float(rom.limits["max_spindle_rpm"]), []
     j = AXES.index(axis)
     for _ in range(k):
@@ -366,10 +321,17 @@ def choose_thermometers(rom, k=6, axis="Z", candidates=None, step_s=300.0, horiz
         for name in names:
             if name in chosen:
                 continue
-            obs = DriftObserver(rom, chosen + [name])
-            for step in range(int(horizon_s / step_s) + 1):
-                e = obs.step(step * step_s, rpm, 20.0, np.full(len(chosen) + 1, 20.0))
-            if best is None or e.band_um[j] < best[0]:
-                best = (e.band_um[j], name)
+            band = _final_band(DriftObserver(rom, chosen + [name]), rpm, step_s, horizon_s)[j]
+            if best is None or band < best[0]:
+                best = (band, name)
         chosen.append(best[1])
     return chosen
+
+
+def _final_band(observer, rpm, step_s, horizon_s):
+    """The 95 % half-band (3,) after running ``observer`` on the readings its model expects, µm."""
+    e = observer.step(0.0, rpm, 20.0, np.full(len(observer.thermometers), np.nan))
+    for step in range(1, int(horizon_s / step_s) + 1):
+        t = step * step_s
+        e = observer.step(t, rpm, 20.0, observer.expected_readings(t, rpm, 20.0))
+    return e.band_um

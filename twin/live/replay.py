@@ -14,6 +14,9 @@ import datetime as _dt
 import time
 
 import numpy as np
+from numpy.typing import ArrayLike
+
+from .nodemap import NodeMap
 
 NAMESPACE = "urn:thermal-twin:live"
 #: Source timestamp of machine time 0 (a fixed date, so replays are reproducible).
@@ -22,22 +25,58 @@ OUTPUT_NODES = {f"{a}{key}": f"{a}_{name}" for a in "XYZ"
                 for key, name in (("", "estimate_um"), ("_band", "band95_um"), ("_compensation", "compensation_um"))}
 
 
-def timestamp(time_s):
-    """The source timestamp of machine time ``time_s``."""
+def timestamp(time_s: float) -> _dt.datetime:
+    """The source timestamp of a machine time.
+
+    Parameters
+    ----------
+    time_s : float
+        Machine time, s after :data:`EPOCH`.
+
+    Returns
+    -------
+    datetime.datetime
+        UTC timestamp.
+    """
     return EPOCH + _dt.timedelta(seconds=float(time_s))
 
 
-def machine_time(stamp):
-    """Machine time (s) of a source timestamp."""
+def machine_time(stamp: _dt.datetime) -> float:
+    """The machine time of a source timestamp.
+
+    Parameters
+    ----------
+    stamp : datetime.datetime
+        Source timestamp (a naive one is taken as UTC).
+
+    Returns
+    -------
+    float
+        Machine time, s after :data:`EPOCH`.
+    """
     if stamp.tzinfo is None:
         stamp = stamp.replace(tzinfo=_dt.timezone.utc)
     return (stamp - EPOCH).total_seconds()
 
 
-def default_node_map(thermometers, room_air="T15", spindle="spindle", index=2):
-    """The node map (:class:`~twin.live.nodemap.NodeMap`) of a replay server publishing these channels."""
-    from .nodemap import NodeMap
+def default_node_map(thermometers: list[str], room_air: str = "T15", spindle: str = "spindle",
+                     index: int = 2) -> NodeMap:
+    """The node map of a replay server publishing these channels.
 
+    Parameters
+    ----------
+    thermometers : list of str
+        The thermometer channels (°C); each is its own node ``ns=<index>;s=<name>``.
+    room_air, spindle : str
+        The channels of the room air (°C) and spindle speed (rpm).
+    index : int
+        The server's namespace index (:attr:`ReplayServer.index`).
+
+    Returns
+    -------
+    NodeMap
+        Inputs, thermometers and the writable output nodes (µm) of :data:`OUTPUT_NODES`.
+    """
     node = lambda name: f"ns={index};s={name}"      # noqa: E731
     return NodeMap({"spindle_speed": node(spindle), "room_air": node(room_air)},
                    {t: node(t) for t in thermometers},
@@ -45,16 +84,27 @@ def default_node_map(thermometers, room_air="T15", spindle="spindle", index=2):
 
 
 class ReplayServer:
-    """An asyncua server on ``host:port`` publishing ``channels`` (names → values); use as ``async with``."""
+    """An asyncua server on ``host:port`` publishing ``channels``; use as ``async with``.
 
-    def __init__(self, channels, host="127.0.0.1", port=4840):
+    Parameters
+    ----------
+    channels : list of str
+        The replayed channel names: one Double variable ``ns=<index>;s=<name>`` each, in the channel's unit.
+    host : str
+        Address to listen on.
+    port : int
+        TCP port.
+    """
+
+    def __init__(self, channels: list[str], host: str = "127.0.0.1", port: int = 4840) -> None:
         self.names = list(channels)
         self.endpoint = f"opc.tcp://{host}:{port}/thermal-twin/"
         self.server = self.index = None
         self.nodes = {}
         self.published = 0
 
-    async def __aenter__(self):
+    async def __aenter__(self) -> ReplayServer:
+        """Build the address space (every channel empty: NaN before machine time 0) and start serving."""
         from asyncua import Server, ua
 
         server = Server()
@@ -76,11 +126,12 @@ class ReplayServer:
         self.server = server
         return self
 
-    async def __aexit__(self, *exc):
+    async def __aexit__(self, *exc) -> None:
+        """Stop the server."""
         await self.server.stop()
 
-    async def publish(self, time_s, values, names=None):
-        """Publish one sample: ``values`` of ``names`` (default every channel) stamped with machine time."""
+    async def publish(self, time_s: float, values: ArrayLike, names: list[str] | None = None) -> None:
+        """Publish one sample: ``values`` of ``names`` (default every channel) stamped with machine time ``time_s`` (s)."""
         from asyncua import ua
 
         stamp = timestamp(time_s)
@@ -90,13 +141,29 @@ class ReplayServer:
             await self.server.write_attribute_value(self.nodes[name].nodeid, dv)
         self.published += 1
 
-    async def read_output(self, key):
-        """The value a client wrote to an output node (``Z``, ``Z_band``, ``Z_compensation`` …)."""
+    async def read_output(self, key: str) -> float:
+        """The value (µm) a client wrote to an output node (``Z``, ``Z_band``, ``Z_compensation`` …)."""
         return await self.nodes[OUTPUT_NODES[key]].read_value()
 
-    async def replay(self, time_s, values, speed=1.0, start=0):
-        """Publish rows ``start…`` of ``values`` (k, channels) at machine times ``time_s``, ``speed`` × faster
-        than real time; returns the wall seconds taken."""
+    async def replay(self, time_s: ArrayLike, values: ArrayLike, speed: float = 1.0, start: int = 0) -> float:
+        """Publish rows ``start…`` of ``values`` at their machine times, ``speed`` × faster than real time.
+
+        Parameters
+        ----------
+        time_s : array_like
+            (k,) machine times, s.
+        values : array_like
+            (k, channels) values in the channels' units.
+        speed : float
+            Machine seconds per wall second.
+        start : int
+            The first row published.
+
+        Returns
+        -------
+        float
+            The wall seconds taken.
+        """
         t = np.asarray(time_s, float)
         wall0 = time.perf_counter()
         for i in range(start, len(t)):

@@ -738,16 +738,21 @@ def channel_labels(machine, channels=None):
     return out
 
 
-def rom_cache_path(machine, order, method="krylov", points=None, kinds=DEFAULT_KINDS):
+def rom_cache_path(machine, order, method="krylov", points=None, kinds=DEFAULT_KINDS, keep_basis=False):
     key = hashlib.sha256(json.dumps([machine_digest(machine), int(order), method,
                                      None if points is None else [float(p) for p in points],
                                      sorted(kinds)]).encode()).hexdigest()[:16]
-    return user_cache_dir() / f"rom-{method}-r{int(order)}-{key}.npz"
+    return user_cache_dir() / f"rom-{method}-r{int(order)}-{key}{'-basis' if keep_basis else ''}.npz"
 
 
-def cached_rom(machine, order=DEFAULT_ORDER, method="krylov", points=None, kinds=DEFAULT_KINDS, rebuild=False):
-    """:func:`build_rom`, or the ROM saved earlier for the same machine matrices and settings."""
-    path = rom_cache_path(machine, order, method, points, kinds)
+def cached_rom(machine, order=DEFAULT_ORDER, method="krylov", points=None, kinds=DEFAULT_KINDS, rebuild=False,
+               keep_basis=False):
+    """:func:`build_rom`, or the ROM saved earlier for the same machine matrices and settings.
+
+    ``keep_basis`` keeps (and caches, in a file of its own) the basis V (n, r), e.g. to add point
+    thermometers (:func:`twin.rom.points.with_point_thermometers`).
+    """
+    path = rom_cache_path(machine, order, method, points, kinds, keep_basis)
     if path.exists() and not rebuild and checked(path) is not None:
         rom = ReducedModel.load(path)
         rom.machine = machine.name          # not in the key: a renamed copy of a machine reuses the ROM
@@ -755,8 +760,8 @@ def cached_rom(machine, order=DEFAULT_ORDER, method="krylov", points=None, kinds
         rom.output_labels = [labels.get(n, "") for n in rom.output_names]   # nor are labels: text only
         rom.info["from_cache"] = str(path)
         return rom
-    rom = build_rom(machine, order, method, points, kinds)
-    write_checked(path, rom.save)
+    rom = build_rom(machine, order, method, points, kinds, keep_basis)
+    write_checked(path, lambda target: rom.save(target, keep_basis))
     rom.info["from_cache"] = None
     return rom
 
