@@ -34,7 +34,7 @@ class AGOANFISRegressor(GreySeriesRegressor):
     y_reference_ : first training target
     """
 
-    def __init__(self, anfis=None):
+    def __init__(self, anfis: ANFISRegressor | None = None):
         self.anfis = anfis
 
     def _template(self) -> ANFISRegressor:
