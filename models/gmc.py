@@ -152,8 +152,9 @@ def tien_least_squares(X0: NDArray[np.float64], y0: NDArray[np.float64], ridge: 
     return grey_least_squares(B, y0[1:], ridge)
 
 
-def run_swarm(estimator: GMCRegressor | GNNMCIRegressor, objective: Callable[[NDArray[np.float64]], NDArray[np.float64]],
-              box: NDArray[np.float64], start: ArrayLike) -> PSOResult:
+def run_swarm(estimator: GMCRegressor | GNNMCIRegressor,
+              objective: Callable[[NDArray[np.float64]], NDArray[np.float64]], box: NDArray[np.float64],
+              start: ArrayLike) -> PSOResult:
     """PSO with the estimator's swarm settings (``n_particles``, ``epochs``, ``c1``,
     ``c2``, ``inertia``, ``random_state``); one particle at ``start`` if
     ``estimator.init_from_ls``.

@@ -154,6 +154,20 @@ def test_bad_training_requests_are_refused(tmp_path, capsys):
     assert "['T00'] given more than once" in capsys.readouterr().err
 
 
+def test_select_auto_on_one_speed_regime_is_one_clear_line(tmp_path, capsys):
+    # before: the ValueError of the blocked cross-validation escaped as a traceback (exit 1)
+    rec = _record(0)
+    steady = Dataset(rec.time_s, np.column_stack([np.full(len(rec), 6000.0), rec.values]),
+                     [ChannelInfo("spindle", "rpm", "speed"), *rec.channels], rec.metadata)
+    steady.write(tmp_path / "steady.csv")
+    code = main(["train", str(tmp_path / "steady.csv"), "--inputs", "spindle,T1,T2", "--target", "Z",
+                 "--select", "auto", "--out", str(tmp_path / "m.json")])
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert "rec0: --select auto cannot cross-validate on this record: " in err
+    assert "at least 2 operating-regime blocks, got 1" in err and not (tmp_path / "m.json").exists()
+
+
 def test_incompatible_model_files_are_refused(tmp_path):
     cm = fit_compensation_model([_record(0)], ["T1", "T2"], "Z", "mlr")
     path = cm.save(tmp_path / "m.json")
