@@ -86,5 +86,6 @@ def _private(x):
     counts, missing = coverage(tmp_path)
     assert counts == {"definitions": 4, "documented": 3, "functions": 3, "typed": 2, "numpydoc": 2}
     assert [m.split(" ", 1)[1] for m in missing] == ["typed_but_bare typed=True numpydoc=False",
-                                                     "documented typed=False numpydoc=True", "Bare (class) no docstring"]
+                                                     "documented typed=False numpydoc=True",
+                                                     "Bare (class) no docstring"]
     assert shares(counts) == pytest.approx({"documented": 75.0, "typed": 200 / 3, "numpydoc": 200 / 3})

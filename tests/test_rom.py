@@ -141,7 +141,8 @@ def test_every_unreadable_file_is_a_rom_error(tmp_path):
 
 
 def test_a_rebuilt_rom_is_the_same_to_the_last_bit(machine):
-    # ARPACK drew its own start vector: the slowest rate, hence the Krylov points and the ROM, changed in the last digits
+    # ARPACK drew its own start vector: the slowest rate, hence the Krylov points and the ROM, changed in the
+    # last digits
     for method in ("krylov", "modal"):
         first, second = (build_rom(machine, 20, method) for _ in range(2))
         for name in ("eigenvalues", "input_matrix", "output_matrix", "uniform_state"):
