@@ -13,6 +13,11 @@ from __future__ import annotations
 
 import contextlib
 import functools
+from collections.abc import Callable, Iterator
+from typing import ParamSpec, TypeVar
+
+P = ParamSpec("P")
+R = TypeVar("R")
 
 
 @functools.cache
@@ -24,14 +29,31 @@ def _controller():
 
 
 @contextlib.contextmanager
-def single_blas_thread():
-    """Limit the BLAS thread pools to one thread inside the block."""
+def single_blas_thread() -> Iterator[None]:
+    """Limit the BLAS thread pools to one thread inside the block.
+
+    Yields
+    ------
+    None
+        Control, with the BLAS pools limited; the previous limits are restored on exit.
+    """
     with _controller().limit(limits=1, user_api="blas"):
         yield
 
 
-def one_blas_thread(fit):
-    """Decorator: run ``fit`` inside :func:`single_blas_thread`."""
+def one_blas_thread(fit: Callable[P, R]) -> Callable[P, R]:
+    """Decorator: run ``fit`` inside :func:`single_blas_thread`.
+
+    Parameters
+    ----------
+    fit : callable
+        The function to wrap (an estimator's ``fit``, usually).
+
+    Returns
+    -------
+    callable
+        ``fit`` with the same signature, run with one BLAS thread.
+    """
 
     @functools.wraps(fit)
     def wrapper(*args, **kwargs):

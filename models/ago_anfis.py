@@ -11,6 +11,7 @@ linear model of the current input changes.
 
 from __future__ import annotations
 
+import numpy as np
 from sklearn.base import clone
 
 from .anfis import ANFISRegressor
@@ -18,15 +19,17 @@ from .grey import GreySeriesRegressor, ago, iago
 from .registry import register_model
 
 
-@register_model({"ago-anfis": {}}, time_series=True)
+@register_model({"ago-anfis": {"random_state": 0}}, time_series=True)
 class AGOANFISRegressor(GreySeriesRegressor):
     """ANFIS on AGO series (grey time-series convention, see :mod:`models.grey`).
 
     Parameters
     ----------
     anfis : ANFISRegressor or None
-        Unfitted template; None means ``ANFISRegressor(init="fcm", n_rules=3)``.
+        Unfitted template; None means ``ANFISRegressor(init="fcm", n_rules=3, random_state=random_state)``.
         Tune it through nested parameters, e.g. ``anfis__epochs``.
+    random_state : int, RandomState or None
+        Seeds the default template's FCM initialisation (ignored when ``anfis`` is given: seed that one).
 
     Attributes
     ----------
@@ -34,11 +37,14 @@ class AGOANFISRegressor(GreySeriesRegressor):
     y_reference_ : first training target
     """
 
-    def __init__(self, anfis=None):
+    def __init__(self, anfis: ANFISRegressor | None = None, random_state: int | np.random.RandomState | None = None):
         self.anfis = anfis
+        self.random_state = random_state
 
     def _template(self) -> ANFISRegressor:
-        return self.anfis if self.anfis is not None else ANFISRegressor(init="fcm", n_rules=3)
+        if self.anfis is not None:
+            return self.anfis
+        return ANFISRegressor(init="fcm", n_rules=3, random_state=self.random_state)
 
     def _n_parameters(self, n_features):
         return self._template().n_parameters(n_features)

@@ -67,10 +67,12 @@ Conventions:
 from __future__ import annotations
 
 import itertools
-from typing import NamedTuple
+from collections.abc import Sequence
+from typing import Literal, NamedTuple
 
 import numpy as np
 import scipy.linalg
+from numpy.typing import ArrayLike, NDArray
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
@@ -262,20 +264,20 @@ class ANFISRegressor(RegressorMixin, BaseEstimator):
 
     def __init__(
         self,
-        init="fcm",
-        n_rules=3,
-        n_mfs=2,
-        epochs=100,
-        step_size=0.01,
-        step_increase=1.1,
-        step_decrease=0.9,
-        ridge=1e-8,
-        validation_fraction=None,
-        n_iter_no_change=None,
-        error_goal=0.0,
-        fcm_m=2.0,
-        premise_update="jang",
-        random_state=None,
+        init: Literal["fcm", "grid"] = "fcm",
+        n_rules: int = 3,
+        n_mfs: int = 2,
+        epochs: int = 100,
+        step_size: float = 0.01,
+        step_increase: float = 1.1,
+        step_decrease: float = 0.9,
+        ridge: float = 1e-8,
+        validation_fraction: float | None = None,
+        n_iter_no_change: int | None = None,
+        error_goal: float = 0.0,
+        fcm_m: float = 2.0,
+        premise_update: Literal["jang", "levenberg-marquardt"] = "jang",
+        random_state: int | np.random.RandomState | None = None,
     ):
         self.init = init
         self.n_rules = n_rules
@@ -328,18 +330,51 @@ class ANFISRegressor(RegressorMixin, BaseEstimator):
         return check_positive_int(self.n_rules, "n_rules")
 
     def n_parameters(self, n_features: int) -> int:
-        """Free parameters for ``n_features`` inputs: consequents plus MF centres and widths."""
+        """Free parameters for ``n_features`` inputs: consequents plus MF centres and widths.
+
+        Parameters
+        ----------
+        n_features : int
+            Number of inputs.
+
+        Returns
+        -------
+        int
+            ``n_rules·(n_features + 1) + 2·n_features·n_mfs`` (FCM: one MF per rule and input).
+        """
         n_rules = self._n_rules_for(n_features)
         n_mfs = check_positive_int(self.n_mfs, "n_mfs") if self.init == "grid" else n_rules
         return n_rules * (n_features + 1) + 2 * n_features * n_mfs
 
     # ------------------------------------------------------------------ fit
     @one_blas_thread
-    def fit(self, X, y, X_check=None, y_check=None):
+    def fit(self, X: ArrayLike, y: ArrayLike, X_check: ArrayLike | None = None,
+            y_check: ArrayLike | None = None) -> ANFISRegressor:
         """Train on ``X`` (n_samples, n_features), ``y`` (n_samples,).
 
         ``X_check``/``y_check`` form the checking set for early stopping
         (best-on-checking parameters are kept); see ``validation_fraction``.
+
+        Parameters
+        ----------
+        X : array_like, shape (n_samples, n_features)
+            Inputs, in any units (standardised internally).
+        y : array_like, shape (n_samples,)
+            Target, in its own unit (the prediction has the same unit).
+        X_check : array_like, shape (n_check, n_features), optional
+            Checking inputs (same units as ``X``).
+        y_check : array_like, shape (n_check,), optional
+            Checking target.
+
+        Returns
+        -------
+        ANFISRegressor
+            ``self``, fitted.
+
+        Raises
+        ------
+        ValueError
+            Bad hyperparameters, NaN/inf, or no more samples than parameters.
         """
         X, y = validate_xy(X, y, what="ANFISRegressor")
         if X_check is None and y_check is None and self.validation_fraction:
@@ -498,28 +533,70 @@ class ANFISRegressor(RegressorMixin, BaseEstimator):
         check_n_features(self, X)
         return (X - self.x_mean_) / self.x_scale_
 
-    def normalised_firing_strengths(self, X) -> np.ndarray:
-        """w̄ (n_samples, n_rules) for ``X``; rows sum to 1 everywhere (see module doc)."""
+    def normalised_firing_strengths(self, X: ArrayLike) -> NDArray[np.float64]:
+        """w̄ (n_samples, n_rules) for ``X``; rows sum to 1 everywhere (see module doc).
+
+        Parameters
+        ----------
+        X : array_like, shape (n_samples, n_features)
+            Inputs, in the units of the training inputs.
+
+        Returns
+        -------
+        ndarray, shape (n_samples, n_rules)
+            Normalised firing strengths (dimensionless).
+        """
         return _normalised_firing(self._z(X), self.mf_centers_, self.mf_sigmas_, self.rule_mfs_)
 
-    def predict(self, X) -> np.ndarray:
-        """Sugeno output ``Σ w̄_r f_r`` for each row of ``X``."""
+    def predict(self, X: ArrayLike) -> NDArray[np.float64]:
+        """Sugeno output ``Σ w̄_r f_r`` for each row of ``X``.
+
+        Parameters
+        ----------
+        X : array_like, shape (n_samples, n_features)
+            Inputs, in the units of the training inputs.
+
+        Returns
+        -------
+        ndarray, shape (n_samples,)
+            Prediction, in the unit of the training target.
+        """
         Z = self._z(X)
         wbar = _normalised_firing(Z, self.mf_centers_, self.mf_sigmas_, self.rule_mfs_)
         return _output(wbar, _with_bias(Z), self.consequents_)[0]
 
     # ------------------------------------------------------------ listing
-    def membership_parameters(self):
-        """Gaussian MF centres and σ in input units, each (n_features, n_mfs)."""
+    def membership_parameters(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Gaussian MF centres and σ in input units, each (n_features, n_mfs).
+
+        Returns
+        -------
+        centers : ndarray, shape (n_features, n_mfs)
+            MF centres, in each input's unit.
+        sigmas : ndarray, shape (n_features, n_mfs)
+            MF widths σ, in each input's unit.
+        """
         check_is_fitted(self, "consequents_")
         centers = self.x_mean_[:, None] + self.x_scale_[:, None] * self.mf_centers_
         return centers, self.x_scale_[:, None] * self.mf_sigmas_
 
-    def rules_text(self, feature_names=None, output_name="out1") -> list[str]:
+    def rules_text(self, feature_names: Sequence[str] | None = None, output_name: str = "out1") -> list[str]:
         """Linguistic rules as in thesis Table 5-6, one string per rule.
 
         FCM rules read ``If (T05 is T05cluster1) and … then (out1 is out1cluster1)``;
         grid rules name MFs ``<input>mf<k>`` as MATLAB does.
+
+        Parameters
+        ----------
+        feature_names : sequence of str, optional
+            One name per input (default ``in1``, ``in2``, …).
+        output_name : str, default "out1"
+            Name of the output in the rules.
+
+        Returns
+        -------
+        list of str
+            ``"<r>. If (<input> is <input><term><k>) and … then (<output> is <output><term><r>)"``.
         """
         check_is_fitted(self, "consequents_")
         names = (

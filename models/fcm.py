@@ -16,6 +16,7 @@ Two validity indices help choose the number of clusters c:
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from sklearn.base import BaseEstimator, ClusterMixin
 from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
@@ -26,7 +27,20 @@ from .registry import register_model
 
 
 def squared_distances(X: np.ndarray, centers: np.ndarray) -> np.ndarray:
-    """Squared Euclidean distances, shape (n_samples, n_clusters), never negative."""
+    """Squared Euclidean distances, shape (n_samples, n_clusters), never negative.
+
+    Parameters
+    ----------
+    X : ndarray, shape (n_samples, n_features)
+        Samples.
+    centers : ndarray, shape (n_clusters, n_features)
+        Cluster centres, in the units of ``X``.
+
+    Returns
+    -------
+    ndarray, shape (n_samples, n_clusters)
+        ``‖x_j − c_i‖²``, in the squared units of ``X`` (rounding below 0 clipped to 0).
+    """
     d2 = (
         np.einsum("ij,ij->i", X, X)[:, None]
         - 2.0 * X @ centers.T
@@ -41,6 +55,18 @@ def fcm_membership(d2: np.ndarray, m: float) -> np.ndarray:
     Computed in log-space, ``μ ∝ d²^(-1/(m-1))`` normalised per row with a
     max-shift, so a sample lying exactly on a centre gets membership 1 there
     instead of a 0/0.
+
+    Parameters
+    ----------
+    d2 : ndarray, shape (n_samples, n_clusters)
+        Squared distances (see :func:`squared_distances`).
+    m : float
+        Fuzziness exponent (> 1).
+
+    Returns
+    -------
+    ndarray, shape (n_samples, n_clusters)
+        Memberships μ, each row summing to 1.
     """
     log_w = -np.log(np.maximum(d2, np.finfo(np.float64).tiny)) / (m - 1.0)
     log_w -= log_w.max(axis=1, keepdims=True)
@@ -49,15 +75,42 @@ def fcm_membership(d2: np.ndarray, m: float) -> np.ndarray:
 
 
 def partition_coefficient(membership: np.ndarray) -> float:
-    """Bezdek's partition coefficient ``PC = Σ_ij μ_ij² / n`` (1/c ≤ PC ≤ 1)."""
+    """Bezdek's partition coefficient ``PC = Σ_ij μ_ij² / n`` (1/c ≤ PC ≤ 1).
+
+    Parameters
+    ----------
+    membership : ndarray, shape (n_samples, n_clusters)
+        Memberships μ (rows sum to 1).
+
+    Returns
+    -------
+    float
+        PC; larger is crisper.
+    """
     membership = np.asarray(membership, dtype=np.float64)
     return float(np.sum(membership**2) / membership.shape[0])
 
 
-def xie_beni_index(X, membership, centers, m: float = 2.0) -> float:
+def xie_beni_index(X: ArrayLike, membership: ArrayLike, centers: ArrayLike, m: float = 2.0) -> float:
     """Xie–Beni index ``Σ μ^m d² / (n · min_{i≠k} ‖c_i - c_k‖²)``; smaller is better.
 
     Undefined (NaN) for a single cluster; infinite if two centres coincide.
+
+    Parameters
+    ----------
+    X : array_like, shape (n_samples, n_features)
+        Samples.
+    membership : array_like, shape (n_samples, n_clusters)
+        Memberships μ.
+    centers : array_like, shape (n_clusters, n_features)
+        Cluster centres, in the units of ``X``.
+    m : float, default 2.0
+        Fuzziness exponent.
+
+    Returns
+    -------
+    float
+        The index (dimensionless), NaN or inf in the cases above.
     """
     X = np.asarray(X, dtype=np.float64)
     centers = np.asarray(centers, dtype=np.float64)
@@ -98,7 +151,8 @@ class FuzzyCMeans(ClusterMixin, BaseEstimator):
     partition_coefficient_, xie_beni_index_ : validity indices of the fit
     """
 
-    def __init__(self, n_clusters=3, m=2.0, tol=1e-5, max_iter=100, random_state=None):
+    def __init__(self, n_clusters: int = 3, m: float = 2.0, tol: float = 1e-5, max_iter: int = 100,
+                 random_state: int | np.random.RandomState | None = None):
         self.n_clusters = n_clusters
         self.m = m
         self.tol = tol
@@ -106,8 +160,21 @@ class FuzzyCMeans(ClusterMixin, BaseEstimator):
         self.random_state = random_state
 
     @one_blas_thread
-    def fit(self, X, y=None):
-        """Cluster the rows of ``X`` (n_samples, n_features)."""
+    def fit(self, X: ArrayLike, y: object = None) -> FuzzyCMeans:
+        """Cluster the rows of ``X`` (n_samples, n_features).
+
+        Parameters
+        ----------
+        X : array_like, shape (n_samples, n_features)
+            Samples, in any units (distances are Euclidean in them).
+        y : ignored
+            Present for the scikit-learn API.
+
+        Returns
+        -------
+        FuzzyCMeans
+            ``self``, fitted.
+        """
         X = validate_x(X, what="FuzzyCMeans")
         c = check_positive_int(self.n_clusters, "n_clusters")
         if c > X.shape[0]:
@@ -138,13 +205,35 @@ class FuzzyCMeans(ClusterMixin, BaseEstimator):
         self.n_features_in_ = X.shape[1]
         return self
 
-    def membership(self, X) -> np.ndarray:
-        """Memberships of new samples in the fitted clusters, (n_samples, n_clusters)."""
+    def membership(self, X: ArrayLike) -> NDArray[np.float64]:
+        """Memberships of new samples in the fitted clusters, (n_samples, n_clusters).
+
+        Parameters
+        ----------
+        X : array_like, shape (n_samples, n_features)
+            Samples, in the units of the training data.
+
+        Returns
+        -------
+        ndarray, shape (n_samples, n_clusters)
+            Memberships μ, each row summing to 1.
+        """
         check_is_fitted(self, "cluster_centers_")
         X = validate_x(X, what="FuzzyCMeans")
         check_n_features(self, X)
         return fcm_membership(squared_distances(X, self.cluster_centers_), self.m)
 
-    def predict(self, X) -> np.ndarray:
-        """Cluster of largest membership for each row of ``X``."""
+    def predict(self, X: ArrayLike) -> NDArray[np.intp]:
+        """Cluster of largest membership for each row of ``X``.
+
+        Parameters
+        ----------
+        X : array_like, shape (n_samples, n_features)
+            Samples, in the units of the training data.
+
+        Returns
+        -------
+        ndarray of int, shape (n_samples,)
+            Cluster indices.
+        """
         return self.membership(X).argmax(axis=1)

@@ -34,21 +34,43 @@ b₁ < 0, an unstable model whose prediction grows without bound; the
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Literal
+
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from scipy.signal import lfilter
 
 from .grey import GreySeriesRegressor, ago, background_values, grey_least_squares, iago
-from .pso import particle_swarm_minimize
+from .pso import PSOResult, particle_swarm_minimize
 from .registry import register_model
 
+if TYPE_CHECKING:
+    from .gnnmci import GNNMCIRegressor
 
-def convolution_response(f, development_coefficient: float, rule: str = "trapezoid") -> np.ndarray:
+
+def convolution_response(f: ArrayLike, development_coefficient: float,
+                         rule: Literal["trapezoid", "midpoint"] = "trapezoid") -> NDArray[np.float64]:
     """``S(t) ≈ ∫₁ᵗ e^{-b₁(t-s)} f(s) ds`` for t = 1..n (S(1) = 0), by recursion.
 
     ``rule="trapezoid"``: ``S(t) = q S(t-1) + ½(f(t) + q f(t-1))`` (Eq 3.14).
     ``rule="midpoint"``: ``S(t) = q S(t-1) + ½ q^{½} (f(t) + f(t-1))``, Tien's
     form used by GNNMCI (Eq A.2). ``f`` may be (n,) or (n, m) (columns are
     filtered independently).
+
+    Parameters
+    ----------
+    f : array_like, shape (n,) or (n, m)
+        The drive f(t), t = 1..n (one sample per time step).
+    development_coefficient : float
+        b₁, in 1/sample.
+    rule : {"trapezoid", "midpoint"}, default "trapezoid"
+        Quadrature of the convolution (see above).
+
+    Returns
+    -------
+    ndarray, shape of ``f``
+        S(t), in the unit of ``f`` × samples.
     """
     q = np.exp(-development_coefficient)
     if rule == "trapezoid":
@@ -66,17 +88,40 @@ def convolution_response(f, development_coefficient: float, rule: str = "trapezo
     return s
 
 
-def deaccumulated_response(f, development_coefficient: float) -> np.ndarray:
-    """Model output ``x̂₁⁰ = IAGO(S)`` for the drive ``f`` (zero initial state), trapezoid rule."""
+def deaccumulated_response(f: ArrayLike, development_coefficient: float) -> NDArray[np.float64]:
+    """Model output ``x̂₁⁰ = IAGO(S)`` for the drive ``f`` (zero initial state), trapezoid rule.
+
+    Parameters
+    ----------
+    f : array_like, shape (n,)
+        The drive ``Σ_j b_j x_j¹ + u``, one sample per time step.
+    development_coefficient : float
+        b₁, in 1/sample.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        x̂₁⁰, in the unit of the target series.
+    """
     return iago(convolution_response(f, development_coefficient))
 
 
-def pso_search_box(theta_ls) -> np.ndarray:
+def pso_search_box(theta_ls: ArrayLike) -> NDArray[np.float64]:
     """Default PSO bounds (dim, 2) around ``θ_LS = [b₁, …]``: θ_LS ± (2|θ_LS| + 0.1 max|θ_LS|).
 
     The development coefficient b₁ is kept in [0, …): a thermal response
     decays, and b₁ < 0 gives an exponentially growing output that explodes
     on any long prediction.
+
+    Parameters
+    ----------
+    theta_ls : array_like, shape (dim,)
+        Least-squares estimate ``[b₁, b₂..b_N, u]`` (see :func:`tien_least_squares`).
+
+    Returns
+    -------
+    ndarray, shape (dim, 2)
+        Lower and upper bound of each parameter.
     """
     theta_ls = np.asarray(theta_ls, dtype=np.float64)
     half = 2.0 * np.abs(theta_ls) + 0.1 * max(np.max(np.abs(theta_ls)), 1e-12)
@@ -85,17 +130,51 @@ def pso_search_box(theta_ls) -> np.ndarray:
     return box
 
 
-def tien_least_squares(X0, y0, ridge: float = 0.0) -> np.ndarray:
-    """``[b₁, b₂..b_N, u]`` from ``x₁⁰(k) = -b₁ z₁¹(k) + Σ b_j z_j¹(k) + u``, k = 2..n."""
+def tien_least_squares(X0: NDArray[np.float64], y0: NDArray[np.float64], ridge: float = 0.0) -> NDArray[np.float64]:
+    """``[b₁, b₂..b_N, u]`` from ``x₁⁰(k) = -b₁ z₁¹(k) + Σ b_j z_j¹(k) + u``, k = 2..n.
+
+    Parameters
+    ----------
+    X0 : ndarray, shape (n, n_features)
+        Zero-referenced inputs x_j⁰.
+    y0 : ndarray, shape (n,)
+        Zero-referenced target x₁⁰.
+    ridge : float, default 0.0
+        Relative ridge of the solve (see :func:`models.grey.grey_least_squares`).
+
+    Returns
+    -------
+    ndarray, shape (n_features + 2,)
+        ``[b₁ (1/sample), b₂..b_N, u]``.
+    """
     Z = background_values(ago(X0))
     B = np.column_stack([-background_values(ago(y0)), Z, np.ones(Z.shape[0])])
     return grey_least_squares(B, y0[1:], ridge)
 
 
-def run_swarm(estimator, objective, box, start):
+def run_swarm(estimator: GMCRegressor | GNNMCIRegressor,
+              objective: Callable[[NDArray[np.float64]], NDArray[np.float64]], box: NDArray[np.float64],
+              start: ArrayLike) -> PSOResult:
     """PSO with the estimator's swarm settings (``n_particles``, ``epochs``, ``c1``,
     ``c2``, ``inertia``, ``random_state``); one particle at ``start`` if
-    ``estimator.init_from_ls``."""
+    ``estimator.init_from_ls``.
+
+    Parameters
+    ----------
+    estimator : GMCRegressor or GNNMCIRegressor
+        Holds the swarm settings.
+    objective : callable
+        Positions (n_particles, dim) → fitness (n_particles,) (vectorised).
+    box : ndarray, shape (dim, 2)
+        Search box.
+    start : array_like, shape (dim,)
+        The least-squares estimate, a starting particle (clipped into the box).
+
+    Returns
+    -------
+    PSOResult
+        See :func:`models.pso.particle_swarm_minimize`.
+    """
     return particle_swarm_minimize(
         objective,
         box,
@@ -141,17 +220,17 @@ class GMCRegressor(GreySeriesRegressor):
 
     def __init__(
         self,
-        delay=0,
-        calibration="ls",
-        ridge=0.0,
-        n_particles=90,
-        epochs=100,
-        c1=2.0,
-        c2=2.0,
-        inertia=(0.9, 0.4),
-        pso_bounds=None,
-        init_from_ls=True,
-        random_state=None,
+        delay: int = 0,
+        calibration: Literal["ls", "pso"] = "ls",
+        ridge: float = 0.0,
+        n_particles: int = 90,
+        epochs: int = 100,
+        c1: float = 2.0,
+        c2: float = 2.0,
+        inertia: tuple[float, float] = (0.9, 0.4),
+        pso_bounds: ArrayLike | None = None,
+        init_from_ls: bool = True,
+        random_state: int | np.random.RandomState | None = None,
     ):
         self.delay = delay
         self.calibration = calibration

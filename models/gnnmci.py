@@ -31,6 +31,7 @@ decaying kernel), which also keeps ``e^{-w₁₁ k}`` from overflowing.
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from scipy.special import expit
 
 from .gmc import convolution_response, pso_search_box, run_swarm, tien_least_squares
@@ -38,11 +39,23 @@ from .grey import GreySeriesRegressor, ago, iago
 from .registry import register_model
 
 
-def network_output(weights, X1) -> np.ndarray:
+def network_output(weights: ArrayLike, X1: NDArray[np.float64]) -> NDArray[np.float64]:
     """Layer-D output x̂₁¹ in the algebraically reduced form of Eq A.4 (b · w₃ = 1).
 
     ``-w₂₁ e^{-w₁₁ k} + conv(Σ_j w₂ⱼ x_j¹ + w₂ᵤ)``: one convolution per weight
     vector instead of one per input, which is what PSO evaluates.
+
+    Parameters
+    ----------
+    weights : array_like, shape (n_inputs + 3,)
+        ``[w₁₁ (1/sample), w₂₁, w₂₂..w₂ₙ, w₂ᵤ]``.
+    X1 : ndarray, shape (n, n_inputs)
+        AGO inputs x_j¹.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        x̂₁¹, the accumulated target estimate.
     """
     weights = np.asarray(weights, dtype=np.float64)
     w11, w21, w2 = weights[0], weights[1], weights[2:]
@@ -51,13 +64,25 @@ def network_output(weights, X1) -> np.ndarray:
     return -w21 * np.exp(-w11 * k) + convolution_response(drive, w11, "midpoint")
 
 
-def network_layers(weights, X1) -> dict[str, np.ndarray]:
+def network_layers(weights: ArrayLike, X1: NDArray[np.float64]) -> dict[str, NDArray[np.float64]]:
     """Layer outputs A–D for one weight vector ``[w₁₁, w₂₁, w₂₂..w₂ₙ, w₂ᵤ]``.
 
     ``X1`` is the (n, n_inputs) AGO input. Returns ``a``, ``b`` (n,),
     ``c`` (n, n_inputs + 2) and ``d`` (n,), the network estimate of x̂₁¹.
     This is the thesis's layer-by-layer mapping, for inspection;
     :func:`network_output` gives the same ``d`` faster.
+
+    Parameters
+    ----------
+    weights : array_like, shape (n_inputs + 3,)
+        ``[w₁₁ (1/sample), w₂₁, w₂₂..w₂ₙ, w₂ᵤ]``.
+    X1 : ndarray, shape (n, n_inputs)
+        AGO inputs x_j¹.
+
+    Returns
+    -------
+    dict of str to ndarray
+        ``a``, ``b`` (n,), ``c`` (n, n_inputs + 2), ``d`` (n,).
     """
     weights = np.asarray(weights, dtype=np.float64)
     w11, w21, w2 = weights[0], weights[1], weights[2:]
@@ -98,14 +123,14 @@ class GNNMCIRegressor(GreySeriesRegressor):
 
     def __init__(
         self,
-        n_particles=90,
-        epochs=100,
-        c1=1.5,
-        c2=2.0,
-        inertia=(0.9, 0.4),
-        pso_bounds=None,
-        init_from_ls=True,
-        random_state=None,
+        n_particles: int = 90,
+        epochs: int = 100,
+        c1: float = 1.5,
+        c2: float = 2.0,
+        inertia: tuple[float, float] = (0.9, 0.4),
+        pso_bounds: ArrayLike | None = None,
+        init_from_ls: bool = True,
+        random_state: int | np.random.RandomState | None = None,
     ):
         self.n_particles = n_particles
         self.epochs = epochs

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
+from numpy.typing import ArrayLike, NDArray
 from scipy.signal import lfilter
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.utils.validation import check_is_fitted
@@ -43,30 +44,83 @@ from .registry import register_model
 _FIRST_SAMPLE = "the first gives no equation"
 
 
-def ago(x, axis: int = 0) -> np.ndarray:
-    """First-order accumulated generating operation ``x¹(k) = Σ_{j≤k} x⁰(j)`` (Eq 3.11)."""
+def ago(x: ArrayLike, axis: int = 0) -> NDArray[np.float64]:
+    """First-order accumulated generating operation ``x¹(k) = Σ_{j≤k} x⁰(j)`` (Eq 3.11).
+
+    Parameters
+    ----------
+    x : array_like
+        Series x⁰, in its own unit.
+    axis : int, default 0
+        The time axis.
+
+    Returns
+    -------
+    ndarray, shape of ``x``
+        x¹, in the unit of ``x`` × samples.
+    """
     return np.cumsum(np.asarray(x, dtype=np.float64), axis=axis)
 
 
-def iago(x1, axis: int = 0) -> np.ndarray:
-    """Inverse AGO ``x⁰(k) = x¹(k) - x¹(k-1)``, ``x⁰(1) = x¹(1)`` (Eq 3.12)."""
+def iago(x1: ArrayLike, axis: int = 0) -> NDArray[np.float64]:
+    """Inverse AGO ``x⁰(k) = x¹(k) - x¹(k-1)``, ``x⁰(1) = x¹(1)`` (Eq 3.12).
+
+    Parameters
+    ----------
+    x1 : array_like
+        Accumulated series x¹.
+    axis : int, default 0
+        The time axis.
+
+    Returns
+    -------
+    ndarray, shape of ``x1``
+        x⁰.
+    """
     x1 = np.asarray(x1, dtype=np.float64)
     return np.diff(x1, axis=axis, prepend=np.zeros_like(np.take(x1, [0], axis=axis)))
 
 
-def background_values(x1, axis: int = 0) -> np.ndarray:
-    """Mean-sequence ``z¹(k) = ½(x¹(k-1) + x¹(k))`` for k = 2..n (n-1 values)."""
+def background_values(x1: ArrayLike, axis: int = 0) -> NDArray[np.float64]:
+    """Mean-sequence ``z¹(k) = ½(x¹(k-1) + x¹(k))`` for k = 2..n (n-1 values).
+
+    Parameters
+    ----------
+    x1 : array_like
+        Accumulated series x¹, n samples along ``axis``.
+    axis : int, default 0
+        The time axis.
+
+    Returns
+    -------
+    ndarray
+        z¹, n − 1 samples along ``axis``, in the unit of ``x1``.
+    """
     x1 = np.asarray(x1, dtype=np.float64)
     n = x1.shape[axis]
     return 0.5 * (np.take(x1, range(n - 1), axis=axis) + np.take(x1, range(1, n), axis=axis))
 
 
-def grey_least_squares(B, Y, ridge: float = 0.0) -> np.ndarray:
+def grey_least_squares(B: ArrayLike, Y: ArrayLike, ridge: float = 0.0) -> NDArray[np.float64]:
     """Solve ``B θ ≈ Y``: lstsq if ``ridge == 0``, else ``(BᵀB + λI)θ = BᵀY``.
 
     ``λ = ridge × mean(diag BᵀB)`` is relative, so the ridge does not depend
     on units; with a ridge the (then positive definite) normal equations are
     solved directly, which is fast for thousands of candidate sensors.
+
+    Parameters
+    ----------
+    B : array_like, shape (m, p)
+        Design matrix.
+    Y : array_like, shape (m,) or (m, q)
+        Right-hand side(s).
+    ridge : float, default 0.0
+        Relative ridge λ / mean(diag BᵀB).
+
+    Returns
+    -------
+    ndarray, shape (p,) or (p, q)
+        θ.
     """
     B = np.asarray(B, dtype=np.float64)
     Y = np.asarray(Y, dtype=np.float64)
@@ -77,8 +131,19 @@ def grey_least_squares(B, Y, ridge: float = 0.0) -> np.ndarray:
     return np.linalg.lstsq(B, Y, rcond=None)[0]
 
 
-def zero_reference(a) -> np.ndarray:
-    """Subtract the first sample (row) so every series starts at 0."""
+def zero_reference(a: ArrayLike) -> NDArray[np.float64]:
+    """Subtract the first sample (row) so every series starts at 0.
+
+    Parameters
+    ----------
+    a : array_like, shape (n,) or (n, d)
+        Time-ordered series, in their own units.
+
+    Returns
+    -------
+    ndarray, shape of ``a``
+        The changes since the first sample, in the same units.
+    """
     a = np.asarray(a, dtype=np.float64)
     return a - a[:1]
 
@@ -100,8 +165,19 @@ class GM11:
     initial_value: float
 
     @classmethod
-    def fit(cls, series) -> "GM11":
-        """Least-squares ``[a, b]`` from ``Y = [x⁰(2..n)]``, ``B = [-z¹(k), 1]``."""
+    def fit(cls, series: ArrayLike) -> GM11:
+        """Least-squares ``[a, b]`` from ``Y = [x⁰(2..n)]``, ``B = [-z¹(k), 1]``.
+
+        Parameters
+        ----------
+        series : array_like, shape (n,)
+            The raw series x⁰ (at least 3 samples), in its own unit.
+
+        Returns
+        -------
+        GM11
+            The fitted model.
+        """
         x0 = validate_series(series, min_samples=1, what="GM(1,1)")
         require_parameters(x0.size, 2, "GM(1,1)", lost=1, lost_reason=_FIRST_SAMPLE)
         z = background_values(ago(x0))
@@ -116,6 +192,16 @@ class GM11:
         ``(x⁰(1) - b/a) e^{-ak} + b/a`` cancels catastrophically when a ≈ 0
         (a constant series fits a ≈ 1e-18), while this one tends smoothly to
         its limit ``x⁰(1) + b k``, a constant forecast ``x̂⁰ = b``.
+
+        Parameters
+        ----------
+        n_samples : int
+            Number of samples to return, from the first one of the fit.
+
+        Returns
+        -------
+        ndarray, shape (n_samples,)
+            x̂⁰, in the unit of the fitted series.
         """
         a, b = self.development_coefficient, self.grey_input
         k = np.arange(n_samples, dtype=np.float64)
@@ -143,17 +229,46 @@ def _influence(theta_fn, n_extra, X, y, ridge, what):
     return theta_fn(zero_reference(X), zero_reference(y), ridge)
 
 
-def gm0n_influence(X, y, ridge: float = 0.0) -> np.ndarray:
+def gm0n_influence(X: ArrayLike, y: ArrayLike, ridge: float = 0.0) -> NDArray[np.float64]:
     """GM(0,N) influence weights θ_j (Eqs 3.21–3.25) of each column of X on y.
 
     Zero-referenced AGO series; rank sensors by ``|θ_j|`` (thesis §4.3). With
     ``ridge > 0`` more sensors than samples are allowed.
+
+    Parameters
+    ----------
+    X : array_like, shape (n_samples, n_features)
+        Time-ordered candidate sensors (e.g. °C); zero-referenced here.
+    y : array_like, shape (n_samples,)
+        Time-ordered target (e.g. µm); zero-referenced here.
+    ridge : float, default 0.0
+        Relative ridge (see :func:`grey_least_squares`).
+
+    Returns
+    -------
+    ndarray, shape (n_features,)
+        θ_j, in the unit of ``y`` per unit of column j.
     """
     return _influence(_gm0n_theta, 0, X, y, ridge, "GM(0,N)")
 
 
-def gm1n_influence(X, y, ridge: float = 0.0) -> np.ndarray:
-    """GM(1,N) driving coefficients b_j (Eqs 3.27–3.30), the influence of each column on y."""
+def gm1n_influence(X: ArrayLike, y: ArrayLike, ridge: float = 0.0) -> NDArray[np.float64]:
+    """GM(1,N) driving coefficients b_j (Eqs 3.27–3.30), the influence of each column on y.
+
+    Parameters
+    ----------
+    X : array_like, shape (n_samples, n_features)
+        Time-ordered candidate sensors (e.g. °C); zero-referenced here.
+    y : array_like, shape (n_samples,)
+        Time-ordered target (e.g. µm); zero-referenced here.
+    ridge : float, default 0.0
+        Relative ridge (see :func:`grey_least_squares`).
+
+    Returns
+    -------
+    ndarray, shape (n_features,)
+        b_j (the development coefficient a left out).
+    """
     return _influence(_gm1n_theta, 1, X, y, ridge, "GM(1,N)")[1:]
 
 
@@ -180,8 +295,21 @@ class GreySeriesRegressor(RegressorMixin, BaseEstimator):
         return 1, _FIRST_SAMPLE
 
     @one_blas_thread
-    def fit(self, X, y):
-        """Fit on time-ordered ``X`` (n_samples, n_features) and ``y`` (n_samples,)."""
+    def fit(self, X: ArrayLike, y: ArrayLike) -> GreySeriesRegressor:
+        """Fit on time-ordered ``X`` (n_samples, n_features) and ``y`` (n_samples,).
+
+        Parameters
+        ----------
+        X : array_like, shape (n_samples, n_features)
+            Time-ordered inputs at a constant sampling interval, in their own units.
+        y : array_like, shape (n_samples,)
+            Time-ordered target, in its own unit.
+
+        Returns
+        -------
+        GreySeriesRegressor
+            ``self``, fitted.
+        """
         X, y = validate_xy(X, y, what=type(self).__name__)
         lost, why = self._samples_without_equation()
         require_parameters(X.shape[0], self._n_parameters(X.shape[1]), type(self).__name__, lost, why)
@@ -190,15 +318,27 @@ class GreySeriesRegressor(RegressorMixin, BaseEstimator):
         self._fit_changes(zero_reference(X), zero_reference(y))
         return self
 
-    def predict(self, X) -> np.ndarray:
-        """``y_reference_ +`` the predicted change from the first row of ``X``."""
+    def predict(self, X: ArrayLike) -> NDArray[np.float64]:
+        """``y_reference_ +`` the predicted change from the first row of ``X``.
+
+        Parameters
+        ----------
+        X : array_like, shape (n_samples, n_features)
+            Time-ordered inputs from the start of the series to predict, at the training interval.
+
+        Returns
+        -------
+        ndarray, shape (n_samples,)
+            Prediction, in the unit of the training target.
+        """
         check_is_fitted(self, "y_reference_")
         X = validate_x(X, what=type(self).__name__)
         check_n_features(self, X)
         return self.y_reference_ + self._predict_changes(zero_reference(X))
 
 
-def chronological_prediction(model, X, y, n_train: int) -> np.ndarray:
+def chronological_prediction(model: BaseEstimator, X: NDArray[np.float64], y: NDArray[np.float64],
+                             n_train: int) -> NDArray[np.float64]:
     """Fit ``model`` on the first ``n_train`` rows, return its prediction of rows ``n_train:``.
 
     ``X`` (n_samples, n_features) and ``y`` (n_samples,) are time-ordered;
@@ -207,6 +347,22 @@ def chronological_prediction(model, X, y, n_train: int) -> np.ndarray:
     input, so it is run over the whole series from the training start and
     the test part read off the tail (the thesis's "calibrate on the first
     stage, predict the rest"); a static model maps each test row on its own.
+
+    Parameters
+    ----------
+    model : BaseEstimator
+        An unfitted regressor (fitted here).
+    X : ndarray, shape (n_samples, n_features)
+        Time-ordered inputs.
+    y : ndarray, shape (n_samples,)
+        Time-ordered target.
+    n_train : int
+        Rows used for fitting.
+
+    Returns
+    -------
+    ndarray, shape (n_samples - n_train,)
+        Prediction of the rows after the training ones, in the unit of ``y``.
     """
     model.fit(X[:n_train], y[:n_train])
     if isinstance(model, GreySeriesRegressor):
@@ -222,10 +378,15 @@ class GM0NRegressor(GreySeriesRegressor):
     the original series, the prediction is ``Δŷ = X⁰ θ``: a zero-intercept
     linear model whose weights are estimated in the AGO domain.
 
+    Parameters
+    ----------
+    ridge : float, default 0.0
+        Relative ridge of the least squares (see :func:`grey_least_squares`).
+
     Attributes: ``coef_`` (θ, n_features), ``y_reference_``.
     """
 
-    def __init__(self, ridge=0.0):
+    def __init__(self, ridge: float = 0.0):
         self.ridge = ridge
 
     def _n_parameters(self, n_features):
@@ -252,10 +413,15 @@ class GM1NRegressor(GreySeriesRegressor):
     ``ρ = (1 - a/2)/(1 + a/2)``, then IAGO. This avoids the textbook
     time-response formula, which assumes constant drivers.
 
+    Parameters
+    ----------
+    ridge : float, default 0.0
+        Relative ridge of the least squares (see :func:`grey_least_squares`).
+
     Attributes: ``development_coefficient_`` (a), ``coef_`` (b, n_features).
     """
 
-    def __init__(self, ridge=0.0):
+    def __init__(self, ridge: float = 0.0):
         self.ridge = ridge
 
     def _n_parameters(self, n_features):

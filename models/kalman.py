@@ -18,10 +18,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import cho_factor, cho_solve, expm
 
 
-def discretize(A, B, dt, noise_intensity=None):
+def discretize(A: ArrayLike, B: ArrayLike, dt: float, noise_intensity: ArrayLike | None = None
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64] | None]:
     """Exact discretisation of ``ẋ = A x + B u + w`` for inputs constant over a step of ``dt`` s.
 
     Parameters
@@ -77,7 +79,7 @@ class KalmanFilter:
     R : measurement-noise covariance, (p, p) or a vector of variances
     """
 
-    def __init__(self, F, G, H, J, Q, R):
+    def __init__(self, F: ArrayLike, G: ArrayLike, H: ArrayLike, J: ArrayLike | None, Q: ArrayLike, R: ArrayLike):
         self.F = np.atleast_2d(np.asarray(F, float))
         n = self.F.shape[0]
         self.G = np.asarray(G, float).reshape(n, -1)
@@ -91,26 +93,60 @@ class KalmanFilter:
             raise ValueError("Kalman filter: Q and R must be finite")
         self.reset(np.zeros(n), np.eye(n))
 
-    def reset(self, x0, P0):
-        """Start again from the state mean ``x0`` and covariance ``P0``."""
+    def reset(self, x0: ArrayLike, P0: ArrayLike) -> KalmanFilter:
+        """Start again from the state mean ``x0`` and covariance ``P0``.
+
+        Parameters
+        ----------
+        x0 : array_like, shape (n,)
+            State mean, in the state's units.
+        P0 : array_like, shape (n, n) or (n,)
+            State covariance, or its diagonal (state units²).
+
+        Returns
+        -------
+        KalmanFilter
+            ``self``.
+        """
         n = self.F.shape[0]
         self.x = np.asarray(x0, float).reshape(n).copy()
         P0 = np.asarray(P0, float)
         self.P = np.diag(P0) if P0.ndim == 1 else P0.reshape(n, n).copy()
         return self
 
-    def predict(self, u):
-        """Advance one step with the input ``u`` held (or averaged) over it."""
+    def predict(self, u: ArrayLike) -> KalmanFilter:
+        """Advance one step with the input ``u`` held (or averaged) over it.
+
+        Parameters
+        ----------
+        u : array_like, shape (m,)
+            Input over the step, in the model's input units.
+
+        Returns
+        -------
+        KalmanFilter
+            ``self``.
+        """
         self.x = self.F @ self.x + self.G @ np.asarray(u, float)
         P = self.F @ self.P @ self.F.T + self.Q
         self.P = 0.5 * (P + P.T)
         return self
 
-    def update(self, y, u):
+    def update(self, y: ArrayLike, u: ArrayLike) -> float:
         """Fuse the measurements ``y`` (NaN = missing) taken with input ``u``.
 
-        Returns the squared Mahalanobis norm of the innovation (χ² with as
-        many degrees of freedom as measurements used), or NaN if none was.
+        Parameters
+        ----------
+        y : array_like, shape (p,)
+            Measurements, in the output units; NaN for a missing one.
+        u : array_like, shape (m,)
+            Input at the measurement (for the feedthrough ``J u``).
+
+        Returns
+        -------
+        float
+            The squared Mahalanobis norm of the innovation (χ² with as many
+            degrees of freedom as measurements used), or NaN if none was.
         """
         y = np.asarray(y, float)
         seen = np.isfinite(y)
@@ -129,14 +165,33 @@ class KalmanFilter:
         self.P = 0.5 * (P + P.T)
         return float(innovation @ cho_solve(factor, innovation))
 
-    def estimate(self, L, M, u):
-        """Mean and standard deviation of ``z = L x + M u`` for the present state."""
+    def estimate(self, L: ArrayLike, M: ArrayLike | None, u: ArrayLike
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Mean and standard deviation of ``z = L x + M u`` for the present state.
+
+        Parameters
+        ----------
+        L : array_like, shape (q, n)
+            Output rows on the state.
+        M : array_like, shape (q, m), or None
+            Feedthrough of the input (None: none).
+        u : array_like, shape (m,)
+            Input.
+
+        Returns
+        -------
+        mean : ndarray, shape (q,)
+            Estimates of z, in its units.
+        std : ndarray, shape (q,)
+            Their standard deviations (from the state covariance only), same units.
+        """
         L = np.asarray(L, float).reshape(-1, len(self.x))
         mean = L @ self.x + (0.0 if M is None else np.asarray(M, float) @ np.asarray(u, float))
         variance = np.einsum("ij,jk,ik->i", L, self.P, L)
         return mean, np.sqrt(np.maximum(variance, 0.0))
 
-    def filter(self, U, Y, L=None, M=None):
+    def filter(self, U: ArrayLike, Y: ArrayLike, L: ArrayLike | None = None,
+               M: ArrayLike | None = None) -> FilterResult:
         """Filter a whole record: measure-update at step k, then predict to k + 1.
 
         Parameters
@@ -144,6 +199,12 @@ class KalmanFilter:
         U : (N, m) inputs; row k is the input over [t_k, t_{k+1})
         Y : (N, p) measurements at t_k (NaN = missing)
         L, M : optional extra outputs ``z = L x + M u`` to estimate at every t_k
+
+        Returns
+        -------
+        FilterResult
+            Filtered states, their variances, the extra outputs with their
+            standard deviations (None without ``L``) and the innovations.
         """
         U = np.asarray(U, float).reshape(len(U), -1)
         Y = np.asarray(Y, float).reshape(len(U), -1)

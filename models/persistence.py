@@ -110,27 +110,90 @@ def _build(document, path):
     return estimator
 
 
-def model_to_document(estimator) -> dict:
-    """The JSON-ready document :func:`save_model` writes (for embedding in a larger file)."""
+def model_to_document(estimator: BaseEstimator) -> dict:
+    """The JSON-ready document :func:`save_model` writes (for embedding in a larger file).
+
+    Parameters
+    ----------
+    estimator : BaseEstimator
+        An instance of a registered class (fitted or not).
+
+    Returns
+    -------
+    dict
+        ``format``, ``version``, ``class``, ``params`` and ``learned`` (see the module docstring).
+
+    Raises
+    ------
+    ValueError
+        If the class is not registered in :mod:`models.registry`.
+    """
     return _model_document(estimator)
 
 
-def model_from_document(document, source="<document>"):
-    """Rebuild an estimator from a :func:`model_to_document` document; ``source`` names it in errors."""
+def model_from_document(document: object, source: str = "<document>") -> BaseEstimator:
+    """Rebuild an estimator from a :func:`model_to_document` document; ``source`` names it in errors.
+
+    Parameters
+    ----------
+    document : object
+        The parsed JSON document (must be a dict).
+    source : str, default "<document>"
+        Names the document in error messages.
+
+    Returns
+    -------
+    BaseEstimator
+        The estimator, with its hyperparameters and learned attributes.
+
+    Raises
+    ------
+    ValueError
+        A wrong format, version, class or tagged value, naming ``source`` and the field.
+    """
     if not isinstance(document, dict):
         raise ValueError(f"{source}: field '<root>' has value of type {type(document).__name__}, expected an object.")
     return _build(document, source)
 
 
-def save_model(estimator, path) -> Path:
-    """Write ``estimator`` (fitted or not) to ``path`` as JSON; returns the path."""
+def save_model(estimator: BaseEstimator, path: Path | str) -> Path:
+    """Write ``estimator`` (fitted or not) to ``path`` as JSON; returns the path.
+
+    Parameters
+    ----------
+    estimator : BaseEstimator
+        An instance of a registered class.
+    path : Path or str
+        The file to write (replaced if it exists).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     path = Path(path)
     path.write_text(json.dumps(_model_document(estimator)))
     return path
 
 
-def load_model(path):
-    """Read an estimator written by :func:`save_model`."""
+def load_model(path: Path | str) -> BaseEstimator:
+    """Read an estimator written by :func:`save_model`.
+
+    Parameters
+    ----------
+    path : Path or str
+        The JSON model file.
+
+    Returns
+    -------
+    BaseEstimator
+        The estimator, predicting as the saved one did.
+
+    Raises
+    ------
+    ValueError
+        Not JSON, or a wrong format, version, class or value (naming the file and field).
+    """
     path = Path(path)
     try:
         document = json.loads(path.read_text())

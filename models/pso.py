@@ -17,9 +17,10 @@ as +inf, so a particle in a region where the model blows up is never best.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
+from numpy.typing import ArrayLike
 from sklearn.utils import check_random_state
 
 from ._validation import check_positive_int
@@ -50,8 +51,8 @@ def _as_bounds(bounds) -> tuple[np.ndarray, np.ndarray]:
 
 
 def particle_swarm_minimize(
-    objective: Callable[[np.ndarray], np.ndarray],
-    bounds,
+    objective: Callable[[np.ndarray], np.ndarray | float],
+    bounds: ArrayLike,
     *,
     n_particles: int = 90,
     max_iter: int = 100,
@@ -62,8 +63,8 @@ def particle_swarm_minimize(
     tol: float = 0.0,
     n_iter_no_change: int | None = None,
     vectorized: bool = True,
-    initial_positions=None,
-    random_state=None,
+    initial_positions: ArrayLike | None = None,
+    random_state: int | np.random.RandomState | None = None,
 ) -> PSOResult:
     """Minimise ``objective`` over the box ``bounds`` with a particle swarm.
 
@@ -86,11 +87,18 @@ def particle_swarm_minimize(
         Early stop once the best fitness has improved by no more than
         ``tol × |best|`` for ``n_iter_no_change`` consecutive epochs.
         ``None`` runs all epochs.
+    vectorized : bool, default True
+        Whether ``objective`` takes the whole swarm at once.
     initial_positions : array-like (k, dim), optional
         Positions for the first k particles (e.g. a least-squares estimate);
         the others start uniformly at random.
     random_state : int, RandomState or None
         Same seed ⇒ identical result.
+
+    Returns
+    -------
+    PSOResult
+        The best position and fitness, the epochs run and the best fitness after each.
     """
     lower, upper = _as_bounds(bounds)
     dim = lower.size

@@ -30,7 +30,11 @@ from __future__ import annotations
 import functools
 import importlib
 import pkgutil
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TypeVar
+
+T = TypeVar("T", bound=type)
 
 
 @dataclass(frozen=True)
@@ -55,8 +59,19 @@ class ModelEntry:
     defaults: dict = field(default_factory=dict)
     time_series: bool = False
 
-    def make(self, **params) -> object:
-        """An unfitted estimator with this name's defaults, overridden by ``params``."""
+    def make(self, **params: object) -> object:
+        """An unfitted estimator with this name's defaults, overridden by ``params``.
+
+        Parameters
+        ----------
+        **params
+            Hyperparameters (keyword arguments of the class).
+
+        Returns
+        -------
+        object
+            The estimator, an instance of :attr:`cls`.
+        """
         return self.cls(**{**self.defaults, **params})
 
 
@@ -65,7 +80,7 @@ _MODELS: dict[str, ModelEntry] = {}
 _TIME_SERIES: set[str] = set()
 
 
-def register_model(names: dict[str, dict] | None = None, time_series: bool = False):
+def register_model(names: dict[str, dict] | None = None, time_series: bool = False) -> Callable[[T], T]:
     """Class decorator: register an estimator for persistence and, with ``names``, for ``twin train``.
 
     Parameters
@@ -75,6 +90,11 @@ def register_model(names: dict[str, dict] | None = None, time_series: bool = Fal
         initialisations).  None: persisted only.
     time_series : bool
         The class is a grey time-series model (see :class:`ModelEntry`).
+
+    Returns
+    -------
+    callable
+        The decorator; it returns the class unchanged.
 
     Raises
     ------
@@ -107,23 +127,51 @@ def _load_all() -> None:
 
 
 def estimator_classes() -> dict[str, type]:
-    """Class name → class of every registered estimator (what a model file may name)."""
+    """Class name → class of every registered estimator (what a model file may name).
+
+    Returns
+    -------
+    dict of str to type
+        A copy; changing it changes nothing.
+    """
     _load_all()
     return dict(_CLASSES)
 
 
 def registered_models() -> dict[str, ModelEntry]:
-    """Command-line name → :class:`ModelEntry` of every ``twin train`` model."""
+    """Command-line name → :class:`ModelEntry` of every ``twin train`` model.
+
+    Returns
+    -------
+    dict of str to ModelEntry
+        A copy.
+    """
     _load_all()
     return dict(_MODELS)
 
 
 def model_names() -> list[str]:
-    """The sorted command-line model names."""
+    """The sorted command-line model names.
+
+    Returns
+    -------
+    list of str
+        Lower-case names, as ``twin train --model`` takes them.
+    """
     return sorted(registered_models())
 
 
 def is_time_series(estimator: object) -> bool:
-    """True if ``estimator`` is an instance of a registered grey time-series class."""
+    """True if ``estimator`` is an instance of a registered grey time-series class.
+
+    Parameters
+    ----------
+    estimator : object
+        Any object (its class name is looked up).
+
+    Returns
+    -------
+    bool
+    """
     _load_all()
     return type(estimator).__name__ in _TIME_SERIES

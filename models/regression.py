@@ -15,12 +15,15 @@ lines of NumPy and :mod:`models.persistence` can store them without pickle.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.decomposition import PCA
 from sklearn.linear_model import LinearRegression
 from sklearn.neural_network import MLPRegressor
-from sklearn.pipeline import make_pipeline
+from sklearn.pipeline import Pipeline, make_pipeline
 from sklearn.preprocessing import StandardScaler
 from sklearn.utils.validation import check_is_fitted
 
@@ -35,8 +38,26 @@ from ._validation import (
 from .registry import register_model
 
 
-def make_ann_pipeline(hidden_layer_sizes=(10,), alpha=1e-4, max_iter=2000, random_state=None):
-    """Plain scikit-learn pipeline of the thesis ANN: StandardScaler → tanh MLP, early stopping."""
+def make_ann_pipeline(hidden_layer_sizes: Sequence[int] = (10,), alpha: float = 1e-4, max_iter: int = 2000,
+                      random_state: int | np.random.RandomState | None = None) -> Pipeline:
+    """Plain scikit-learn pipeline of the thesis ANN: StandardScaler → tanh MLP, early stopping.
+
+    Parameters
+    ----------
+    hidden_layer_sizes : sequence of int, default (10,)
+        Units per hidden layer.
+    alpha : float, default 1e-4
+        L2 penalty of the MLP.
+    max_iter : int, default 2000
+        Most Adam epochs.
+    random_state : int, RandomState or None
+        Seeds the weights and the early-stopping split.
+
+    Returns
+    -------
+    Pipeline
+        Unfitted ``StandardScaler → MLPRegressor`` (Adam, 10 % early-stopping split, 20 epochs' patience).
+    """
     return make_pipeline(
         StandardScaler(),
         MLPRegressor(
@@ -60,8 +81,19 @@ def _scaling(scaler: StandardScaler):
 class _LinearPredictor(RegressorMixin, BaseEstimator):
     """Shared ``predict = X @ coef_ + intercept_`` for the linear wrappers."""
 
-    def predict(self, X):
-        """Linear prediction ``X β + β₀``."""
+    def predict(self, X: ArrayLike) -> NDArray[np.float64]:
+        """Linear prediction ``X β + β₀``.
+
+        Parameters
+        ----------
+        X : array_like, shape (n_samples, n_features)
+            Inputs, in the units of the training inputs.
+
+        Returns
+        -------
+        ndarray, shape (n_samples,)
+            Prediction, in the unit of the training target.
+        """
         check_is_fitted(self, "coef_")
         X = validate_x(X, what=type(self).__name__)
         check_n_features(self, X)
@@ -76,14 +108,32 @@ class MLRRegressor(_LinearPredictor):
     collinear temperatures); ``coef_``/``intercept_`` are always in input
     units, and ``standardized_coef_`` (per input standard deviation) is kept
     for ranking inputs.
+
+    Parameters
+    ----------
+    standardize : bool, default False
+        Solve on standardised inputs.
     """
 
-    def __init__(self, standardize=False):
+    def __init__(self, standardize: bool = False):
         self.standardize = standardize
 
     @one_blas_thread
-    def fit(self, X, y):
-        """Ordinary least squares on ``X`` (n_samples, n_features)."""
+    def fit(self, X: ArrayLike, y: ArrayLike) -> MLRRegressor:
+        """Ordinary least squares on ``X`` (n_samples, n_features).
+
+        Parameters
+        ----------
+        X : array_like, shape (n_samples, n_features)
+            Inputs, in their own units (e.g. °C).
+        y : array_like, shape (n_samples,)
+            Target, in its own unit (e.g. µm); the prediction has the same unit.
+
+        Returns
+        -------
+        MLRRegressor
+            ``self``, fitted.
+        """
         X, y = validate_xy(X, y, what="MLRRegressor")
         require_parameters(X.shape[0], X.shape[1] + 1, f"MLRRegressor ({X.shape[1]} coefficients + intercept)")
         mean, scale = np.zeros(X.shape[1]), np.ones(X.shape[1])
@@ -119,13 +169,26 @@ class PCRRegressor(_LinearPredictor):
     coef_, intercept_ : equivalent linear model in input units
     """
 
-    def __init__(self, variance_threshold=0.85, n_components=None):
+    def __init__(self, variance_threshold: float = 0.85, n_components: int | None = None):
         self.variance_threshold = variance_threshold
         self.n_components = n_components
 
     @one_blas_thread
-    def fit(self, X, y):
-        """Standardise, project on the kept components, regress ``y`` on the scores."""
+    def fit(self, X: ArrayLike, y: ArrayLike) -> PCRRegressor:
+        """Standardise, project on the kept components, regress ``y`` on the scores.
+
+        Parameters
+        ----------
+        X : array_like, shape (n_samples, n_features)
+            Inputs, in their own units (e.g. °C).
+        y : array_like, shape (n_samples,)
+            Target, in its own unit (e.g. µm); the prediction has the same unit.
+
+        Returns
+        -------
+        PCRRegressor
+            ``self``, fitted.
+        """
         X, y = validate_xy(X, y, min_samples=2, what="PCRRegressor")
         if not 0.0 < self.variance_threshold <= 1.0:
             raise ValueError(f"variance_threshold must be in (0, 1], got {self.variance_threshold!r}.")
@@ -159,17 +222,42 @@ class ANNRegressor(RegressorMixin, BaseEstimator):
     :func:`make_ann_pipeline` (Adam, early stopping, seeded) and its weights
     are then stored as arrays: ``coefs_``/``intercepts_`` (lists, one per
     layer), ``x_mean_``, ``x_scale_``, ``y_mean_``, ``y_scale_``.
+
+    Parameters
+    ----------
+    hidden_layer_sizes : sequence of int, default (10,)
+        Units per hidden layer.
+    alpha : float, default 1e-4
+        L2 penalty.
+    max_iter : int, default 2000
+        Most Adam epochs.
+    random_state : int, RandomState or None
+        Seeds the weights and the early-stopping split.
     """
 
-    def __init__(self, hidden_layer_sizes=(10,), alpha=1e-4, max_iter=2000, random_state=None):
+    def __init__(self, hidden_layer_sizes: Sequence[int] = (10,), alpha: float = 1e-4, max_iter: int = 2000,
+                 random_state: int | np.random.RandomState | None = None):
         self.hidden_layer_sizes = hidden_layer_sizes
         self.alpha = alpha
         self.max_iter = max_iter
         self.random_state = random_state
 
     @one_blas_thread
-    def fit(self, X, y):
-        """Train the network on ``X`` (n_samples, n_features), ``y`` (n_samples,)."""
+    def fit(self, X: ArrayLike, y: ArrayLike) -> ANNRegressor:
+        """Train the network on ``X`` (n_samples, n_features), ``y`` (n_samples,).
+
+        Parameters
+        ----------
+        X : array_like, shape (n_samples, n_features)
+            Inputs, in their own units (e.g. °C).
+        y : array_like, shape (n_samples,)
+            Target, in its own unit (e.g. µm); the prediction has the same unit.
+
+        Returns
+        -------
+        ANNRegressor
+            ``self``, fitted.
+        """
         X, y = validate_xy(X, y, what="ANNRegressor")
         sizes = [X.shape[1], *self.hidden_layer_sizes, 1]
         n_weights = sum((a + 1) * b for a, b in zip(sizes[:-1], sizes[1:]))
@@ -192,8 +280,19 @@ class ANNRegressor(RegressorMixin, BaseEstimator):
         self.n_features_in_ = X.shape[1]
         return self
 
-    def predict(self, X):
-        """Forward pass: tanh hidden layers, linear output, de-standardised."""
+    def predict(self, X: ArrayLike) -> NDArray[np.float64]:
+        """Forward pass: tanh hidden layers, linear output, de-standardised.
+
+        Parameters
+        ----------
+        X : array_like, shape (n_samples, n_features)
+            Inputs, in the units of the training inputs.
+
+        Returns
+        -------
+        ndarray, shape (n_samples,)
+            Prediction, in the unit of the training target.
+        """
         check_is_fitted(self, "coefs_")
         X = validate_x(X, what="ANNRegressor")
         check_n_features(self, X)

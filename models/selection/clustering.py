@@ -16,6 +16,7 @@ the reference, and the tests check both agree.
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
@@ -24,11 +25,21 @@ from ..fcm import FuzzyCMeans
 from ..grey import zero_reference
 
 
-def similarity_matrix(X) -> np.ndarray:
+def similarity_matrix(X: ArrayLike) -> NDArray[np.float64]:
     """``|r_ij|`` between the columns (sensors) of X, (n_sensors, n_sensors), diagonal 1.
 
     Seed 002 normalises ``c_i = x_i / max|x_i|`` first; Pearson r is
     scale-invariant, so that step does not change R.
+
+    Parameters
+    ----------
+    X : array_like, shape (n_samples, n_sensors)
+        Sensor records (e.g. °C), one column per sensor.
+
+    Returns
+    -------
+    ndarray, shape (n_sensors, n_sensors)
+        R in [0, 1] (0 against a constant sensor).
     """
     X = validate_x(X, what="similarity_matrix")
     Xc = X - X.mean(axis=0)
@@ -39,11 +50,22 @@ def similarity_matrix(X) -> np.ndarray:
     return R
 
 
-def maximum_spanning_tree(R) -> tuple[np.ndarray, np.ndarray]:
+def maximum_spanning_tree(R: ArrayLike) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
     """Prim's maximum spanning tree of a dense similarity matrix.
 
-    Returns ``edges`` (n-1, 2) int and their ``weights`` (n-1,), in the order
-    Prim adds them. O(n²) time, vectorised over the fringe.
+    O(n²) time, vectorised over the fringe.
+
+    Parameters
+    ----------
+    R : array_like, shape (n, n)
+        Symmetric similarity.
+
+    Returns
+    -------
+    edges : ndarray of int, shape (n - 1, 2)
+        Tree edges, in the order Prim adds them.
+    weights : ndarray, shape (n - 1,)
+        Their similarities.
     """
     R = np.asarray(R, dtype=np.float64)
     n = R.shape[0]
@@ -64,20 +86,49 @@ def maximum_spanning_tree(R) -> tuple[np.ndarray, np.ndarray]:
     return edges, weights
 
 
-def tree_clusters(n: int, edges, weights, lam: float) -> np.ndarray:
-    """Labels (n,) of the connected parts left after cutting tree edges with weight < λ."""
+def tree_clusters(n: int, edges: ArrayLike, weights: ArrayLike, lam: float) -> NDArray[np.int32]:
+    """Labels (n,) of the connected parts left after cutting tree edges with weight < λ.
+
+    Parameters
+    ----------
+    n : int
+        Number of sensors.
+    edges : array_like of int, shape (n - 1, 2)
+        Tree edges (see :func:`maximum_spanning_tree`).
+    weights : array_like, shape (n - 1,)
+        Their similarities.
+    lam : float
+        Threshold λ: edges at or above it are kept.
+
+    Returns
+    -------
+    ndarray of int, shape (n,)
+        Group label of each sensor, 0..n_groups − 1.
+    """
     keep = np.asarray(weights) >= lam
     e = np.asarray(edges)[keep]
     graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
     return connected_components(graph, directed=False)[1]
 
 
-def lambda_for_n_groups(weights, n_groups: int) -> float:
+def lambda_for_n_groups(weights: ArrayLike, n_groups: int) -> float:
     """Threshold λ whose cut of the tree (edge ``weights``) gives ``n_groups`` groups.
 
     Cutting the k weakest of the n - 1 edges leaves k + 1 groups, so λ is the
     ``n_groups``-th smallest weight (ties can merge groups; the caller gets
     fewer then). For ``n_groups = n`` λ is just above the largest weight.
+
+    Parameters
+    ----------
+    weights : array_like, shape (n - 1,)
+        Edge weights of the maximum spanning tree.
+    n_groups : int
+        Wanted number of groups, 1..n.
+
+    Returns
+    -------
+    float
+        λ.
     """
     w = np.sort(np.asarray(weights, dtype=np.float64))
     n = w.size + 1
@@ -89,13 +140,30 @@ def lambda_for_n_groups(weights, n_groups: int) -> float:
     return float(w[n_groups - 1])
 
 
-def fuzzy_equivalence_clusters(X, lam: float | None = None, n_groups: int | None = None):
+def fuzzy_equivalence_clusters(X: ArrayLike, lam: float | None = None,
+                               n_groups: int | None = None) -> tuple[NDArray[np.int32], float]:
     """Seed 002 fuzzy clustering: |Pearson| similarity, transitive closure, λ-cut.
 
     Give either the threshold ``lam`` or the wanted ``n_groups`` (λ is then
     chosen by :func:`lambda_for_n_groups`). Returns ``(labels, lam)``. The
     closure is taken through the maximum spanning tree (module docstring),
     so this is also seed 004's maximal-tree clustering.
+
+    Parameters
+    ----------
+    X : array_like, shape (n_samples, n_sensors)
+        Sensor records, one column per sensor.
+    lam : float, optional
+        Threshold λ in [0, 1].
+    n_groups : int, optional
+        Wanted number of groups.
+
+    Returns
+    -------
+    labels : ndarray of int, shape (n_sensors,)
+        Group of each sensor.
+    lam : float
+        The threshold used.
     """
     if (lam is None) == (n_groups is None):
         raise ValueError("give exactly one of lam or n_groups.")
@@ -106,12 +174,22 @@ def fuzzy_equivalence_clusters(X, lam: float | None = None, n_groups: int | None
     return tree_clusters(R.shape[0], edges, weights, lam), float(lam)
 
 
-def transitive_closure(R) -> np.ndarray:
+def transitive_closure(R: ArrayLike) -> NDArray[np.float64]:
     """Max–min transitive closure t(R) via the maximum spanning tree, O(n²).
 
     Tree edges are merged from strongest to weakest (Kruskal order); when two
     groups first join through an edge of weight w, every pair across them
     gets ``t(R) = w``.
+
+    Parameters
+    ----------
+    R : array_like, shape (n, n)
+        Symmetric similarity.
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+        t(R); its diagonal is that of ``R``.
     """
     R = np.asarray(R, dtype=np.float64)
     n = R.shape[0]
@@ -131,10 +209,20 @@ def transitive_closure(R) -> np.ndarray:
     return T
 
 
-def max_min_transitive_closure(R) -> np.ndarray:
+def max_min_transitive_closure(R: ArrayLike) -> NDArray[np.float64]:
     """Reference closure by repeated max–min squaring, ``R ← R∘R`` until ``R^(2l) = R^(2l+1)``.
 
     ``(R∘R)_ij = max_k min(R_ik, R_kj)``. O(n³ log n); for small n and tests.
+
+    Parameters
+    ----------
+    R : array_like, shape (n, n)
+        Symmetric similarity with unit diagonal.
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+        t(R).
     """
     R = np.asarray(R, dtype=np.float64)
     while True:
@@ -144,13 +232,32 @@ def max_min_transitive_closure(R) -> np.ndarray:
         R = squared
 
 
-def fcm_sensor_clusters(X, n_clusters: int, features=None, m: float = 2.0, random_state=None) -> np.ndarray:
+def fcm_sensor_clusters(X: ArrayLike, n_clusters: int, features: ArrayLike | None = None, m: float = 2.0,
+                        random_state: int | np.random.RandomState | None = None) -> NDArray[np.intp]:
     """FCM labels (n_sensors,) for the sensors (columns) of X.
 
     By default each sensor is clustered on its zero-referenced time series
     normalised by its largest change, ``x⁰_i / max|x⁰_i|`` (shape matters,
     not scale; thesis option (a)). Pass ``features`` (n_sensors, n_features),
     e.g. influence weights as a column, to cluster on those instead (option (b)).
+
+    Parameters
+    ----------
+    X : array_like, shape (n_samples, n_sensors)
+        Time-ordered sensor records (e.g. °C).
+    n_clusters : int
+        Number of groups.
+    features : array_like, shape (n_sensors, n_features), optional
+        What to cluster the sensors on instead of their normalised series.
+    m : float, default 2.0
+        FCM fuzziness.
+    random_state : int, RandomState or None
+        Seeds FCM.
+
+    Returns
+    -------
+    ndarray of int, shape (n_sensors,)
+        Cluster of largest membership of each sensor.
     """
     X = validate_x(X, what="fcm_sensor_clusters")
     if features is None:

@@ -7,9 +7,12 @@ block better with it.  Several targets (drift axes) can share one sensor set.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 
 @dataclass(frozen=True)
@@ -91,8 +94,11 @@ def _add_fold_objective(objective, g, f, S, lam, criterion):
             objective += g.tw[a] * worst * scale
 
 
-def greedy_loso(blocks_X, blocks_y, k_max, ridge=1e-4, normalise="none", criterion="max",
-                target_weights=None, folds=None):
+def greedy_loso(blocks_X: Sequence[NDArray[np.float64]], blocks_y: Sequence[ArrayLike], k_max: int,
+                ridge: float = 1e-4, normalise: Literal["none", "rows", "peak"] = "none",
+                criterion: Literal["max", "sse"] = "max", target_weights: ArrayLike | None = None,
+                folds: Sequence[int] | None = None
+                ) -> tuple[NDArray[np.int_], NDArray[np.float64], NDArray[np.float64]]:
     """Greedy forward selection on the leave-one-block-out error of an MLR (with intercept).
 
     ``blocks_X`` : list of (n_f, p) zero-referenced candidate series, one per block (record);
@@ -112,6 +118,34 @@ def greedy_loso(blocks_X, blocks_y, k_max, ridge=1e-4, normalise="none", criteri
     (the max criterion also needs one residual matrix per block), never by refitting.
     Returns the chosen columns in order, the objective after each step, and every
     candidate's objective when used alone.
+
+    Parameters
+    ----------
+    blocks_X : sequence of ndarray, each (n_f, p)
+        Zero-referenced candidate series (e.g. °C), one per block; at least two blocks.
+    blocks_y : sequence of array_like, each (n_f,) or (n_f, a)
+        Matching targets (e.g. µm).
+    k_max : int
+        Sensors to choose.
+    ridge : float, default 1e-4
+        Ridge on the slopes, relative to the mean Gram diagonal.
+    normalise : {"none", "rows", "peak"}, default "none"
+        Weight of each block's term (above).
+    criterion : {"max", "sse"}, default "max"
+        Held-out peak residual or sum of squares.
+    target_weights : array_like, shape (a,), optional
+        Weight of each target (default 1).
+    folds : sequence of int, optional
+        Blocks held out in turn (default all).
+
+    Returns
+    -------
+    chosen : ndarray of int, shape (k_max,)
+        Candidate columns in the order chosen.
+    history : ndarray, shape (k_max,)
+        Objective after each step (µm with ``criterion="max"`` and ``normalise="none"``, µm² with "sse").
+    alone : ndarray, shape (p,)
+        Each candidate's objective as the only sensor.
     """
     Ys, tw, folds = _checked_blocks(blocks_X, blocks_y, target_weights, folds)
     p = blocks_X[0].shape[1]

@@ -2,17 +2,35 @@
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import NDArray
 
 
-def pod_modes(X):
-    """POD of the centred snapshot matrix X (n, p): (U, σ, Vᵀ), thin SVD (computed once, shared by axes and K)."""
+def pod_modes(X: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """POD of the centred snapshot matrix X (n, p): (U, σ, Vᵀ), thin SVD (computed once, shared by axes and K).
+
+    Parameters
+    ----------
+    X : ndarray, shape (n, p)
+        Snapshots (rows: times; columns: candidate sensors, e.g. °C).
+
+    Returns
+    -------
+    U : ndarray, shape (n, r)
+        Temporal modes, r = min(n, p).
+    s : ndarray, shape (r,)
+        Singular values, descending (unit of X).
+    Vt : ndarray, shape (r, p)
+        Spatial loadings.
+    """
     import scipy.linalg as la
 
     Xc = X - X.mean(axis=0)
     return la.svd(Xc, full_matrices=False, lapack_driver="gesdd", check_finite=False)
 
 
-def qr_drift(X, y, k, n_modes=20, noise_floor=1e-3, pod=None):
+def qr_drift(X: NDArray[np.float64], y: NDArray[np.float64], k: int, n_modes: int = 20, noise_floor: float = 1e-3,
+             pod: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]] | None = None
+             ) -> tuple[NDArray[np.int_], NDArray[np.float64]]:
     """Q-DEIM (QR with column pivoting) on the drift-relevant POD modes of the snapshot matrix X (n, p).
 
     POD of the centred snapshots, X = U Σ Vᵀ, keeping modes above ``noise_floor`` of σ₁ (at most
@@ -21,6 +39,28 @@ def qr_drift(X, y, k, n_modes=20, noise_floor=1e-3, pod=None):
     Vᵀ (k × p) picks the ``k`` sensors from which those modal coordinates are best determined
     (well-conditioned Vᵀ[:, S]).  Returns the sensors (pivot order) and every candidate's
     drift-weighted loading norm.  ``pod``: the result of :func:`pod_modes` of X, when already known.
+
+    Parameters
+    ----------
+    X : ndarray, shape (n, p)
+        Snapshots of the candidates (e.g. °C).
+    y : ndarray, shape (n,)
+        The drift (e.g. µm).
+    k : int
+        Sensors to choose.
+    n_modes : int, default 20
+        Most POD modes considered.
+    noise_floor : float, default 1e-3
+        Modes with σ below this fraction of σ₁ are dropped.
+    pod : tuple, optional
+        ``pod_modes(X)``, when already computed.
+
+    Returns
+    -------
+    sensors : ndarray of int, shape (k,)
+        Chosen candidate columns, in pivot order.
+    score : ndarray, shape (p,)
+        Drift-weighted loading norm of every candidate (dimensionless).
     """
     from scipy.linalg import qr
 

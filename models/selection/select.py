@@ -28,6 +28,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from .._validation import check_positive_int, validate_xy
 from .clustering import fcm_sensor_clusters, fuzzy_equivalence_clusters
@@ -74,8 +75,21 @@ class SensorSelection:
     method: str
 
 
-def representatives(groups, scores) -> np.ndarray:
-    """Index of the best-scoring member of each group (groups labelled >= 0)."""
+def representatives(groups: ArrayLike, scores: ArrayLike) -> NDArray[np.intp]:
+    """Index of the best-scoring member of each group (groups labelled >= 0).
+
+    Parameters
+    ----------
+    groups : array_like of int, shape (n_sensors,)
+        Group label of each sensor (-1: in no group).
+    scores : array_like, shape (n_sensors,)
+        Score of each sensor (larger is better).
+
+    Returns
+    -------
+    ndarray of int, shape (n_groups,)
+        One sensor index per group, in the order of the group labels.
+    """
     groups = np.asarray(groups)
     scores = np.asarray(scores, dtype=np.float64)
     picks = []
@@ -86,18 +100,40 @@ def representatives(groups, scores) -> np.ndarray:
 
 
 def select_sensors(
-    X,
-    y,
+    X: ArrayLike,
+    y: ArrayLike,
     method: str = "gra+fcm",
     n_select: int = 5,
     *,
     cluster_on: str = "series",
     representative: str | None = None,
-    random_state=None,
+    random_state: int | np.random.RandomState | None = None,
 ) -> SensorSelection:
     """Choose ``n_select`` of the sensors (columns of X) for predicting y.
 
     See the module docstring for the methods. ``random_state`` seeds FCM.
+
+    Parameters
+    ----------
+    X : array_like, shape (n_samples, n_sensors)
+        Time-ordered candidate sensors (e.g. °C).
+    y : array_like, shape (n_samples,)
+        The thermal error (e.g. µm).
+    method : str, default "gra+fcm"
+        One of :data:`METHODS`.
+    n_select : int, default 5
+        Sensors to choose (K).
+    cluster_on : {"series", "scores"}, default "series"
+        What FCM clusters.
+    representative : str, optional
+        Score used inside groups, overriding the method's.
+    random_state : int, RandomState or None
+        Seeds FCM.
+
+    Returns
+    -------
+    SensorSelection
+        Chosen columns (best first; fewer than ``n_select`` when groups merge), their scores and the groups.
     """
     X, y = validate_xy(X, y, min_samples=3, what="select_sensors")
     n_select = check_positive_int(n_select, "n_select")

@@ -5,6 +5,7 @@ the results went.
 """
 from __future__ import annotations
 
+import argparse
 import sys
 
 from ..infra.cli_common import (
@@ -23,7 +24,14 @@ def _datasets_help():
             "or a --column-map), or a scenario name (simulated with its sensor noise)")
 
 
-def cmd_train(args):
+def cmd_train(args: argparse.Namespace) -> None:
+    """``twin train``: fit a compensation model on datasets, refuse or flag an unstable one, save it, print its fit.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+    """
     from .store import parse_params
     from .train import train
 
@@ -44,7 +52,14 @@ def cmd_train(args):
     print(f"model saved to {args.out}")
 
 
-def cmd_evaluate(args):
+def cmd_evaluate(args: argparse.Namespace) -> None:
+    """``twin evaluate``: score a saved model on datasets, print the table, write it and the plots with ``--out``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+    """
     from .train import evaluate
 
     ev = evaluate(args.model, args.datasets, out_dir=args.out, column_map=_column_map(args),
@@ -59,7 +74,14 @@ def _column_map(args):
     return read_column_map(getattr(args, "column_map", None))
 
 
-def cmd_study(args):
+def cmd_study(args: argparse.Namespace) -> None:
+    """``twin study``: run the cross-condition, thesis-protocol or hybrid study, print its Markdown report.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+    """
     from . import studies
 
     common = dict(machine=args.machine, mesh_size_m=args.mesh_size, scheduler=args.scheduler,
@@ -88,8 +110,14 @@ def _add_data_options(p):
                    help="NaNs in a measured CSV (default: error)")
 
 
-def register(sub):
-    """Add ``train``, ``evaluate`` and ``study``."""
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``train``, ``evaluate`` and ``study``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of the ``twin`` command.
+    """
     t = sub.add_parser("train", help="train a compensation model on datasets and save it (JSON, no pickle)")
     t.add_argument("datasets", nargs="+", help=_datasets_help())
     t.add_argument("--inputs", required=True, action="append", help="input channels, comma-separated")

@@ -14,12 +14,16 @@
 """
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
+
 import numpy as np
+from numpy.typing import NDArray
 
 from models.selection_cv import Selection, select_by_blocked_cv
 
+from ..core.dataset import Dataset
 from ..errors import TwinInputError
-from .store import dataset_label, make_estimator, sampling_interval
+from .store import CompensationModel, dataset_label, make_estimator, sampling_interval
 
 #: candidates of ``--select auto``: fast to fit, every family (static, grey, grey-box)
 AUTO_CANDIDATES = ("mlr", "pcr", "anfis", "gm0n", "gm1n", "gmc", "greybox")
@@ -37,11 +41,37 @@ def _speed_channel(dataset, inputs):
     return rpm[0]
 
 
-def auto_select(datasets, inputs, target, candidates=AUTO_CANDIDATES, zero_reference=True) -> tuple[str, Selection]:
+def auto_select(datasets: Iterable[Dataset], inputs: list[str], target: str,
+                candidates: Sequence[str] = AUTO_CANDIDATES, zero_reference: bool = True) -> tuple[str, Selection]:
     """The model name chosen by blocked cross-validation on one training record, and the full ranking.
 
     The greybox candidate takes the inputs as given: the first must be the
     spindle speed (rpm); if it is not, the greybox candidate is left out.
+
+    Parameters
+    ----------
+    datasets : iterable of Dataset
+        Exactly one training record, evenly sampled, with a spindle-speed input (rpm).
+    inputs : list of str
+        Input channels, the same for every candidate.
+    target : str
+        Target channel (µm for a drift axis).
+    candidates : sequence of str, default :data:`AUTO_CANDIDATES`
+        Model names to rank.
+    zero_reference : bool, default True
+        Reference inputs and target to the first row.
+
+    Returns
+    -------
+    best : str
+        The chosen model name.
+    selection : Selection
+        Scores per candidate and fold, the ranking and the reason.
+
+    Raises
+    ------
+    TwinInputError
+        Not one record, no rpm input, uneven sampling, or fewer than two operating-regime blocks.
     """
     datasets = list(datasets)
     if len(datasets) != 1:
@@ -62,12 +92,29 @@ def auto_select(datasets, inputs, target, candidates=AUTO_CANDIDATES, zero_refer
             pool[name] = (make_estimator(name, {"sampling_interval": dt}), range(X.shape[1]))
         else:
             pool[name] = (make_estimator(name), range(X.shape[1]))
-    selection = select_by_blocked_cv(pool, X, y, ds[speed_name], unit=ds.info(target).unit)
+    try:
+        selection = select_by_blocked_cv(pool, X, y, ds[speed_name], unit=ds.info(target).unit)
+    except ValueError as exc:     # the record's (one speed regime only); a candidate's failed fit is caught inside
+        raise TwinInputError(f"{dataset_label(ds)}: --select auto cannot cross-validate on this record: {exc}") \
+            from None
     return selection.best, selection
 
 
-def stability_problem(cm, datasets) -> str | None:
-    """Why the fitted model is unstable, or None: a < 0, or a diverging prediction on the training data."""
+def stability_problem(cm: CompensationModel, datasets: Iterable[Dataset]) -> str | None:
+    """Why the fitted model is unstable, or None: a < 0, or a diverging prediction on the training data.
+
+    Parameters
+    ----------
+    cm : CompensationModel
+        The fitted model.
+    datasets : iterable of Dataset
+        Its training records.
+
+    Returns
+    -------
+    str or None
+        The reason, or None for a stable model.
+    """
     a = getattr(cm.estimator, "development_coefficient_", None)
     if a is not None and a < 0:
         return (f"{cm.model_name}: development coefficient a = {a:.3g} < 0, an unstable grey model whose prediction "
@@ -82,13 +129,36 @@ def stability_problem(cm, datasets) -> str | None:
     return None
 
 
-def continued_prediction(cm, dataset, history=None) -> tuple[np.ndarray, np.ndarray]:
+def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Dataset | None = None
+                         ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """``(measured, predicted)`` change of the target since the *training* start, for a record that continues it.
 
     Static models map the inputs referenced to the training start. A
     time-series model runs over ``history`` (the training record, from its
     start) followed by ``dataset`` at the training sampling interval, and the
     tail is returned.
+
+    Parameters
+    ----------
+    cm : CompensationModel
+        A model trained by this version (its file holds the training reference).
+    dataset : Dataset
+        The record that continues the training one.
+    history : Dataset, optional
+        The training record, required for a time-series model.
+
+    Returns
+    -------
+    measured : ndarray, shape (n_rows,)
+        Target change since the training start, in the target's unit (µm for a drift axis).
+    predicted : ndarray, shape (n_rows,)
+        The model's prediction of it, same unit.
+
+    Raises
+    ------
+    TwinInputError
+        No training reference, missing channels, no ``history`` for a time-series model, another
+        sampling interval, or a ``history`` that does not start like the training record.
     """
     ref = cm.preprocessing.get("training_reference")
     if ref is None:

@@ -27,15 +27,17 @@ On disk (``.json``, no pickle)::
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from models.persistence import model_from_document, model_to_document
 from models.registry import is_time_series, registered_models
 
-from ..core.dataset import json_default, project_version
+from ..core.dataset import Dataset, json_default, project_version
 from ..core.files import write_text_atomic
 from ..errors import TwinInputError
 
@@ -45,6 +47,18 @@ FORMAT_VERSION = 1
 
 def make_estimator(name: str, params: dict | None = None) -> object:
     """An unfitted estimator by model name (see :mod:`models.registry`) with hyperparameters overridden.
+
+    Parameters
+    ----------
+    name : str
+        Model name, as ``twin train --model`` takes it (case-insensitive).
+    params : dict, optional
+        Hyperparameters overriding the name's defaults.
+
+    Returns
+    -------
+    object
+        The estimator (a scikit-learn style regressor).
 
     Raises
     ------
@@ -65,8 +79,24 @@ def make_estimator(name: str, params: dict | None = None) -> object:
     return entry.cls(**merged)
 
 
-def parse_params(items):
-    """``["n_rules=4", "epochs=20"]`` → ``{"n_rules": 4, "epochs": 20}`` (values read as JSON when they can be)."""
+def parse_params(items: Sequence[str] | None) -> dict[str, object]:
+    """``["n_rules=4", "epochs=20"]`` → ``{"n_rules": 4, "epochs": 20}`` (values read as JSON when they can be).
+
+    Parameters
+    ----------
+    items : sequence of str or None
+        ``name=value`` strings (``--param``); None gives ``{}``.
+
+    Returns
+    -------
+    dict of str to object
+        Name → value (a JSON value, else the text).
+
+    Raises
+    ------
+    TwinInputError
+        For an item without ``=``.
+    """
     out = {}
     for item in items or []:
         if "=" not in item:
@@ -79,7 +109,18 @@ def parse_params(items):
     return out
 
 
-def dataset_label(dataset):
+def dataset_label(dataset: Dataset) -> str:
+    """The name a dataset goes by in tables and messages: its label, scenario, source file stem, or "dataset".
+
+    Parameters
+    ----------
+    dataset : Dataset
+        A record (twin or measured).
+
+    Returns
+    -------
+    str
+    """
     meta = dataset.metadata
     if meta.get("label"):
         return str(meta["label"])
@@ -90,8 +131,26 @@ def dataset_label(dataset):
     return "dataset"
 
 
-def sampling_interval(dataset, strict=True):
-    """The constant sampling interval of a dataset (s); with ``strict`` an uneven one is an error."""
+def sampling_interval(dataset: Dataset, strict: bool = True) -> float:
+    """The constant sampling interval of a dataset (s); with ``strict`` an uneven one is an error.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        A record (twin or measured).
+    strict : bool, default True
+        Refuse steps that differ from their median by more than 1e-6 of it.
+
+    Returns
+    -------
+    float
+        The median time step, s.
+
+    Raises
+    ------
+    TwinInputError
+        One row only, or uneven steps with ``strict``.
+    """
     steps = np.diff(dataset.time_s)
     if len(steps) == 0:
         raise TwinInputError(f"{dataset_label(dataset)}: a dataset with one row has no sampling interval")
@@ -102,8 +161,21 @@ def sampling_interval(dataset, strict=True):
     return dt
 
 
-def check_channels(dataset, names, units=None, role="input"):
-    """Raise a :class:`TwinInputError` naming missing channels or unit mismatches, listing what is there."""
+def check_channels(dataset: Dataset, names: Sequence[str], units: Sequence[str] | None = None,
+                   role: str = "input") -> None:
+    """Raise a :class:`TwinInputError` naming missing channels or unit mismatches, listing what is there.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        A record (twin or measured).
+    names : sequence of str
+        Channels that must be there.
+    units : sequence of str, optional
+        Their required units (``degC``, ``um``, ``rpm`` …); None checks presence only.
+    role : str, default "input"
+        Named in the message (``input``, ``target``).
+    """
     missing = [n for n in names if n not in dataset]
     if missing:
         raise TwinInputError(f"{dataset_label(dataset)}: lacks {role} channel(s) {missing}; it has "
@@ -115,8 +187,18 @@ def check_channels(dataset, names, units=None, role="input"):
             raise TwinInputError(f"{dataset_label(dataset)}: channel units do not match: {text}")
 
 
-def check_reference_samples(count, n_rows, label):
-    """Raise unless ``count`` (rows averaged for the zero reference) is a whole number in 1 .. ``n_rows``."""
+def check_reference_samples(count: object, n_rows: int, label: str) -> None:
+    """Raise unless ``count`` (rows averaged for the zero reference) is a whole number in 1 .. ``n_rows``.
+
+    Parameters
+    ----------
+    count : object
+        The ``reference_samples`` value given.
+    n_rows : int
+        Rows of the dataset.
+    label : str
+        Names the dataset in the message.
+    """
     if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
         raise TwinInputError(f"reference_samples (--reference-samples) must be a whole number of rows, at least 1; "
                              f"got {count}")
@@ -125,8 +207,23 @@ def check_reference_samples(count, n_rows, label):
                              f"{n_rows} rows it has")
 
 
-def reference_rows(values, preprocessing, label="dataset"):
-    """Subtract each column's reference (mean of the first ``reference_samples`` rows) when zero-referencing."""
+def reference_rows(values: ArrayLike, preprocessing: dict, label: str = "dataset") -> NDArray[np.float64]:
+    """Subtract each column's reference (mean of the first ``reference_samples`` rows) when zero-referencing.
+
+    Parameters
+    ----------
+    values : array_like, shape (n_rows, n_columns)
+        Channel values, in their units.
+    preprocessing : dict
+        A model's ``preprocessing`` (``zero_reference``, ``reference_samples``).
+    label : str, default "dataset"
+        Names the dataset in errors.
+
+    Returns
+    -------
+    ndarray, shape (n_rows, n_columns)
+        The changes since the reference (or the values, unchanged, without zero-referencing), same units.
+    """
     values = np.asarray(values, float)
     if not preprocessing.get("zero_reference", True):
         return values
@@ -137,7 +234,29 @@ def reference_rows(values, preprocessing, label="dataset"):
 
 @dataclass
 class CompensationModel:
-    """A fitted estimator plus its channel contract; ``predict(dataset)`` gives the target change."""
+    """A fitted estimator plus its channel contract; ``predict(dataset)`` gives the target change.
+
+    Attributes
+    ----------
+    estimator : object
+        The fitted ``models`` estimator.
+    model_name : str
+        Its registry name (``anfis``, ``mlr`` …).
+    inputs : list of str
+        Input channels, in the estimator's column order.
+    target : str
+        Target channel.
+    input_units, target_unit : list of str, str
+        Their units (``degC``, ``um`` …), checked on every dataset.
+    preprocessing : dict
+        ``zero_reference``, ``reference_samples`` and, once fitted, the raw ``training_reference``.
+    training : list of dict
+        Label, rows, source, scenario, kind and duration (h) of each training record.
+    sampling_interval_s : float or None
+        The training interval, s (time-series models only).
+    metadata : dict
+        Training metrics, selection and stability notes.
+    """
 
     estimator: object
     model_name: str
@@ -151,30 +270,81 @@ class CompensationModel:
     metadata: dict = field(default_factory=dict)
 
     @property
-    def is_time_series(self):
+    def is_time_series(self) -> bool:
+        """Whether the estimator is a grey time-series model (coefficients per sample)."""
         return is_time_series(self.estimator)
 
-    def describe(self):
+    def describe(self) -> str:
+        """One line: name, class, kind, inputs → target [unit].
+
+        Returns
+        -------
+        str
+        """
         kind = "grey time-series" if self.is_time_series else "static"
         return (f"{self.model_name} ({type(self.estimator).__name__}, {kind}): {', '.join(self.inputs)} → "
                 f"{self.target} [{self.target_unit}]")
 
     # ------------------------------------------------------------------ data
-    def check(self, dataset):
+    def check(self, dataset: Dataset) -> None:
+        """Raise a :class:`TwinInputError` unless ``dataset`` has the inputs and the target in the model's units.
+
+        Parameters
+        ----------
+        dataset : Dataset
+            A record (twin or measured).
+        """
         check_channels(dataset, self.inputs, self.input_units, "input")
         check_channels(dataset, [self.target], [self.target_unit], "target")
 
-    def features(self, dataset):
+    def features(self, dataset: Dataset) -> NDArray[np.float64]:
+        """The input matrix as the estimator sees it (zero-referenced unless that is switched off).
+
+        Parameters
+        ----------
+        dataset : Dataset
+            A record (twin or measured).
+
+        Returns
+        -------
+        ndarray, shape (n_rows, n_inputs)
+            In the inputs' units.
+        """
         check_channels(dataset, self.inputs, self.input_units, "input")
         return reference_rows(dataset.matrix(self.inputs), self.preprocessing, dataset_label(dataset))
 
-    def target_values(self, dataset):
-        """The measured target as the model sees it (zero-referenced unless that is switched off)."""
+    def target_values(self, dataset: Dataset) -> NDArray[np.float64]:
+        """The measured target as the model sees it (zero-referenced unless that is switched off).
+
+        Parameters
+        ----------
+        dataset : Dataset
+            A record (twin or measured).
+
+        Returns
+        -------
+        ndarray, shape (n_rows,)
+            In the target's unit (µm for a drift axis).
+        """
         check_channels(dataset, [self.target], [self.target_unit], "target")
         return reference_rows(dataset[self.target][:, None], self.preprocessing, dataset_label(dataset))[:, 0]
 
-    def predict(self, dataset):
-        """Predicted target (its change since the record's start when zero-referenced), one per row."""
+    def predict(self, dataset: Dataset) -> NDArray[np.float64]:
+        """Predicted target (its change since the record's start when zero-referenced), one per row.
+
+        A time-series model sampled at another interval than in training is run on the record resampled
+        (linearly) onto the training interval and its prediction interpolated back.
+
+        Parameters
+        ----------
+        dataset : Dataset
+            A record (twin or measured).
+
+        Returns
+        -------
+        ndarray, shape (n_rows,)
+            In the target's unit (µm for a drift axis).
+        """
         X = self.features(dataset)
         if not self.is_time_series:
             return np.asarray(self.estimator.predict(X), float)
@@ -194,7 +364,13 @@ class CompensationModel:
         return y - float(self.estimator.y_reference_) if self.preprocessing.get("zero_reference", True) else y
 
     # ------------------------------------------------------------------ files
-    def to_document(self):
+    def to_document(self) -> dict:
+        """The JSON-ready file document (layout in the module docstring).
+
+        Returns
+        -------
+        dict
+        """
         return {
             "format": FORMAT, "version": FORMAT_VERSION, "model_name": self.model_name,
             "inputs": list(self.inputs), "input_units": list(self.input_units),
@@ -204,15 +380,41 @@ class CompensationModel:
             "metadata": dict(self.metadata), "estimator": model_to_document(self.estimator),
         }
 
-    def save(self, path):
-        """Write the model as JSON (atomically); returns the path."""
+    def save(self, path: Path | str) -> Path:
+        """Write the model as JSON (atomically); returns the path.
+
+        Parameters
+        ----------
+        path : Path or str
+            The ``.json`` file; its folder is created.
+
+        Returns
+        -------
+        Path
+            ``path``.
+        """
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         return write_text_atomic(path, json.dumps(self.to_document(), indent=1, default=json_default))
 
     @classmethod
     def load(cls, path: Path | str) -> CompensationModel:
-        """Read a model written by :meth:`save`; a wrong format or version is a clear error."""
+        """Read a model written by :meth:`save`; a wrong format or version is a clear error.
+
+        Parameters
+        ----------
+        path : Path or str
+            The model file.
+
+        Returns
+        -------
+        CompensationModel
+
+        Raises
+        ------
+        TwinInputError
+            Missing file, not JSON, wrong format or version, missing fields, or a bad estimator document.
+        """
         path = Path(path)
         doc = _read_document(path)
         try:
@@ -294,6 +496,12 @@ def fit_compensation_model(datasets: list, inputs: list[str], target: str, model
         Model name (see :mod:`models.registry`) and hyperparameters overriding its defaults.
     zero_reference, reference_samples
         Reference inputs and target to the mean of their first ``reference_samples`` rows.
+
+    Returns
+    -------
+    CompensationModel
+        Fitted, with its training records and training reference (metrics are added by
+        :func:`twin.compensation.train.train`).
 
     Raises
     ------

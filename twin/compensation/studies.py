@@ -18,6 +18,7 @@ Inputs and targets are zero-referenced per record (see :mod:`twin.compensation.s
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -104,21 +105,75 @@ def _available(names):
     return [n for n in names if n in known or Path(str(n)).exists()]
 
 
-def simulate_many(scenarios: list, machine: MachineSpec | None = None, scheduler="local", noise: bool = True,
-                  progress=None) -> list[Dataset]:
-    """Datasets of ``scenarios`` on ``machine`` (default: the nominal ``vmc_ram``), one sweep task each."""
+def simulate_many(scenarios: list, machine: MachineSpec | None = None, scheduler: str | object = "local",
+                  noise: bool = True, progress: Callable[[int, int], None] | None = None) -> list[Dataset]:
+    """Datasets of ``scenarios`` on ``machine`` (default: the nominal ``vmc_ram``), one sweep task each.
+
+    Each record gets the thesis instruments' noise (:data:`INSTRUMENT_NOISE`) where its scenario has
+    none, and no camera spots.
+
+    Parameters
+    ----------
+    scenarios : list
+        Scenario names, TOML paths or :class:`~twin.core.scenario.Scenario` objects.
+    machine : MachineSpec, optional
+        The (possibly perturbed) machine.
+    scheduler : str or distributed.Client, default "local"
+        See :func:`twin.infra.sweep.run_tasks`.
+    noise : bool, default True
+        Add sensor noise (seeded by each scenario).
+    progress : callable, optional
+        ``progress(done, total)``.
+
+    Returns
+    -------
+    list of Dataset
+        In the order of ``scenarios``.
+    """
     machine = machine or MachineSpec()
     machine.build()       # mesh and operator caches ready before the workers start (none meshes twice)
 
     return run_tasks([SimulateTask(machine, s, noise) for s in scenarios], scheduler=scheduler, progress=progress)
 
 
-def installed_thermometers(dataset):
+def installed_thermometers(dataset: Dataset) -> list[str]:
+    """The thermometer channels of a record (kind ``temperature``): the candidate inputs of a study.
+
+    Parameters
+    ----------
+    dataset : Dataset
+
+    Returns
+    -------
+    list of str
+    """
     return dataset.names_of_kind("temperature")
 
 
-def select_inputs(datasets, target, k=4, method="gm-influence+fcm", candidates=None, random_state=0):
-    """Choose ``k`` input channels for ``target`` on training datasets by a seed method (zero-referenced)."""
+def select_inputs(datasets: Sequence[Dataset], target: str, k: int = 4, method: str = "gm-influence+fcm",
+                  candidates: list[str] | None = None, random_state: int = 0) -> list[str]:
+    """Choose ``k`` input channels for ``target`` on training datasets by a seed method (zero-referenced).
+
+    Parameters
+    ----------
+    datasets : sequence of Dataset
+        Training records, stacked after zero-referencing each.
+    target : str
+        Target channel (µm for a drift axis).
+    k : int, default 4
+        Inputs to choose (at most the number of candidates).
+    method : str, default "gm-influence+fcm"
+        A method of :func:`models.selection.select_sensors`.
+    candidates : list of str, optional
+        Candidate channels (default: the first record's thermometers).
+    random_state : int, default 0
+        Seeds FCM.
+
+    Returns
+    -------
+    list of str
+        The chosen channels, best score first.
+    """
     candidates = candidates or installed_thermometers(datasets[0])
     X = np.vstack([zero_referenced(d.matrix(candidates)) for d in datasets])
     y = np.concatenate([d[target] - d[target][0] for d in datasets])
@@ -161,9 +216,10 @@ def _transfer(data, axis, model, inputs, k, select_method, params):
 
 def cross_condition_study(families: dict | None = None, axes: tuple = ("Z", "Y"), model: str = "mlr",
                           inputs: list[str] | None = None, k: int = 4, select_method: str = "gm-influence+fcm",
-                          machine: str = "vmc_ram", mesh_size_m: float | None = None, scheduler="local",
-                          out_dir: Path | str | None = None, params: dict | None = None, progress=None, log=print,
-                          overwrite: bool = False) -> StudyResult:
+                          machine: str = "vmc_ram", mesh_size_m: float | None = None,
+                          scheduler: str | object = "local", out_dir: Path | str | None = None,
+                          params: dict | None = None, progress: Callable[[int, int], None] | None = None,
+                          log: Callable[[str], object] | None = print, overwrite: bool = False) -> StudyResult:
     """Train on one scenario family, test on the others; the transfer matrix per axis.
 
     Parameters
@@ -175,8 +231,14 @@ def cross_condition_study(families: dict | None = None, axes: tuple = ("Z", "Y")
     inputs : list of str, optional
         Fixed input channels, or None to choose ``k`` of the installed thermometers on each training
         family with ``select_method`` (as a user would on their one training condition).
-    machine, mesh_size_m, scheduler, progress
-        The machine (element size in m) and the sweep.
+    machine, mesh_size_m
+        The machine (name or TOML path) and its element size, m (default: the machine's).
+    scheduler : str or distributed.Client, default "local"
+        Where the simulations run (see :func:`twin.infra.sweep.run_tasks`).
+    progress : callable, optional
+        ``progress(done, total)`` of the simulations.
+    log : callable or None, default print
+        Receives notes (scenarios left out); None is silent.
     out_dir, overwrite
         The report folder, checked before the work (see :func:`twin.infra.outdir.check_output_folder`).
 
@@ -207,13 +269,47 @@ def cross_condition_study(families: dict | None = None, axes: tuple = ("Z", "Y")
 # ----------------------------------------------------------------------------- thesis protocol
 def thesis_protocol_study(axes: tuple = ("Z", "Y"), models: tuple = ("anfis", "mlr"), inputs: list[str] | None = None,
                           k: int = 4, select_method: str = "gm-influence+fcm", machine: str = "vmc_ram",
-                          mesh_size_m: float | None = None, scheduler="local", out_dir: Path | str | None = None,
-                          progress=None, log=print, overwrite: bool = False) -> StudyResult:
+                          mesh_size_m: float | None = None, scheduler: str | object = "local",
+                          out_dir: Path | str | None = None, progress: Callable[[int, int], None] | None = None,
+                          log: Callable[[str], object] | None = print, overwrite: bool = False) -> StudyResult:
     """Train on Test IV, test on Tests I, II, III, V, VI (thesis §5): a table per axis and model (µm).
 
     ``inputs``: fixed input channels, or None to choose ``k`` installed thermometers on Test IV with
     ``select_method``.  ``out_dir`` is checked before the work (``overwrite``: see
     :func:`twin.infra.outdir.check_output_folder`).
+
+    Parameters
+    ----------
+    axes : tuple of str, default ("Z", "Y")
+        Drift axes (µm).
+    models : tuple of str, default ("anfis", "mlr")
+        Model names.
+    inputs : list of str, optional
+        Fixed input channels.
+    k, select_method
+        How many inputs are chosen, and by which method, when ``inputs`` is None.
+    machine, mesh_size_m
+        The machine (name or TOML path) and its element size, m (default: the machine's).
+    scheduler : str or distributed.Client, default "local"
+        Where the simulations run (see :func:`twin.infra.sweep.run_tasks`).
+    progress : callable, optional
+        ``progress(done, total)`` of the simulations.
+    log : callable or None, default print
+        Receives notes (scenarios left out); None is silent.
+    out_dir : Path or str, optional
+        Report folder (Markdown, JSON, plots), written atomically.
+    overwrite : bool, default False
+        See :func:`twin.infra.outdir.check_output_folder`.
+
+    Returns
+    -------
+    StudyResult
+        Rows per axis, model and record: RMSE and max |residual| (µm), NSE, improvement %.
+
+    Raises
+    ------
+    TwinInputError
+        Test IV or all the other tests unavailable, or an unusable ``out_dir``.
     """
     check_output_folder(out_dir, overwrite, inputs=(machine,))
     tests = _available(THESIS_TEST)
@@ -286,8 +382,9 @@ def _pooled(rows, curves, axes):
 def hybrid_study(train: tuple = HYBRID_TRAIN, test: tuple = HYBRID_TEST, axes: tuple = ("Z", "Y"),
                  model: str = "anfis", inputs: list[str] | None = None, k: int = 4,
                  select_method: str = "gm-influence+fcm", gap: dict | None = None, machine: str = "vmc_ram",
-                 mesh_size_m: float | None = None, physics_backend: str = "fe", scheduler="local",
-                 out_dir: Path | str | None = None, progress=None, log=print, overwrite: bool = False) -> StudyResult:
+                 mesh_size_m: float | None = None, physics_backend: str = "fe", scheduler: str | object = "local",
+                 out_dir: Path | str | None = None, progress: Callable[[int, int], None] | None = None,
+                 log: Callable[[str], object] | None = print, overwrite: bool = False) -> StudyResult:
     """Pure physics vs pure data-driven vs hybrid (physics + learned residual) on held-out records.
 
     "Measured" records: the twin with ``gap`` (default :data:`DEFAULT_GAP`:
@@ -298,6 +395,46 @@ def hybrid_study(train: tuple = HYBRID_TRAIN, test: tuple = HYBRID_TEST, axes: t
     Hybrid: the same ``model`` and inputs fitted to the physics residual
     (measured − physics change); prediction = physics + learned residual.
     Scores are in µm.
+
+    Parameters
+    ----------
+    train, test : tuple of str
+        Training and held-out scenarios (names or TOML paths; unavailable ones are left out).
+    axes : tuple of str, default ("Z", "Y")
+        Drift axes (µm).
+    model : str, default "anfis"
+        Model name of the data-driven and the residual model.
+    inputs : list of str, optional
+        Fixed input channels.
+    k, select_method
+        How many inputs are chosen, and by which method, when ``inputs`` is None.
+    gap : dict, optional
+        ``source_scale`` ((source, factor) pairs or one factor) and ``convection_scale`` of the "real" machine.
+    machine, mesh_size_m
+        The machine (name or TOML path) and its element size, m (default: the machine's).
+    scheduler : str or distributed.Client, default "local"
+        Where the simulations run (see :func:`twin.infra.sweep.run_tasks`).
+    progress : callable, optional
+        ``progress(done, total)`` of the simulations.
+    log : callable or None, default print
+        Not used: this study leaves unavailable scenarios out silently (the parameter keeps the
+        studies' signatures alike).
+    physics_backend : {"fe", "rom"}, default "fe"
+        See :func:`twin.compensation.train.physics_prediction`.
+    out_dir : Path or str, optional
+        Report folder (Markdown, JSON, plot), written atomically.
+    overwrite : bool, default False
+        See :func:`twin.infra.outdir.check_output_folder`.
+
+    Returns
+    -------
+    StudyResult
+        Per-record and pooled held-out rows per approach: RMSE and max |residual| (µm), improvement %.
+
+    Raises
+    ------
+    TwinInputError
+        No training or no held-out scenario available, or an unusable ``out_dir``.
     """
     check_output_folder(out_dir, overwrite, inputs=(machine,))
 

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -15,7 +16,21 @@ from .train import format_table
 
 @dataclass
 class StudyResult:
-    """A study's tables (name → list of row dicts), its Markdown report, further data and its folder."""
+    """A study's tables (name → list of row dicts), its Markdown report, further data and its folder.
+
+    Attributes
+    ----------
+    name : str
+        The study (``cross-condition``, ``thesis-protocol``, ``hybrid``); names its files.
+    out_dir : Path or None
+        Its folder, once written.
+    tables : dict of str to list of dict
+        Table name → rows (one CSV each).
+    markdown : str
+        The report.
+    data : dict
+        Further JSON-ready results (matrices, chosen scenarios, inputs).
+    """
 
     name: str
     out_dir: Path | None
@@ -24,8 +39,21 @@ class StudyResult:
     data: dict = field(default_factory=dict)
 
 
-def write_study(result: StudyResult, out_dir: Path | str, overwrite: bool = False, extra=None) -> None:
-    """Write ``<name>.md``, one CSV per table and ``<name>.json`` atomically; ``extra(folder)`` adds figures."""
+def write_study(result: StudyResult, out_dir: Path | str, overwrite: bool = False,
+                extra: Callable[[Path], None] | None = None) -> None:
+    """Write ``<name>.md``, one CSV per table and ``<name>.json`` atomically; ``extra(folder)`` adds figures.
+
+    Parameters
+    ----------
+    result : StudyResult
+        The study; its ``out_dir`` is set on success.
+    out_dir : Path or str
+        The folder (see :func:`twin.infra.outdir.atomic_directory`).
+    overwrite : bool, default False
+        Write into a non-empty folder that is not a twin output.
+    extra : callable, optional
+        ``extra(temporary folder)`` writes the figures.
+    """
     import pandas as pd
 
     with atomic_directory(out_dir, overwrite) as tmp:
@@ -45,8 +73,33 @@ def _inputs_text(inputs, k, select_method, where):
 
 # ----------------------------------------------------------------------------- cross-condition
 def cross_condition_markdown(rows: list[dict], matrices: dict, chosen: dict, used_inputs: dict, axes: tuple,
-                             model: str, inputs, k: int, select_method: str) -> str:
-    """The transfer report: per axis a train × test table of improvement % (max |residual| in µm)."""
+                             model: str, inputs: Sequence[str] | None, k: int, select_method: str) -> str:
+    """The transfer report: per axis a train × test table of improvement % (max |residual| in µm).
+
+    Parameters
+    ----------
+    rows : list of dict
+        One per (axis, training family, test family): ``improvement_percent`` and ``max_residual`` (µm).
+    matrices : dict of str to ndarray
+        Axis → transfer matrix of improvement % (training family × test family).
+    chosen : dict of str to str
+        Family → its scenario.
+    used_inputs : dict
+        (family, axis) → the input channels used.
+    axes : tuple of str
+        Drift axes.
+    model : str
+        Model name.
+    inputs : sequence of str or None
+        Fixed inputs, or None when they were chosen per family.
+    k, select_method
+        How many inputs were chosen, and by which method.
+
+    Returns
+    -------
+    str
+        Markdown, ending with a newline.
+    """
     fams = list(chosen)
     md = [f"# Cross-condition transfer ({model}, inputs: "
           f"{_inputs_text(inputs, k, select_method, 'on the training family')})",
@@ -68,7 +121,21 @@ def cross_condition_markdown(rows: list[dict], matrices: dict, chosen: dict, use
 
 
 def plot_transfer(matrices: dict, labels: list[str], axes: tuple, path: Path, model: str) -> None:
-    """Heat maps of the transfer matrices (improvement %, clipped to ±100) side by side."""
+    """Heat maps of the transfer matrices (improvement %, clipped to ±100) side by side.
+
+    Parameters
+    ----------
+    matrices : dict of str to ndarray
+        Axis → transfer matrix of improvement %.
+    labels : list of str
+        Family names, in matrix order.
+    axes : tuple of str
+        Drift axes, one panel each.
+    path : Path
+        The PNG to write.
+    model : str
+        Model name, in the titles.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -94,8 +161,27 @@ def plot_transfer(matrices: dict, labels: list[str], axes: tuple, path: Path, mo
 
 
 # ----------------------------------------------------------------------------- thesis protocol
-def thesis_markdown(rows: list[dict], axes: tuple, models: tuple, inputs, k: int, select_method: str) -> str:
-    """The thesis-protocol report: one table per axis and model (µm)."""
+def thesis_markdown(rows: list[dict], axes: tuple, models: tuple, inputs: Sequence[str] | None, k: int,
+                    select_method: str) -> str:
+    """The thesis-protocol report: one table per axis and model (µm).
+
+    Parameters
+    ----------
+    rows : list of dict
+        One per (axis, model, record): ``rmse``, ``max_residual``, ``uncompensated_max`` (µm), ``nse``,
+        ``improvement_percent`` (%), ``role``, ``inputs``.
+    axes, models : tuple of str
+        Drift axes and model names.
+    inputs : sequence of str or None
+        Fixed inputs, or None when they were chosen on Test IV.
+    k, select_method
+        How many inputs were chosen, and by which method.
+
+    Returns
+    -------
+    str
+        Markdown, ending with a newline.
+    """
     md = ["# Thesis protocol: train on Test IV, test on Tests I, II, III, V, VI", "",
           f"Inputs: {_inputs_text(inputs, k, select_method, 'on Test IV')}; "
           "metrics on the change since the start of each test (µm).", ""]
@@ -108,7 +194,15 @@ def thesis_markdown(rows: list[dict], axes: tuple, models: tuple, inputs, k: int
 
 
 def plot_thesis(plots: dict, folder: Path) -> None:
-    """Measured vs predicted per (axis, model, test): ``<test>_<axis>_<model>.png``."""
+    """Measured vs predicted per (axis, model, test): ``<test>_<axis>_<model>.png``.
+
+    Parameters
+    ----------
+    plots : dict
+        (axis, model, record label) → (time_s, measured change, predicted change), µm.
+    folder : Path
+        Where the PNGs go.
+    """
     from ..infra.plots import (
         plot_measured_vs_predicted,  # on use: it switches matplotlib to Agg
     )
@@ -121,7 +215,32 @@ def plot_thesis(plots: dict, folder: Path) -> None:
 # ----------------------------------------------------------------------------- hybrid
 def hybrid_markdown(rows: list[dict], pooled: list[dict], gap: dict, train: list, test: list, used: dict,
                     model: str, k: int, select_method: str, physics_backend: str) -> str:
-    """The hybrid report: the perturbation, pooled held-out scores and per-record scores (µm)."""
+    """The hybrid report: the perturbation, pooled held-out scores and per-record scores (µm).
+
+    Parameters
+    ----------
+    rows : list of dict
+        One per (axis, approach, record): ``rmse``, ``max_residual`` (µm), ``improvement_percent``, ``role``.
+    pooled : list of dict
+        One per (axis, approach), pooled over the held-out records.
+    gap : dict
+        ``source_scale`` and ``convection_scale`` of the "measured" machine.
+    train, test : list of str
+        Training and held-out scenarios.
+    used : dict of str to list of str
+        Axis → input channels.
+    model : str
+        Model name.
+    k, select_method
+        How many inputs were chosen, and by which method.
+    physics_backend : str
+        ``fe`` or ``rom``.
+
+    Returns
+    -------
+    str
+        Markdown, ending with a newline.
+    """
     scale = gap.get("source_scale", 1.0)
     powers = (", ".join(f"{n} ×{f:g}" for n, f in scale) if isinstance(scale, (tuple, list))
               else f"every source ×{float(scale):g}")
@@ -144,7 +263,19 @@ def hybrid_markdown(rows: list[dict], pooled: list[dict], gap: dict, train: list
 
 
 def plot_hybrid(curves: dict, te_labels: list[str], axes: tuple, path: Path) -> None:
-    """Measured, physics, data-driven and hybrid drift change (µm) over time (h) on every held-out record."""
+    """Measured, physics, data-driven and hybrid drift change (µm) over time (h) on every held-out record.
+
+    Parameters
+    ----------
+    curves : dict
+        (axis, record label) → (time_s, measured, physics, data-driven, hybrid), drift changes in µm.
+    te_labels : list of str
+        Held-out records, one row of panels each.
+    axes : tuple of str
+        Drift axes, one column each.
+    path : Path
+        The PNG to write.
+    """
     import matplotlib
 
     matplotlib.use("Agg")

@@ -19,10 +19,13 @@ itself, so improvement % = (1 − max|residual| / max|change|) × 100.
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 import fea
 from models import metrics
@@ -38,11 +41,16 @@ from ..rom.reduction import cached_rom
 from .protocol import auto_select, continued_prediction, stability_problem
 from .store import CompensationModel, dataset_label, fit_compensation_model
 
+if TYPE_CHECKING:
+    from ..core.machine import Machine
+
 METRIC_COLUMNS = ("rmse", "nse", "r", "max_residual", "improvement_percent", "uncompensated_max", "rows")
 
 
 # ----------------------------------------------------------------------------- datasets
-def load_dataset(spec, column_map=None, nan_policy="error", machine=None, noise=True, label=None):
+def load_dataset(spec: Dataset | Path | str, column_map: dict[str, str] | None = None,
+                 nan_policy: Literal["error", "interpolate", "drop"] = "error", machine: Machine | None = None,
+                 noise: bool = True, label: str | None = None) -> Dataset:
     """A :class:`Dataset` from a path or a scenario name.
 
     ``spec`` may be a :class:`Dataset` (returned as is), a CSV path (read with
@@ -50,6 +58,31 @@ def load_dataset(spec, column_map=None, nan_policy="error", machine=None, noise=
     ``column_map`` and ``nan_policy``; a column mapped to ``"time_s"`` is the
     time in s), or the name of a scenario, which is
     simulated on ``machine`` (default: the scenario's) with its sensor noise.
+
+    Parameters
+    ----------
+    spec : Dataset, Path or str
+        The dataset, a CSV path or a scenario name.
+    column_map : dict of str to str, optional
+        Measured CSV column → ``<name>_<unit>`` (or ``time_s``); given, a sidecar is ignored.
+    nan_policy : {"error", "interpolate", "drop"}, default "error"
+        NaNs in a measured CSV.
+    machine : Machine, optional
+        The machine a scenario runs on (default: the scenario's).
+    noise : bool, default True
+        Add the scenario's sensor noise (seeded).
+    label : str, optional
+        Stored as ``metadata["label"]``, the name the dataset goes by in tables.
+
+    Returns
+    -------
+    Dataset
+        Channels in edge units (°C, µm, µε, rpm, mm/min, W).
+
+    Raises
+    ------
+    TwinInputError
+        Neither a file nor a known scenario, or a bad CSV (file, field, value).
     """
     if isinstance(spec, Dataset):
         return spec
@@ -82,8 +115,25 @@ def _input_files(specs):
 
 
 # ----------------------------------------------------------------------------- metrics
-def score(y_true, y_pred):
-    """Metrics of a prediction of the (zero-referenced) target: dict of :data:`METRIC_COLUMNS`."""
+def score(y_true: ArrayLike, y_pred: ArrayLike) -> dict[str, float | int]:
+    """Metrics of a prediction of the (zero-referenced) target: dict of :data:`METRIC_COLUMNS`.
+
+    NSE and R are NaN for a constant target (R also for a constant prediction), the improvement for a
+    target that never moves.
+
+    Parameters
+    ----------
+    y_true : array_like, shape (n,)
+        Measured change of the target (e.g. µm).
+    y_pred : array_like, shape (n,)
+        Predicted change, same unit.
+
+    Returns
+    -------
+    dict
+        ``rmse``, ``max_residual``, ``uncompensated_max``, ``uncompensated_rmse`` (unit of y), ``nse``,
+        ``r`` (dimensionless), ``improvement_percent`` (%) and ``rows``.
+    """
     y_true, y_pred = np.asarray(y_true, float), np.asarray(y_pred, float)
     peak = float(np.max(np.abs(y_true)))
     out = {"rmse": metrics.rmse(y_true, y_pred), "max_residual": metrics.max_abs_residual(y_true, y_pred),
@@ -96,8 +146,23 @@ def score(y_true, y_pred):
     return out
 
 
-def format_table(rows, columns=None, floatfmt=".3g"):
-    """Markdown table of a list of dicts: ``columns`` (default: the first row's keys), floats as ``floatfmt``."""
+def format_table(rows: Sequence[dict], columns: Sequence[str] | None = None, floatfmt: str = ".3g") -> str:
+    """Markdown table of a list of dicts: ``columns`` (default: the first row's keys), floats as ``floatfmt``.
+
+    Parameters
+    ----------
+    rows : sequence of dict
+        One dict per table row; a missing key prints empty.
+    columns : sequence of str, optional
+        Keys shown, in order; also the headers.
+    floatfmt : str, default ".3g"
+        Format spec of non-integer numbers.
+
+    Returns
+    -------
+    str
+        The table, ending with a newline.
+    """
     columns = columns or list(rows[0])
     return markdown_table([[r.get(c, "") for c in columns] for r in rows], columns, formats=floatfmt) + "\n"
 
@@ -105,18 +170,38 @@ def format_table(rows, columns=None, floatfmt=".3g"):
 # ----------------------------------------------------------------------------- train / evaluate
 @dataclass
 class Evaluation:
+    """The result of :func:`evaluate`.
+
+    Attributes
+    ----------
+    rows : list of dict
+        One per dataset: ``dataset`` (its label) and the metrics of :func:`score`.
+    out_dir : Path or None
+        Where the table and plots were written.
+    predictions : dict
+        Label → (time_s, measured change, predicted change), arrays in s and the target's unit.
+    """
+
     rows: list            # one dict per dataset
     out_dir: Path | None
     predictions: dict     # label → (time_s, measured change, predicted change)
 
-    def table(self):
+    def table(self) -> str:
+        """The metrics as a Markdown table, one row per dataset.
+
+        Returns
+        -------
+        str
+        """
         cols = ["dataset", "rows", "rmse", "nse", "r", "max_residual", "improvement_percent", "uncompensated_max"]
         return format_table(self.rows, cols)
 
 
-def train(datasets, inputs, target, model="anfis", params=None, out=None, zero_reference=True,
-          reference_samples=1, column_map=None, nan_policy="error", machine=None, overwrite=False,
-          select=None, allow_unstable=False):
+def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], target: str, model: str = "anfis",
+          params: dict | None = None, out: Path | str | None = None, zero_reference: bool = True,
+          reference_samples: int = 1, column_map: dict[str, str] | None = None,
+          nan_policy: Literal["error", "interpolate", "drop"] = "error", machine: Machine | None = None,
+          overwrite: bool = False, select: str | None = None, allow_unstable: bool = False) -> CompensationModel:
     """Fit a compensation model on datasets (paths, scenario names or :class:`Dataset`) and save it to ``out``.
 
     ``out`` is checked before the work (:func:`twin.infra.outdir.check_output_file`): an existing
@@ -131,6 +216,40 @@ def train(datasets, inputs, target, model="anfis", params=None, out=None, zero_r
 
     Returns the :class:`CompensationModel`; its training metrics are in
     ``model.metadata["training_metrics"]``.
+
+    Parameters
+    ----------
+    datasets : sequence of Dataset, Path or str
+        Training records (see :func:`load_dataset`).
+    inputs : str or list of str
+        Input channels (comma-separated names allowed, as ``--inputs`` gives them).
+    target : str
+        Target channel (µm for a drift axis).
+    model : str, default "anfis"
+        Model name (see :mod:`models.registry`); ignored with ``select``.
+    params : dict, optional
+        Hyperparameters overriding the model's defaults.
+    out : Path or str, optional
+        Model file to write (JSON).
+    zero_reference, reference_samples
+        Reference inputs and target to the mean of their first ``reference_samples`` rows.
+    column_map, nan_policy, machine
+        See :func:`load_dataset`.
+    overwrite : bool, default False
+        Replace an existing ``out``.
+    select : {"auto"}, optional
+        Choose the model by blocked cross-validation.
+    allow_unstable : bool, default False
+        Save an unstable grey fit instead of refusing it.
+
+    Returns
+    -------
+    CompensationModel
+
+    Raises
+    ------
+    TwinInputError
+        Bad data, channels, model or parameters, an unusable ``out``, or an unstable fit.
     """
     if out is not None:
         check_output_file(out, overwrite, inputs=_input_files(datasets))
@@ -158,8 +277,11 @@ def train(datasets, inputs, target, model="anfis", params=None, out=None, zero_r
     return cm
 
 
-def evaluate(model, datasets, out_dir=None, column_map=None, nan_policy="error", machine=None, plots=True,
-             overwrite=False, reference="own", history=None):
+def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset | Path | str],
+             out_dir: Path | str | None = None, column_map: dict[str, str] | None = None,
+             nan_policy: Literal["error", "interpolate", "drop"] = "error", machine: Machine | None = None,
+             plots: bool = True, overwrite: bool = False, reference: Literal["own", "train"] = "own",
+             history: Dataset | Path | str | None = None) -> Evaluation:
     """Score a model (a :class:`CompensationModel` or a saved model path) on datasets.
 
     Writes (when ``out_dir`` is given) ``evaluation.md``, ``evaluation.csv``,
@@ -171,6 +293,35 @@ def evaluate(model, datasets, out_dir=None, column_map=None, nan_policy="error",
     start warm), so it is referenced to the training start, and time-series
     models run over ``history`` (the training record) and then the dataset
     (:func:`~twin.compensation.protocol.continued_prediction`).
+
+    Parameters
+    ----------
+    model : CompensationModel, Path or str
+        The model, or its file.
+    datasets : sequence of Dataset, Path or str
+        Records to score (see :func:`load_dataset`); a repeated label gets ``_2``, ``_3`` …
+    out_dir : Path or str, optional
+        Folder for the table and plots, written atomically; None writes nothing.
+    column_map, nan_policy, machine
+        See :func:`load_dataset`.
+    plots : bool, default True
+        Write the PNGs.
+    overwrite : bool, default False
+        See :func:`twin.infra.outdir.check_output_folder`.
+    reference : {"own", "train"}, default "own"
+        Zero reference of each record (above).
+    history : Dataset, Path or str, optional
+        The training record, for ``reference="train"``.
+
+    Returns
+    -------
+    Evaluation
+        The metric rows, the predictions and the folder.
+
+    Raises
+    ------
+    TwinInputError
+        Bad data or channels, a model that cannot predict a record, or an unusable ``out_dir``.
     """
     if reference not in ("own", "train"):
         raise TwinInputError(f"--reference {reference!r}: choose 'own' (each record's start) or 'train'")
@@ -239,9 +390,21 @@ class RecordSchedule:
     when absent), ``ambient_<zone>`` per zone, else one ambient for all zones
     from the mean of the ``ambient``/``air`` channels, and ``ambient_gradient``
     (K/m, 0 when absent).
+
+    Parameters
+    ----------
+    machine : Machine
+        The machine whose thermal inputs are built.
+    dataset : Dataset
+        The record.
+
+    Raises
+    ------
+    TwinInputError
+        No ``spindle`` channel, or no ambient channel at all.
     """
 
-    def __init__(self, machine, dataset):
+    def __init__(self, machine: Machine, dataset: Dataset):
         self.machine = machine
         self.t = dataset.time_s
         if "spindle" not in dataset:
@@ -263,19 +426,56 @@ class RecordSchedule:
             self.ambient = {z: mean for z in zones}
         self.gradient = dataset["ambient_gradient"] if "ambient_gradient" in dataset else np.zeros(len(dataset))
 
-    def conditions(self, times_s):
+    def conditions(self, times_s: ArrayLike) -> tuple[NDArray[np.float64], dict[str, NDArray[np.float64]],
+                                                      dict[str, NDArray[np.float64]], NDArray[np.float64]]:
+        """The operating conditions at ``times_s``, linearly interpolated in the record.
+
+        Parameters
+        ----------
+        times_s : array_like
+            Times, s (clamped to the record's span).
+
+        Returns
+        -------
+        rpm : ndarray
+            Spindle speed, rpm.
+        feeds : dict of str to ndarray
+            Axis → feed, mm/min.
+        ambient : dict of str to ndarray
+            Zone → air temperature, °C.
+        gradient : ndarray
+            Vertical ambient gradient, K/m.
+        """
         t = np.atleast_1d(np.asarray(times_s, float))
         rpm = np.interp(t, self.t, self.spindle)
         feeds = {a: np.interp(t, self.t, v) for a, v in self.feeds.items()}
         ambient = {z: np.interp(t, self.t, v) for z, v in self.ambient.items()}
         return rpm, feeds, ambient, np.interp(t, self.t, self.gradient)
 
-    def sample(self, times_s):
+    def sample(self, times_s: ArrayLike) -> NDArray[np.float64]:
+        """Thermal inputs ``u`` of the machine at ``times_s`` (what :meth:`fea.ThermalSolver.run` samples).
+
+        Parameters
+        ----------
+        times_s : array_like
+            Times, s.
+
+        Returns
+        -------
+        ndarray, shape (n_times, n_inputs)
+            Columns as ``machine.thermal.input_names`` (°C, K/m, W).
+        """
         rpm, feeds, ambient, gradient = self.conditions(times_s)
         return self.machine.input_matrix(rpm, feeds, ambient, gradient)
 
-    def at_rest(self):
-        """Inputs at t₀ with spindle and feeds stopped: the machine in equilibrium with the room."""
+    def at_rest(self) -> NDArray[np.float64]:
+        """Inputs at t₀ with spindle and feeds stopped: the machine in equilibrium with the room.
+
+        Returns
+        -------
+        ndarray, shape (n_inputs,)
+            Thermal inputs (°C, K/m, W).
+        """
         rpm, feeds, ambient, gradient = self.conditions([self.t[0]])
         return self.machine.input_matrix(rpm * 0, {a: f * 0 for a, f in feeds.items()}, ambient, gradient)[0]
 
@@ -283,7 +483,9 @@ class RecordSchedule:
 PHYSICS_BACKENDS = ("fe", "rom")
 
 
-def physics_prediction(machine, dataset, outputs=("Z", "Y"), backend="fe", max_step_s=None, initial="rest"):
+def physics_prediction(machine: Machine, dataset: Dataset, outputs: Sequence[str] = ("Z", "Y"),
+                       backend: Literal["fe", "rom"] = "fe", max_step_s: float | None = None,
+                       initial: Literal["rest"] | float = "rest") -> dict[str, NDArray[np.float64]]:
     """The twin's prediction of ``outputs`` (edge units, e.g. µm) from a record's operating conditions.
 
     Parameters
@@ -297,7 +499,10 @@ def physics_prediction(machine, dataset, outputs=("Z", "Y"), backend="fe", max_s
     initial : ``"rest"`` — steady state with spindle and feeds stopped at the first ambient
         (a record rarely knows more); or a uniform temperature in °C
 
-    Returns a dict name → (n,) array, absolute (not zero-referenced).
+    Returns
+    -------
+    dict of str to ndarray
+        Name → (n,) array in edge units, absolute (not zero-referenced).
     """
     if backend not in PHYSICS_BACKENDS:
         raise TwinInputError(f"unknown physics backend {backend!r}; available: {PHYSICS_BACKENDS}")

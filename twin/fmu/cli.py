@@ -1,6 +1,7 @@
 """CLI commands ``twin fmu export|validate|simulate``: a thin layer over :mod:`twin.fmu`."""
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 from ..errors import TwinInputError
@@ -10,7 +11,14 @@ from ..rom.cli import add_rom_options, machine_and_rom
 # Handlers import the library inside them, never up here: start-up time (`twin --help` must not load scipy).
 
 
-def cmd_fmu_export(args):
+def cmd_fmu_export(args: argparse.Namespace) -> None:
+    """``twin fmu export``: write an FMU of the machine's ROM (or FE), validate it with fmpy, print what it is.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+    """
     from .export import export_fmu, validate
 
     check_out_file(args)
@@ -30,7 +38,14 @@ def cmd_fmu_export(args):
     print("fmpy.validate_fmu: no problems")
 
 
-def cmd_fmu_validate(args):
+def cmd_fmu_validate(args: argparse.Namespace) -> None:
+    """``twin fmu validate``: check an FMU with ``fmpy.validate_fmu``; problems are an error.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+    """
     from .export import validate
 
     problems = validate(existing_fmu(args.fmu))
@@ -41,8 +56,14 @@ def cmd_fmu_validate(args):
     print(f"{args.fmu}: no problems")
 
 
-def cmd_fmu_simulate(args):
-    """Run an FMU through a scenario in fmpy, compare it with the in-process ROM, write a CSV."""
+def cmd_fmu_simulate(args: argparse.Namespace) -> None:
+    """Run an FMU through a scenario in fmpy, compare it with the in-process ROM, write a CSV.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+    """
     import io
 
     import numpy as np
@@ -77,8 +98,14 @@ def cmd_fmu_simulate(args):
     print(f"largest relative difference from the in-process ROM: {worst:.2e}")
 
 
-def register(sub):
-    """Add the ``fmu`` command with its ``export``, ``validate`` and ``simulate`` subcommands."""
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``fmu`` command with its ``export``, ``validate`` and ``simulate`` subcommands.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of the ``twin`` command.
+    """
     fmu = sub.add_parser("fmu", help="export, validate and run FMI 2.0 co-simulation FMUs of the twin")
     fsub = fmu.add_subparsers(dest="fmu_command", required=True)
     export = fsub.add_parser("export", help="write an FMU (ROM engine) and validate it with fmpy")

@@ -30,18 +30,21 @@ import shutil
 import subprocess
 import tempfile
 import zipfile
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Literal
 from xml.dom.minidom import parseString
 from xml.etree.ElementTree import Element, SubElement, fromstring, tostring
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from ..core.machine_definition import room_zone
 from ..core.scenario import Scenario, load_scenario
-from ..rom.reduction import scenario_conditions
+from ..rom.reduction import ReducedModel, scenario_conditions
 from . import spec
 from .native_source import c_sources, model_data_header
-from .spec import FMUError
+from .spec import FMUError, Variable
 
 KINDS = ("python", "native")
 ENGINES = ("rom", "fe")
@@ -75,12 +78,18 @@ def _description(rom, engine):
             f"temperatures (degC), TCP drift (um) and strains (ue) out")
 
 
-def export_fmu(rom, out, kind="python", engine="rom", outputs=None, default_temperature_C=20.0,
-               step_s=spec.DEFAULT_STEP_S, fe_options=None, compiler="cc", fmi_version=2):
+def export_fmu(rom: ReducedModel, out: Path | str, kind: Literal["python", "native"] = "python",
+               engine: Literal["rom", "fe"] = "rom", outputs: Sequence[str] | None = None,
+               default_temperature_C: float = 20.0, step_s: float = spec.DEFAULT_STEP_S,
+               fe_options: dict | None = None, compiler: str = "cc", fmi_version: int = 2) -> Path:
     """Write an FMI 2.0 Co-Simulation FMU of ``rom`` to ``out``; return its path.
+
+    The file is written as ``<out>.fmu.partial`` and renamed when complete; its folder is created.
 
     Parameters
     ----------
+    rom : the machine's :class:`~twin.rom.reduction.ReducedModel`
+    out : the ``.fmu`` file
     kind : ``"python"`` (PythonFMU) or ``"native"`` (compiled C)
     engine : ``"rom"`` or, for the Python kind only, ``"fe"`` (the full model; slow)
     outputs : ROM output names to expose (default: all of the ROM's)
@@ -89,6 +98,17 @@ def export_fmu(rom, out, kind="python", engine="rom", outputs=None, default_temp
     fe_options : for ``engine="fe"``: dict(machine=name or TOML path, mesh_size_m=..., max_step_s=...)
     compiler : C compiler command for the native kind
     fmi_version : 2 (both kinds) or 3 (native kind only: FMI 3.0 Co-Simulation)
+
+    Returns
+    -------
+    Path
+        ``out``.
+
+    Raises
+    ------
+    FMUError
+        An unknown kind or engine, a combination not offered, a name not ending in ``.fmu``, or a failed build
+        (compiler missing or failing).
     """
     if kind not in KINDS:
         raise FMUError(f"unknown FMU kind {kind!r}; kinds: {list(KINDS)}")
@@ -134,9 +154,26 @@ def _append_units_logs_experiment(root, variables, step_s, fmi_version=2):
     root.append(_default_experiment(step_s))
 
 
-def documentation_html(view, variables, engine, note=""):
+def documentation_html(view: ReducedModel, variables: Sequence[Variable], engine: str, note: str = "") -> str:
     """``documentation/index.html``: what the FMU is, and a table of its variables (name, causality, unit,
-    range, start, description)."""
+    range, start, description).
+
+    Parameters
+    ----------
+    view : ReducedModel
+        The ROM restricted to the exported outputs.
+    variables : sequence of Variable
+        The FMU's variables.
+    engine : str
+        ``rom`` or ``fe``.
+    note : str, default ""
+        HTML appended to the description.
+
+    Returns
+    -------
+    str
+        The HTML page.
+    """
     from html import escape
 
     def cell(x):
@@ -256,8 +293,19 @@ def _export_python(rom, view, variables, out, engine, step_s, fe_options):
 
 
 # ----------------------------------------------------------------------------- native kind
-def fmi_headers_dir():
-    """The official FMI 2 headers shipped with fmpy."""
+def fmi_headers_dir() -> Path:
+    """The official FMI 2 headers shipped with fmpy.
+
+    Returns
+    -------
+    Path
+        fmpy's ``c-code`` folder (it holds the FMI 3 headers too).
+
+    Raises
+    ------
+    FMUError
+        If the headers are missing.
+    """
     import fmpy
 
     path = Path(fmpy.__file__).parent / "c-code"
@@ -269,11 +317,32 @@ def fmi_headers_dir():
 FMI2_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 
 
-def write_native_sources(rom, variables, rows, folder, guid, fmi_version=2):
+def write_native_sources(rom: ReducedModel, variables: Sequence[Variable], rows: Sequence[int],
+                         folder: Path | str, guid: str, fmi_version: int = 2) -> Path:
     """Write the C sources of the native FMU into ``folder``; return the C file to compile.
 
     The official FMI headers (from fmpy), the generated ``model_data.h``, and the package's
     fixed C files (:mod:`twin.fmu.native_source`), the API file renamed ``thermal_twin_rom.c``.
+
+    Parameters
+    ----------
+    rom : ReducedModel
+        The machine's ROM.
+    variables : sequence of Variable
+        The FMU's variables.
+    rows : sequence of int
+        The ROM outputs exported.
+    folder : Path or str
+        Created if needed.
+    guid : str
+        The GUID (FMI 2) or instantiation token (FMI 3).
+    fmi_version : int, default 2
+        2 or 3.
+
+    Returns
+    -------
+    Path
+        ``folder/thermal_twin_rom.c``.
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -285,8 +354,23 @@ def write_native_sources(rom, variables, rows, folder, guid, fmi_version=2):
     return folder / C_FILE
 
 
-def compile_native(source, library, compiler="cc"):
-    """Compile the C source into a shared library; raise :class:`FMUError` with the compiler's message."""
+def compile_native(source: Path | str, library: Path | str, compiler: str = "cc") -> Path | str:
+    """Compile the C source into a shared library; raise :class:`FMUError` with the compiler's message.
+
+    Parameters
+    ----------
+    source : Path or str
+        The C file; its folder is on the include path.
+    library : Path or str
+        The shared library to write.
+    compiler : str, default "cc"
+        The C compiler command.
+
+    Returns
+    -------
+    Path or str
+        ``library``.
+    """
     cmd = [compiler, "-shared", "-fPIC", "-O2", "-std=c99", "-Wall", "-I", str(Path(source).parent), str(source),
            "-o", str(library), "-lm"]
     try:
@@ -403,14 +487,24 @@ def _export_native3(rom, view, variables, rows, out, step_s, compiler):
 
 
 # ----------------------------------------------------------------------------- checks and runs
-def validate(path):
-    """Problems fmpy finds in the FMU (an empty list when it is valid)."""
+def validate(path: Path | str) -> list[str]:
+    """Problems fmpy finds in the FMU (an empty list when it is valid).
+
+    Parameters
+    ----------
+    path : Path or str
+        The FMU.
+
+    Returns
+    -------
+    list of str
+    """
     from fmpy.validation import validate_fmu
 
     return list(validate_fmu(str(path)))
 
 
-def input_table(rom, scenario, times=None):
+def input_table(rom: ReducedModel, scenario: Scenario | Path | str, times: ArrayLike | None = None) -> np.ndarray:
     """A structured array (``time`` + FMU input names) driving the FMU through a scenario.
 
     Two rows hold the conditions at initialisation — those at t₀, with the
@@ -424,6 +518,26 @@ def input_table(rom, scenario, times=None):
     Only the measured zones have a column: the FMU lags the enclosure's air itself,
     from the room's (a scenario event that reaches a lagged zone but not the room
     cannot be fed to it and is refused).
+
+    Parameters
+    ----------
+    rom : ReducedModel
+        The machine's ROM.
+    scenario : Scenario, Path or str
+        The scenario (object, TOML path or name).
+    times : array_like, optional
+        Step times, s (default the scenario's samples).
+
+    Returns
+    -------
+    ndarray
+        Structured, ``len(times) + 2`` rows: ``time`` (s), ``spindle_speed`` (rpm), ``feed_x/y/z`` (mm/min),
+        ``ambient_<zone>`` (°C) of the measured zones, ``ambient_gradient`` (K/m).
+
+    Raises
+    ------
+    FMUError
+        For an event that reaches a lagged zone but not the room.
     """
     scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     for i, ev in enumerate(scenario.events):
@@ -451,11 +565,23 @@ def input_table(rom, scenario, times=None):
     return table
 
 
-def scenario_start(rom, scenario):
+def scenario_start(rom: ReducedModel, scenario: Scenario) -> tuple[float, bool]:
     """FMU start parameters ``(T_initial, steady_start)`` for a scenario's initial state.
 
     A steady start is the steady state for the inputs set at initialisation
     (the first row of :func:`input_table`).
+
+    Parameters
+    ----------
+    rom : ReducedModel
+        The machine's ROM.
+    scenario : Scenario
+
+    Returns
+    -------
+    T_initial : float
+        °C: the scenario's uniform temperature, else the room's air at t = 0 (20.0, unused, for a steady start).
+    steady_start : bool
     """
     init = scenario.initial
     if init["kind"] == "steady":
@@ -466,8 +592,21 @@ def scenario_start(rom, scenario):
     return float(value), False
 
 
-def table_inputs(rom, table):
-    """Plant inputs (k, m_p) of the ROM (``rom.plant_input_names``) for an FMU input table."""
+def table_inputs(rom: ReducedModel, table: np.ndarray) -> NDArray[np.float64]:
+    """Plant inputs (k, m_p) of the ROM (``rom.plant_input_names``) for an FMU input table.
+
+    Parameters
+    ----------
+    rom : ReducedModel
+        The machine's ROM.
+    table : ndarray
+        Structured input table (see :func:`input_table`).
+
+    Returns
+    -------
+    ndarray, shape (k, m_p)
+        Plant inputs (°C, K/m, W).
+    """
     feeds = {a: table[f"feed_{a}"] for a in "xyz"}
     ambient = {z: table[f"ambient_{z}"] for z in rom.measured_zones}
     return rom.plant_inputs_from_conditions(table["spindle_speed"], feeds, ambient, table["ambient_gradient"])
@@ -479,13 +618,32 @@ def _start_index(t):
     return int(same[0]) if len(same) else 0
 
 
-def simulate_table(rom, table, T_initial=20.0, steady_start=False, outputs=None):
+def simulate_table(rom: ReducedModel, table: np.ndarray, T_initial: float = 20.0, steady_start: bool = False,
+                   outputs: Sequence[str] | None = None) -> NDArray[np.float64]:
     """The in-process twin (ROM, ZOH) on an FMU input table: outputs (k, p) at the table's distinct times.
 
     Semantics of fmpy's co-simulation loop: a row at the same time as the one
     before it is an input event (the first row initialises, the second drives
     the first step); row i is held over [tᵢ, tᵢ₊₁); an output at tᵢ uses the
     inputs last set (those of the step just made).
+
+    Parameters
+    ----------
+    rom : ReducedModel
+        The machine's ROM.
+    table : ndarray
+        Structured input table (see :func:`input_table`).
+    T_initial : float, default 20.0
+        Uniform start temperature, °C (without ``steady_start``).
+    steady_start : bool, default False
+        Start in equilibrium with the initialisation row.
+    outputs : sequence of str, optional
+        ROM outputs returned (default all).
+
+    Returns
+    -------
+    ndarray, shape (k, p)
+        Outputs in their units (°C, µm, µε).
     """
     t = np.asarray(table["time"], float)
     U = table_inputs(rom, table)
@@ -501,8 +659,30 @@ def simulate_table(rom, table, T_initial=20.0, steady_start=False, outputs=None)
     return rom.plant_outputs(X, applied)[:, _output_rows(rom, outputs)]
 
 
-def simulate(path, table, T_initial=20.0, steady_start=False, outputs=None, **kwargs):
-    """Run an FMU in fmpy on an input table (output interval = the table's step); return fmpy's result."""
+def simulate(path: Path | str, table: np.ndarray, T_initial: float = 20.0, steady_start: bool = False,
+             outputs: Sequence[str] | None = None, **kwargs: object) -> np.ndarray:
+    """Run an FMU in fmpy on an input table (output interval = the table's step); return fmpy's result.
+
+    Parameters
+    ----------
+    path : Path or str
+        The FMU.
+    table : ndarray
+        Structured input table (see :func:`input_table`).
+    T_initial : float, default 20.0
+        Start value of ``T_initial``, °C.
+    steady_start : bool, default False
+        Start value of ``steady_start``.
+    outputs : sequence of str, optional
+        Outputs recorded (default fmpy's: all).
+    **kwargs
+        Passed to :func:`fmpy.simulate_fmu`.
+
+    Returns
+    -------
+    ndarray
+        Structured: ``time`` (s) and one field per output (°C, µm, µε).
+    """
     from fmpy import simulate_fmu
 
     t = np.asarray(table["time"], float)

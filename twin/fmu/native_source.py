@@ -17,19 +17,36 @@ with (a, g) computed for the first step size and recomputed whenever the master 
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..core.machine_definition import room_zone
+
+if TYPE_CHECKING:
+    from ..rom.reduction import ReducedModel
+    from .spec import Variable
 
 C_DIR = Path(__file__).with_name("c")
 #: The C files of each FMI version: the API file first (shipped as ``thermal_twin_rom.c``), then what it includes.
 C_FILES = {2: ("fmi2.c", "model.c"), 3: ("fmi3.c", "model.c", "fmi3_unsupported.c")}
 
 
-def c_sources(fmi_version):
-    """``{file name: text}`` of the fixed C sources for FMI ``fmi_version`` (2 or 3), API file first."""
+def c_sources(fmi_version: int) -> dict[str, str]:
+    """``{file name: text}`` of the fixed C sources for FMI ``fmi_version`` (2 or 3), API file first.
+
+    Parameters
+    ----------
+    fmi_version : int
+        2 or 3.
+
+    Returns
+    -------
+    dict of str to str
+        File name → C text, in :data:`C_FILES` order.
+    """
     return {name: (C_DIR / name).read_text(encoding="utf-8") for name in C_FILES[int(fmi_version)]}
 
 
@@ -104,8 +121,25 @@ def _source_lines(rom):
     ]
 
 
-def model_data_header(rom, variables, guid, rows):
-    """``model_data.h`` for a ROM, its FMU variables (twin.fmu.spec) and the kept output rows."""
+def model_data_header(rom: ReducedModel, variables: Sequence[Variable], guid: str, rows: Sequence[int]) -> str:
+    """``model_data.h`` for a ROM, its FMU variables (twin.fmu.spec) and the kept output rows.
+
+    Parameters
+    ----------
+    rom : ReducedModel
+        The machine's ROM (all outputs).
+    variables : sequence of Variable
+        The FMU's variables (:func:`twin.fmu.spec.interface`).
+    guid : str
+        The GUID or FMI 3 instantiation token.
+    rows : sequence of int
+        The ROM outputs exported.
+
+    Returns
+    -------
+    str
+        The C header: sizes, value references, input bounds, source laws and the ROM matrices (17 digits).
+    """
     params = {v.role: v for v in variables if v.causality == "parameter"}
     inputs = [v for v in variables if v.causality == "input"]
     outputs = [v for v in variables if v.causality == "output"]

@@ -9,14 +9,23 @@ from __future__ import annotations
 
 import shutil
 from ctypes import byref
+from pathlib import Path
 
 from .spec import FMUError
 
 
 class FMUStepError(FMUError):
-    """The FMU rejected a call (``fmi2Error``); ``messages`` holds what it logged."""
+    """The FMU rejected a call (``fmi2Error``); ``messages`` holds what it logged.
 
-    def __init__(self, message, messages):
+    Parameters
+    ----------
+    message : str
+        What failed.
+    messages : list of str
+        The FMU's log messages during the call (appended to the text).
+    """
+
+    def __init__(self, message: str, messages: list[str]):
         super().__init__(message + ("; the FMU logged: " + " | ".join(messages) if messages else ""))
         self.messages = messages
 
@@ -30,9 +39,16 @@ class FMUSession:
     T_initial, steady_start : the FMU's start parameters
     inputs : input values set before initialisation ends (dict name → value)
     start_time : start of the simulation, s
+    logging_on : let the FMU log every message (not only errors)
+
+    Raises
+    ------
+    FMUStepError
+        If the FMU refuses to leave initialisation (an input or parameter out of range).
     """
 
-    def __init__(self, path, T_initial=20.0, steady_start=False, inputs=None, start_time=0.0, logging_on=False):
+    def __init__(self, path: Path | str, T_initial: float = 20.0, steady_start: bool = False,
+                 inputs: dict[str, float] | None = None, start_time: float = 0.0, logging_on: bool = False):
         from fmpy import extract, read_model_description
         from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
                                fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
@@ -58,8 +74,8 @@ class FMUSession:
             from fmpy.logging import addLoggerProxy
 
             addLoggerProxy(byref(callbacks))
-        except Exception:            # pragma: no cover - fmpy without its logging helper
-            pass
+        except (ImportError, OSError, AttributeError):  # pragma: no cover - fmpy without its native logging
+            pass                      # helper (module, shared library or symbol missing): messages stay unformatted
         self._callbacks = callbacks   # keep the ctypes callbacks alive
         self.fmu = FMU2Slave(guid=self.description.guid, unzipDirectory=self._unzipped,
                              modelIdentifier=self.description.coSimulation.modelIdentifier,
@@ -84,12 +100,34 @@ class FMUSession:
             else:
                 self.fmu.setReal([self.vr[name]], [float(value)])
 
-    def set(self, **inputs):
-        """Set input values by name (checked by the FMU at the next step)."""
+    def set(self, **inputs: float) -> None:
+        """Set input values by name (checked by the FMU at the next step).
+
+        Parameters
+        ----------
+        **inputs
+            Variable name → value, in the variable's unit (Boolean parameters take a bool).
+
+        Raises
+        ------
+        FMUError
+            For a name the FMU does not have.
+        """
         self._set_values(inputs)
 
-    def get(self, *names):
-        """Values of Real variables: one name → a float, several → a list."""
+    def get(self, *names: str) -> float | list[float]:
+        """Values of Real variables: one name → a float, several → a list.
+
+        Parameters
+        ----------
+        *names
+            Variable names.
+
+        Returns
+        -------
+        float or list of float
+            In the variables' units (°C, µm, µε …).
+        """
         values = self.fmu.getReal([self.vr[n] for n in names])
         return values[0] if len(names) == 1 else list(values)
 
@@ -102,17 +140,26 @@ class FMUSession:
         except FMICallException as exc:
             raise FMUStepError(f"{what} failed with status {exc.status}", self.messages[before:]) from None
 
-    def step(self, h):
-        """Advance by ``h`` s (``doStep``); raise :class:`FMUStepError` if the FMU refuses."""
+    def step(self, h: float) -> None:
+        """Advance by ``h`` s (``doStep``); raise :class:`FMUStepError` if the FMU refuses.
+
+        Parameters
+        ----------
+        h : float
+            Communication step, s.
+        """
         self._call(self.fmu.doStep, f"doStep at t = {self.time:g} s", self.time, float(h))
         self.time += float(h)
 
     # ---------------------------------------------------------------- lifetime
-    def close(self):
+    def close(self) -> None:
+        """Terminate and free the instance and delete its unzipped folder; a second call does nothing."""
         if self.fmu is not None:
+            from fmpy.fmi1 import FMICallException
+
             try:
                 self.fmu.terminate()
-            except Exception:
+            except FMICallException:   # an FMU that refused a step may refuse to terminate: it is freed anyway
                 pass
             self.fmu.freeInstance()
             self.fmu = None

@@ -23,11 +23,18 @@ from __future__ import annotations
 import hashlib
 import math
 import uuid
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 from xml.etree.ElementTree import Element, SubElement
 
 from ..core.machine_definition import room_zone
 from ..errors import TwinInputError
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from ..rom.reduction import ReducedModel
 
 #: FMU unit name → (base-unit exponents, factor, offset) as in FMI 2.0 §2.2.2.
 UNITS = {
@@ -66,6 +73,32 @@ class FMUError(TwinInputError):
 
 @dataclass(frozen=True)
 class Variable:
+    """One FMU variable, as both kinds declare it.
+
+    Attributes
+    ----------
+    name : str
+    vr : int
+        Value reference (unique across types).
+    type : str
+        ``Real`` or ``Boolean``.
+    causality, variability : str
+        FMI causality (``parameter``, ``input``, ``output``) and variability.
+    unit : str or None
+        FMU unit name (a key of :data:`UNITS`), None for unitless ones.
+    description : str
+    start : float, bool or None
+    initial : str or None
+        FMI ``initial`` (``exact``, ``calculated``).
+    min, max : float or None
+        Range, in ``unit``.
+    role : str
+        What it is to the FMU code: ``T_initial``, ``steady_start``, ``spindle_factor``, ``rpm``,
+        ``feed_<axis>``, ``ambient:<zone>``, ``gradient`` or ``output``.
+    depends_on : tuple of str
+        Outputs: the inputs with a direct (feedthrough) effect on it, by name.
+    """
+
     name: str
     vr: int
     type: str                 # Real | Boolean
@@ -81,8 +114,21 @@ class Variable:
     depends_on: tuple = ()    # outputs: the inputs with a direct (feedthrough) effect on it, by name
 
 
-def interface(rom, default_temperature_C=20.0):
-    """The FMU variables of a ROM, value references from 0 in declaration order."""
+def interface(rom: ReducedModel, default_temperature_C: float = 20.0) -> list[Variable]:
+    """The FMU variables of a ROM, value references from 0 in declaration order.
+
+    Parameters
+    ----------
+    rom : ReducedModel
+        The ROM (or its view restricted to the exported outputs).
+    default_temperature_C : float, default 20.0
+        Start value of ``T_initial`` and of the ambient inputs, °C.
+
+    Returns
+    -------
+    list of Variable
+        Parameters, inputs, then outputs (see the module docstring).
+    """
     limits = rom.limits
     rows = []
 
@@ -128,11 +174,25 @@ DRIVER_ROLES = {"constant": (), "spindle": ("rpm",), "feed_x": ("feed_x",), "fee
                 "feed_z": ("feed_z",), "feed_xy": ("feed_x", "feed_y"), "feed_xyz": ("feed_x", "feed_y", "feed_z")}
 
 
-def direct_inputs(rom, d_row, inputs):
+def direct_inputs(rom: ReducedModel, d_row: ArrayLike, inputs: Mapping[str, str]) -> tuple[str, ...]:
     """Names of the FMU inputs with a non-zero direct feedthrough on an output (row ``d_row`` of D over u).
 
     A lagged zone's ambient is a state, not an input; a source's power depends on the inputs of its driver.
     ``inputs``: FMU input role → name.
+
+    Parameters
+    ----------
+    rom : ReducedModel
+        The ROM (or its view restricted to the exported outputs).
+    d_row : array_like, shape (m,)
+        One output's row of the feedthrough D over the thermal inputs.
+    inputs : mapping of str to str
+        FMU input role → name.
+
+    Returns
+    -------
+    tuple of str
+        Input names, in the order of ``inputs``.
     """
     roles = []
     drivers = {f"power:{s['name']}": s["driver"] for s in rom.sources}
@@ -148,8 +208,20 @@ def direct_inputs(rom, d_row, inputs):
 
 
 
-def ambient_description(rom, zone):
-    """What the ambient input of a measured zone is, naming the lagged zones that follow it inside the model."""
+def ambient_description(rom: ReducedModel, zone: str) -> str:
+    """What the ambient input of a measured zone is, naming the lagged zones that follow it inside the model.
+
+    Parameters
+    ----------
+    rom : ReducedModel
+        The ROM (or its view restricted to the exported outputs).
+    zone : str
+        A measured zone.
+
+    Returns
+    -------
+    str
+    """
     text = f"measured air temperature of convection zone {zone!r}"
     if zone == room_zone(rom.zones) and rom.lagged_zones:
         lags = ", ".join(f"{z!r} ({rom.zone_lags_s[z] / 3600.0:g} h)" for z in rom.lagged_zones)
@@ -157,13 +229,37 @@ def ambient_description(rom, zone):
     return text
 
 
-def guid(rom, kind):
-    """A GUID that changes with the ROM and the FMU kind (stable for the same ROM)."""
+def guid(rom: ReducedModel, kind: str) -> str:
+    """A GUID that changes with the ROM and the FMU kind (stable for the same ROM).
+
+    Parameters
+    ----------
+    rom : ReducedModel
+        The ROM (or its view restricted to the exported outputs).
+    kind : str
+        Distinguishes the FMU kinds (and, for the Python kind, its content).
+
+    Returns
+    -------
+    str
+        ``{8-4-4-4-12}`` hex digits from a SHA-256 of the ROM digest, method, order, kind and output names.
+    """
     h = hashlib.sha256(f"{rom.digest}|{rom.method}|{rom.order}|{kind}|{rom.output_names}".encode()).digest()
     return "{" + str(uuid.UUID(bytes=h[:16])) + "}"
 
 
-def unit_definitions(used):
+def unit_definitions(used: Iterable[str]) -> Element:
+    """``UnitDefinitions``: each unit used in SI base units (:data:`UNITS`) with its display units.
+
+    Parameters
+    ----------
+    used : iterable of str
+        FMU unit names.
+
+    Returns
+    -------
+    Element
+    """
     node = Element("UnitDefinitions")
     for name in sorted(used):
         exps, factor, offset = UNITS[name]
@@ -179,8 +275,20 @@ def unit_definitions(used):
     return node
 
 
-def type_definitions(used, fmi_version=2):
-    """``TypeDefinitions``: one Real (FMI 2 ``SimpleType``) / ``Float64Type`` (FMI 3) per unit used."""
+def type_definitions(used: Iterable[str], fmi_version: int = 2) -> Element:
+    """``TypeDefinitions``: one Real (FMI 2 ``SimpleType``) / ``Float64Type`` (FMI 3) per unit used.
+
+    Parameters
+    ----------
+    used : iterable of str
+        FMU unit names.
+    fmi_version : int, default 2
+        2 or 3.
+
+    Returns
+    -------
+    Element
+    """
     node = Element("TypeDefinitions")
     for unit in sorted(used):
         name, quantity = QUANTITIES[unit]
@@ -191,8 +299,17 @@ def type_definitions(used, fmi_version=2):
     return node
 
 
-def real_type_attributes(v):
-    """``declaredType``, ``quantity`` and ``unit`` of a Real variable (empty for unitless ones)."""
+def real_type_attributes(v: Variable) -> dict[str, str]:
+    """``declaredType``, ``quantity`` and ``unit`` of a Real variable (empty for unitless ones).
+
+    Parameters
+    ----------
+    v : Variable
+
+    Returns
+    -------
+    dict of str to str
+    """
     if not v.unit:
         return {}
     name, quantity = QUANTITIES[v.unit]
@@ -203,8 +320,17 @@ def _fmt(value):
     return f"{value:.17g}"
 
 
-def scalar_variable(v):
-    """The FMI 2 ``ScalarVariable`` element of a :class:`Variable`."""
+def scalar_variable(v: Variable) -> Element:
+    """The FMI 2 ``ScalarVariable`` element of a :class:`Variable`.
+
+    Parameters
+    ----------
+    v : Variable
+
+    Returns
+    -------
+    Element
+    """
     attrib = {"name": v.name, "valueReference": str(v.vr), "description": v.description,
               "causality": v.causality, "variability": v.variability}
     if v.initial:
@@ -225,13 +351,22 @@ def scalar_variable(v):
     return node
 
 
-def model_structure(variables):
+def model_structure(variables: Sequence[Variable]) -> Element:
     """``ModelStructure`` (FMI 2, 1-based indices): every output in Outputs and InitialUnknowns.
 
     An output's ``dependencies`` list only the inputs with a non-zero feedthrough (air thermometers
     on their zone's ambient); the others depend on the state alone (``dependencies=""``), so a master
     sees no algebraic loop through them.  InitialUnknowns keep the default (all knowns: a steady
     start depends on every input).
+
+    Parameters
+    ----------
+    variables : sequence of Variable
+        Every FMU variable, in value-reference order (the indices are their positions + 1).
+
+    Returns
+    -------
+    Element
     """
     node = Element("ModelStructure")
     outputs = SubElement(node, "Outputs")

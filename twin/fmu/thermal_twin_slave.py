@@ -263,7 +263,14 @@ class ThermalTwin(Fmi2Slave):
         self._cache = None
 
     # -------------------------------------------------------------- FMI
-    def exit_initialization_mode(self):
+    def exit_initialization_mode(self) -> bool:
+        """fmi2ExitInitializationMode: check the inputs, set the start state (uniform or steady).
+
+        Returns
+        -------
+        bool
+            False (fmi2Error, logged) if an input is out of range.
+        """
         bad = self._bad_inputs()
         if bad:
             self.log("initial inputs out of range: " + "; ".join(bad), Fmi2Status.error)
@@ -273,13 +280,29 @@ class ThermalTwin(Fmi2Slave):
         self._cache = None
         return True
 
-    def enter_initialization_mode(self):
+    def enter_initialization_mode(self) -> None:
+        """fmi2EnterInitializationMode: parameters and inputs may now be set for the start."""
         self._phase = "initialization"
 
-    def terminate(self):
+    def terminate(self) -> None:
+        """fmi2Terminate: no further step is accepted."""
         self._phase = "terminated"
 
-    def do_step(self, current_time, step_size):
+    def do_step(self, current_time: float, step_size: float) -> bool:
+        """fmi2DoStep: advance by ``step_size`` with the inputs held over the step.
+
+        Parameters
+        ----------
+        current_time : float
+            Time at the start of the step, s.
+        step_size : float
+            Step, s (> 0).
+
+        Returns
+        -------
+        bool
+            False (fmi2Error, logged) before initialisation, for an input out of range or a step ≤ 0.
+        """
         if self._phase != "step":
             self.log(f"doStep at t = {current_time:g} s: the FMU is {self._phase}, not initialised for stepping",
                      Fmi2Status.error)

@@ -48,7 +48,17 @@ class Candidates:
         return len(self.names)
 
     def index(self, names: list[str]) -> list[int]:
-        """Positions of ``names`` among the candidates."""
+        """Positions of ``names`` among the candidates.
+
+        Parameters
+        ----------
+        names : list of str
+            Candidate names (a missing one raises ``KeyError``).
+
+        Returns
+        -------
+        list of int
+        """
         where = {n: i for i, n in enumerate(self.names)}
         return [where[n] for n in names]
 
@@ -64,7 +74,17 @@ class CandidateSpec:
     exclude_groups: tuple = ("cavities", "floor")
 
     def build(self, machine: Machine) -> Candidates:
-        """The candidates on ``machine``, built once per process and machine."""
+        """The candidates on ``machine``, built once per process and machine.
+
+        Parameters
+        ----------
+        machine : Machine
+            A built machine.
+
+        Returns
+        -------
+        Candidates
+        """
         return cached(("candidates", id(machine), self), lambda: candidate_locations(machine, **vars(self)))
 
 
@@ -79,6 +99,11 @@ def farthest_point_sample(points: np.ndarray, n: int, start: int | None = None) 
         How many to keep; all of them if ``n >= m``.
     start : int, optional
         The first point; default the highest (largest z, then smallest x).
+
+    Returns
+    -------
+    ndarray of int64, shape (min(n, m),)
+        Indices into ``points`` in the order chosen (``arange(m)`` if ``n >= m``).
     """
     points = np.asarray(points, float)
     if n >= len(points):
@@ -150,6 +175,11 @@ def candidate_locations(machine: Machine, parts: tuple = DEFAULT_PARTS, n_surfac
         Add the camera's spots / the installed thermometers.
     exclude_groups : tuple of str
         Facet groups whose nodes are no candidates (sealed cavities, floor contact).
+
+    Returns
+    -------
+    Candidates
+        Surface nodes first (in node order), then the camera spots and installed thermometers.
 
     Raises
     ------

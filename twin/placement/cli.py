@@ -1,13 +1,22 @@
 """CLI command ``twin place``: a thin layer over :func:`twin.placement.study.placement_study`."""
 from __future__ import annotations
 
+import argparse
+
 from ..infra.cli_common import add_cluster_options, add_overwrite, split_names
 from ..infra.progress import progress_bar
 
 # The handler imports the library inside it, never up here: start-up time (`twin --help` must not load scipy).
 
 
-def cmd_place(args):
+def cmd_place(args: argparse.Namespace) -> None:
+    """``twin place``: run the placement study, print its summary and where the report went.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+    """
     from .candidates import DEFAULT_PARTS
     from .selection import METHODS
     from .study import DEFAULT_TEST, DEFAULT_TRAIN, DEFAULT_VALIDATION, placement_study
@@ -25,8 +34,14 @@ def cmd_place(args):
     print(f"report, tables, candidate scores and render in {res.out_dir}/")
 
 
-def register(sub):
-    """Add ``place``."""
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``place``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of the ``twin`` command.
+    """
     p = sub.add_parser("place", help="sensor-placement study: candidates, selection methods, K × method table")
     p.add_argument("--parts", help="parts whose surface nodes are candidates (default: all outer parts)")
     p.add_argument("--candidates", type=int, default=2000, help="surface candidates after thinning (default 2000)")

@@ -16,6 +16,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -74,7 +75,20 @@ class Record:
 
 
 def record_times(scenario: Scenario, record_interval_s: float | None = None) -> np.ndarray:
-    """Record times, s: the scenario's samples, or every ``record_interval_s`` if that is coarser."""
+    """Record times, s: the scenario's samples, or every ``record_interval_s`` if that is coarser.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The scenario.
+    record_interval_s : float, optional
+        Recording interval, s; None (or finer than the scenario's sampling) keeps the scenario's samples.
+
+    Returns
+    -------
+    ndarray
+        Times from 0 to the scenario's end, s.
+    """
     t = scenario.times()
     if record_interval_s is None or record_interval_s <= scenario.sample_interval_s:
         return t
@@ -123,7 +137,18 @@ def _run_record(name, times, run, k, axes, start):
 
 def elementary_inputs(machine: Machine) -> list[tuple[str, int, float]]:
     """``(input name, index, step)`` of every thermal input of ``machine``: source powers at their reference
-    power (W), ambient zones +:data:`RESPONSE_AMBIENT_STEP_K`, the gradient +:data:`RESPONSE_GRADIENT_STEP_K_PER_M`."""
+    power (W), ambient zones +:data:`RESPONSE_AMBIENT_STEP_K`, the gradient +:data:`RESPONSE_GRADIENT_STEP_K_PER_M`.
+
+    Parameters
+    ----------
+    machine : Machine
+        A built machine.
+
+    Returns
+    -------
+    list of (str, int, float)
+        Input name, its column in ``machine.thermal.input_names``, and the step (W, K or K/m).
+    """
     names = machine.thermal.input_names
     power = {f"power:{s.name}": float(s.coefficient_W) for s in machine.definition.sources}
     out = []
@@ -172,7 +197,8 @@ class ResponseTask:
     max_step_s: float = 300.0
 
     @property
-    def scenario(self):
+    def scenario(self) -> str:
+        """The record's name, ``step:<input>``."""
         return f"step:{self.input_name}"
 
     def __call__(self):
@@ -198,7 +224,17 @@ def _file_digest(path):
 
 
 def record_cache_key(task: RecordTask | ResponseTask) -> str:
-    """The record cache's key of a task: machine file, scenario file (or step input), candidates, axes."""
+    """The record cache's key of a task: machine file, scenario file (or step input), candidates, axes.
+
+    Parameters
+    ----------
+    task : RecordTask or ResponseTask
+
+    Returns
+    -------
+    str
+        20 hex digits of a SHA-256 of the payload.
+    """
     definition = load_machine(task.machine.name)
     payload = {"v": RECORD_CACHE_VERSION, "machine": repr(task.machine), "machine_file": _file_digest(
         definition.source), "candidates": repr(task.candidates), "axes": task.axes}
@@ -231,9 +267,27 @@ def _save_record(path, rec):
         seconds=rec.seconds, **{f"drift_{a}": v for a, v in rec.drift.items()}))
 
 
-def run_records(tasks: list, scheduler: object = "local", use_cache: bool = True, progress=None) -> list[Record]:
+def run_records(tasks: list, scheduler: object = "local", use_cache: bool = True,
+                progress: Callable[[int, int], None] | None = None) -> list[Record]:
     """Records of :class:`RecordTask` s and :class:`ResponseTask` s, from the disk cache where possible, the rest
-    through the sweep (``scheduler``: see :func:`twin.infra.sweep.run_tasks`)."""
+    through the sweep (``scheduler``: see :func:`twin.infra.sweep.run_tasks`).
+
+    Parameters
+    ----------
+    tasks : list of RecordTask or ResponseTask
+        The runs.
+    scheduler : str or distributed.Client, default "local"
+        See :func:`twin.infra.sweep.run_tasks`.
+    use_cache : bool, default True
+        Read and write the record cache in the user cache; False runs every task and stores nothing.
+    progress : callable, optional
+        ``progress(done, total)`` of the runs not cached.
+
+    Returns
+    -------
+    list of Record
+        Noise-free, in the order of ``tasks``.
+    """
     keys = [record_cache_key(t) for t in tasks] if use_cache else [None] * len(tasks)
     out = [None] * len(tasks)
     todo = []
@@ -255,6 +309,18 @@ def scenario_seed(name: str, base: int = 0) -> int:
     """A noise seed from a scenario's name (a stable hash, the same in every run and process; not ``hash()``).
 
     The same scenario gets the same noise whatever its role or position in a study.
+
+    Parameters
+    ----------
+    name : str
+        The scenario's name.
+    base : int, default 0
+        Mixed into the hash (another noise draw).
+
+    Returns
+    -------
+    int
+        A seed in 0 .. 2³¹ − 1.
     """
     digest = hashlib.sha256(f"{int(base)}:{name}".encode()).digest()
     return int.from_bytes(digest[:4], "little") & 0x7FFFFFFF
@@ -265,6 +331,20 @@ def add_noise(record: Record, kinds: list[str], seed: int) -> Record:
 
     ``kinds`` are the candidates' kinds (``surface``, ``camera``, ``installed``); the drift noise is drawn
     from ``seed + 7919``, the temperatures' from ``seed``.
+
+    Parameters
+    ----------
+    record : Record
+        A noise-free record.
+    kinds : list of str
+        One kind per candidate.
+    seed : int
+        Noise seed (see :func:`scenario_seed`).
+
+    Returns
+    -------
+    Record
+        A new record (°C, µm); ``record`` is unchanged.
     """
     temp_kinds = [NOISE[k] for k in kinds]
     settings = {"temperature": "DS18S20", "camera": "S65", "displacement": "NCDT"}

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -18,6 +19,10 @@ from .records import Record
 from .scoring import best_k_pool
 from .selection import OWN_METHODS
 
+if TYPE_CHECKING:
+    from ..core.scenario import Scenario
+    from .study import PlacementResult
+
 
 def _cell(rows, method, k, axis):
     for r in rows:
@@ -26,8 +31,21 @@ def _cell(rows, method, k, axis):
     return None
 
 
-def k_method_table(result, axis: str) -> str:
-    """Markdown K × method table of one axis: validation max |residual| / RMSE (µm), the best per K in bold."""
+def k_method_table(result: PlacementResult, axis: str) -> str:
+    """Markdown K × method table of one axis: validation max |residual| / RMSE (µm), the best per K in bold.
+
+    Parameters
+    ----------
+    result : PlacementResult
+        The study's result (its ``config``, ``table`` and ``test`` are read).
+    axis : str
+        Drift axis.
+
+    Returns
+    -------
+    str
+        The table, ending with a newline.
+    """
     methods = result.config["methods"]
     rows = []
     for k in range(1, result.config["k_max"] + 1):
@@ -51,9 +69,22 @@ def _validation_max(result, axis, row):
     return _cell(result.table, row["method"], row["K"], axis)["max_residual"]
 
 
-def verdicts(result) -> dict:
+def verdicts(result: PlacementResult) -> dict:
     """Plain statements on the goals per axis, judged on the test scenarios with the sets chosen on validation:
-    ≥ 80 % reduction with 4–5 sensors; the best own method vs the best seed method (both chosen on validation)."""
+    ≥ 80 % reduction with 4–5 sensors; the best own method vs the best seed method (both chosen on validation).
+
+    Parameters
+    ----------
+    result : PlacementResult
+        The study's result (its ``config``, ``table`` and ``test`` are read).
+
+    Returns
+    -------
+    dict
+        Axis → the uncompensated peaks (µm), the chosen method and K with their validation and test max
+        |residual| (µm), reduction % and ``goal_80_percent``; with both kinds of method, the best own and
+        seed sets on the test and per K whether ours beat theirs on validation.
+    """
     out = {}
     for axis in result.config["axes"]:
         best = result.test["best"][axis]
@@ -128,9 +159,20 @@ def _chosen_section(result):
             markdown_table(rows, ["axis", "#", "sensor", "kind", "part", "x (m)", "y (m)", "z (m)"], formats=".3f")]
 
 
-def placement_summary(result) -> str:
+def placement_summary(result: PlacementResult) -> str:
     """The Markdown report (``placement.md``): setup, K × method tables and verdicts per axis, ANFIS check,
-    chosen locations."""
+    chosen locations.
+
+    Parameters
+    ----------
+    result : PlacementResult
+        The study's result (its ``config``, ``table`` and ``test`` are read).
+
+    Returns
+    -------
+    str
+        Markdown, ending with a newline.
+    """
     lines = _header(result)
     v = verdicts(result)
     for axis in result.config["axes"]:
@@ -141,10 +183,28 @@ def placement_summary(result) -> str:
 
 
 def record_dataset(record: Record, candidates: Candidates, columns: list[int], machine: Machine,
-                   scenario) -> Dataset:
+                   scenario: Scenario | Path | str) -> Dataset:
     """A :class:`~twin.core.dataset.Dataset` of a (noisy) record: operating conditions, the chosen candidates as
     thermometers (°C, with positions) and the drift axes (µm) — what a machine fitted with those sensors
-    would log, ready for ``twin train`` / ``twin evaluate``."""
+    would log, ready for ``twin train`` / ``twin evaluate``.
+
+    Parameters
+    ----------
+    record : Record
+        The record.
+    candidates : Candidates
+        The study's candidates.
+    columns : list of int
+        Candidates to include as thermometers.
+    machine : Machine
+        The machine (its operating-condition channels).
+    scenario : Scenario, Path or str
+        The record's scenario.
+
+    Returns
+    -------
+    Dataset
+    """
     sc = as_scenario(scenario)
     cond = ScenarioInputs(machine, sc).conditions(record.time_s)
     channels, cols = machine_condition_channels(machine, cond)
@@ -187,9 +247,19 @@ def _chosen_rows(result):
             for axis, (method, k, idx) in result.best.items() for j, i in enumerate(idx, start=1)]
 
 
-def write_placement_report(result, machine: Machine, folder: Path) -> None:
+def write_placement_report(result: PlacementResult, machine: Machine, folder: Path) -> None:
     """Write ``placement.md``, ``placement.json``, the CSV tables, ``chosen_sensors.png``, ``k_curves.png`` and
-    (if the result keeps its records) ``datasets/<scenario>.csv`` into ``folder``."""
+    (if the result keeps its records) ``datasets/<scenario>.csv`` into ``folder``.
+
+    Parameters
+    ----------
+    result : PlacementResult
+        The study's result, with its summary.
+    machine : Machine
+        The machine (for the render and the datasets).
+    folder : Path
+        An existing, empty folder.
+    """
     import matplotlib
 
     matplotlib.use("Agg")

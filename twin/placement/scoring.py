@@ -22,7 +22,24 @@ REPORT_K = (4, 5)
 
 
 def stack(records: list[Record], cols: np.ndarray, axis: str) -> tuple[np.ndarray, np.ndarray]:
-    """Zero-referenced inputs (°C, columns ``cols``) and drift (µm) of ``records``, stacked row-wise."""
+    """Zero-referenced inputs (°C, columns ``cols``) and drift (µm) of ``records``, stacked row-wise.
+
+    Parameters
+    ----------
+    records : list of Record
+        The records.
+    cols : ndarray of int
+        Candidate columns.
+    axis : str
+        Drift axis.
+
+    Returns
+    -------
+    X : ndarray, shape (n_rows, len(cols))
+        Temperature changes, K.
+    y : ndarray, shape (n_rows,)
+        Drift changes, µm.
+    """
     X = np.vstack([zero_referenced(r.temperatures[:, cols]) for r in records])
     y = np.concatenate([zero_referenced(r.drift[axis]) for r in records])
     return X, y
@@ -31,6 +48,17 @@ def stack(records: list[Record], cols: np.ndarray, axis: str) -> tuple[np.ndarra
 def score_set(train: list[Record], test: list[Record], cols: np.ndarray, axis: str,
               model: str = "mlr") -> tuple[float, float, dict]:
     """Fit ``model`` on ``train`` with the sensors ``cols``; score it on ``test``.
+
+    Parameters
+    ----------
+    train, test : list of Record
+        Records to fit on and to score on.
+    cols : ndarray of int
+        Candidate columns (the sensor set).
+    axis : str
+        Drift axis.
+    model : str, default "mlr"
+        Model name (see :mod:`models.registry`).
 
     Returns
     -------
@@ -55,7 +83,21 @@ def score_set(train: list[Record], test: list[Record], cols: np.ndarray, axis: s
 
 
 def uncompensated(records: list[Record], axis: str) -> tuple[float, float]:
-    """Max |drift change| and its RMS pooled over ``records``, µm: the error without compensation."""
+    """Max |drift change| and its RMS pooled over ``records``, µm: the error without compensation.
+
+    Parameters
+    ----------
+    records : list of Record
+    axis : str
+        Drift axis.
+
+    Returns
+    -------
+    max : float
+        µm.
+    rms : float
+        µm.
+    """
     y = np.concatenate([zero_referenced(r.drift[axis]) for r in records])
     return float(np.abs(y).max()), float(np.sqrt(np.mean(y ** 2)))
 
@@ -64,6 +106,27 @@ def score_table(sets: dict, train: list[Record], test: list[Record], candidates:
                 axes: tuple) -> tuple[list[dict], dict]:
     """One row per method, K and axis: the MLR on that set scored on ``test`` (µm), and the uncompensated
     (max, RMS) per axis.  ``sets``: ``(method, axis)`` → sets per K (see :class:`~twin.placement.selection.Selection`).
+
+    Parameters
+    ----------
+    sets : dict
+        ``(method, axis)`` → candidate index lists per K.
+    train, test : list of Record
+        Records to fit on and to score on.
+    candidates : Candidates
+        Names the sensors.
+    methods : list of str
+        Methods scored.
+    axes : tuple of str
+        Drift axes.
+
+    Returns
+    -------
+    table : list of dict
+        ``method``, ``K``, ``axis``, ``max_residual``, ``rmse`` (µm), ``reduction_percent``, ``sensors``,
+        ``per_scenario``.
+    uncompensated : dict
+        Axis → (max, RMS) drift change of ``test``, µm.
     """
     table, uncomp = [], {}
     for axis in axes:
@@ -78,14 +141,43 @@ def score_table(sets: dict, train: list[Record], test: list[Record], candidates:
 
 
 def best_k_pool(k_max: int) -> list[int]:
-    """The K among which each axis's best set is chosen: those of :data:`REPORT_K` studied, else every K studied."""
+    """The K among which each axis's best set is chosen: those of :data:`REPORT_K` studied, else every K studied.
+
+    Parameters
+    ----------
+    k_max : int
+        Largest K studied.
+
+    Returns
+    -------
+    list of int
+    """
     return [k for k in REPORT_K if k <= k_max] or list(range(1, k_max + 1))
 
 
 def choose_best(table: list[dict], candidates: Candidates, axes: tuple, k_max: int,
                 methods: tuple | None = None) -> dict:
     """Axis → (method, K, candidate indices) of the smallest max |residual| in ``table`` (the validation
-    scores) among the K of :func:`best_k_pool` and, if given, among ``methods``."""
+    scores) among the K of :func:`best_k_pool` and, if given, among ``methods``.
+
+    Parameters
+    ----------
+    table : list of dict
+        Rows of :func:`score_table`.
+    candidates : Candidates
+        To turn sensor names back into indices.
+    axes : tuple of str
+        Drift axes.
+    k_max : int
+        Largest K studied.
+    methods : tuple of str, optional
+        Restrict the choice to these methods.
+
+    Returns
+    -------
+    dict
+        Axis → (method, K, candidate indices).
+    """
     best = {}
     for axis in axes:
         rows = [r for r in table if r["axis"] == axis and r["K"] in best_k_pool(k_max)
@@ -99,6 +191,20 @@ def score_choices(choices: dict, train: list[Record], test: list[Record], candid
     """Axis → the MLR on the chosen set of that axis scored on ``test`` (µm), as a row of the score table.
 
     ``choices``: axis → (method, K, candidate indices), as :func:`choose_best` returns.
+
+    Parameters
+    ----------
+    choices : dict
+        Axis → (method, K, candidate indices).
+    train, test : list of Record
+        Records to fit on and to score on.
+    candidates : Candidates
+        Names the sensors.
+
+    Returns
+    -------
+    dict
+        Axis → a row like those of :func:`score_table`.
     """
     out = {}
     for axis, (method, k, idx) in choices.items():
@@ -112,7 +218,27 @@ def score_choices(choices: dict, train: list[Record], test: list[Record], candid
 def anfis_scores(best: dict, sets: dict, train: list[Record], test: list[Record], uncomp: dict,
                 k_max: int) -> list[dict]:
     """ANFIS-FCM (3 rules) on the best method's sets with 4 and 5 sensors, scored like the MLR on ``test`` (µm);
-    ``uncomp``: axis → (max, RMS) drift change of ``test``."""
+    ``uncomp``: axis → (max, RMS) drift change of ``test``.
+
+    Parameters
+    ----------
+    best : dict
+        Axis → (method, K, candidate indices).
+    sets : dict
+        ``(method, axis)`` → candidate index lists per K.
+    train, test : list of Record
+        Records to fit on and to score on.
+    uncomp : dict
+        Axis → (max, RMS) drift change of ``test``, µm.
+    k_max : int
+        Largest K studied (K = 4, 5 beyond it are skipped).
+
+    Returns
+    -------
+    list of dict
+        One row per axis and K: ``max_residual``, ``rmse`` (µm), ``reduction_percent``; or ``error`` if the fit
+        failed.
+    """
     rows = []
     for axis, (method, _k, _idx) in best.items():
         for k in (4, 5):

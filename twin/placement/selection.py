@@ -26,6 +26,7 @@ Selection sees the training records only (the step responses too, for
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -66,14 +67,27 @@ class Selection:
 
 
 def thin(n: int, max_rows: int) -> np.ndarray:
-    """At most ``max_rows`` row indices spread evenly over ``n`` rows (all of them if ``n <= max_rows``)."""
+    """At most ``max_rows`` row indices spread evenly over ``n`` rows (all of them if ``n <= max_rows``).
+
+    Parameters
+    ----------
+    n : int
+        Rows available.
+    max_rows : int
+        Most rows kept.
+
+    Returns
+    -------
+    ndarray of int
+        Increasing row indices, the first and the last included.
+    """
     if n <= max_rows:
         return np.arange(n)
     return np.unique(np.linspace(0, n - 1, max_rows).round().astype(int))
 
 
 def select_sets(records: list[Record], responses: list[Record], methods: list[str], axes: tuple, k_max: int,
-                max_rows: int = 2000, log=print) -> Selection:
+                max_rows: int = 2000, log: Callable[[str], object] | None = print) -> Selection:
     """Choose the sensor sets of ``methods`` for every axis and K = 1 … ``k_max`` on ``records``.
 
     Parameters
@@ -92,6 +106,11 @@ def select_sets(records: list[Record], responses: list[Record], methods: list[st
         Rows for the selection, thinned evenly within each record (at least 50 per record).
     log : callable or None
         Progress lines.
+
+    Returns
+    -------
+    Selection
+        The sets per method, axis and K, and the candidates' scores.
     """
     t0 = time.perf_counter()
     per = max(50, max_rows // len(records))

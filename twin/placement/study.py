@@ -24,6 +24,7 @@ The three scenario sets must be disjoint.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -93,6 +94,9 @@ class PlacementResult:
         (``own``/``seed``: the best own and best seed method chosen on validation, if both kinds ran).
     uncompensated_test : dict
         Axis → (max, RMS) drift change on the test scenarios, µm.
+
+    :func:`placement_study` also sets ``config`` (the study's settings, dict), ``cand_scores`` (score name →
+    one value per candidate) and ``records`` (the noisy scenario records, or None).
     """
 
     out_dir: Path | None
@@ -173,11 +177,13 @@ def _test_choices(table, best, cands, axes, k_max, methods, rec_train, rec_test)
 
 def placement_study(machine: str = "vmc_ram", mesh_size_m: float | None = None, parts: tuple = DEFAULT_PARTS,
                     n_candidates: int = 2000, camera: bool = True, train: tuple = DEFAULT_TRAIN,
-                    validation: tuple = DEFAULT_VALIDATION, test: tuple = DEFAULT_TEST, methods: tuple = METHODS, k_max: int = 8, axes: tuple = DEFAULT_AXES,
-                    record_interval_s: float | None = 60.0, max_selection_rows: int = 2000, scheduler="local",
-                    use_cache: bool = True, noise: bool = True, report_k: int = 5, anfis_check: bool = True,
-                    write_datasets: bool = True, out_dir: Path | str | None = None, progress=None, log=print,
-                    response_horizon_s: float = RESPONSE_HORIZON_S, overwrite: bool = False) -> PlacementResult:
+                    validation: tuple = DEFAULT_VALIDATION, test: tuple = DEFAULT_TEST, methods: tuple = METHODS,
+                    k_max: int = 8, axes: tuple = DEFAULT_AXES, record_interval_s: float | None = 60.0,
+                    max_selection_rows: int = 2000, scheduler: str | object = "local", use_cache: bool = True,
+                    noise: bool = True, report_k: int = 5, anfis_check: bool = True, write_datasets: bool = True,
+                    out_dir: Path | str | None = None, progress: Callable[[int, int], None] | None = None,
+                    log: Callable[[str], object] | None = print, response_horizon_s: float = RESPONSE_HORIZON_S,
+                    overwrite: bool = False) -> PlacementResult:
     """Run the placement study; write its report to ``out_dir`` (see the module docstring).
 
     Parameters
@@ -199,6 +205,8 @@ def placement_study(machine: str = "vmc_ram", mesh_size_m: float | None = None, 
         Training rows the selection uses (thinned evenly per scenario).
     scheduler, use_cache, progress
         The sweep (see :func:`twin.infra.sweep.run_tasks`) and the record cache.
+    log : callable or None, default print
+        Receives notes (skipped scenarios, selection progress); None is silent.
     noise
         Draw DS18S20/S65/NCDT noise on the records, seeded by each scenario's name.
     report_k
@@ -216,6 +224,11 @@ def placement_study(machine: str = "vmc_ram", mesh_size_m: float | None = None, 
     Returns
     -------
     PlacementResult
+
+    Raises
+    ------
+    TwinInputError
+        An unknown method, a scenario in two roles, too few scenarios, or an unusable ``out_dir``.
     """
     check_output_folder(out_dir, overwrite, inputs=(machine,))
     t_start = time.perf_counter()

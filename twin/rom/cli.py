@@ -1,11 +1,17 @@
 """CLI commands ``twin rom build`` and ``twin rom report``: a thin layer over :mod:`twin.rom`."""
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..core.files import write_text_atomic
 from ..errors import TwinInputError
 from ..infra.cli_common import add_overwrite, check_out_file
+
+if TYPE_CHECKING:
+    from ..core.machine import Machine
+    from .reduction import ReducedModel
 
 # Handlers import the library inside them, never up here: start-up time (`twin --help` must not load scipy).
 # So twin.rom.reduction's default order is copied here (tests/test_cli_startup.py keeps the two equal).
@@ -22,8 +28,19 @@ def _orders(text):
     return values
 
 
-def machine_and_rom(args):
-    """The machine and its (cached) ROM named by ``--machine``, ``--mesh-size``, ``--order`` and ``--method``."""
+def machine_and_rom(args: argparse.Namespace) -> tuple[Machine, ReducedModel]:
+    """The machine and its (cached) ROM named by ``--machine``, ``--mesh-size``, ``--order`` and ``--method``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line (``--rebuild``, if it has it, builds the ROM even if cached).
+
+    Returns
+    -------
+    machine : Machine
+    rom : ReducedModel
+    """
     from ..core.machine import build_machine
     from .reduction import cached_rom
 
@@ -31,15 +48,28 @@ def machine_and_rom(args):
     return machine, cached_rom(machine, args.order, args.method, rebuild=getattr(args, "rebuild", False))
 
 
-def add_rom_options(p):
-    """Add the options that choose the machine and its ROM (``rom build``, ``fmu export``, ``fmu simulate``)."""
+def add_rom_options(p: argparse.ArgumentParser) -> None:
+    """Add the options that choose the machine and its ROM (``rom build``, ``fmu export``, ``fmu simulate``).
+
+    Parameters
+    ----------
+    p : argparse.ArgumentParser
+        The command's parser.
+    """
     p.add_argument("--machine", default="vmc_ram", help="machine name or TOML path (default vmc_ram)")
     p.add_argument("--mesh-size", type=float, help="target tetrahedron edge length, m")
     p.add_argument("--order", type=int, default=DEFAULT_ORDER, help=f"ROM order (default {DEFAULT_ORDER})")
     p.add_argument("--method", choices=("krylov", "modal"), default="krylov", help="reduction method")
 
 
-def cmd_rom_build(args):
+def cmd_rom_build(args: argparse.Namespace) -> None:
+    """``twin rom build``: build (or read from the cache) a machine's ROM, print its size and time constants.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+    """
     check_out_file(args)
     machine, rom = machine_and_rom(args)
     i = rom.info
@@ -51,7 +81,14 @@ def cmd_rom_build(args):
         print(f"  saved to {rom.save(args.out)}")
 
 
-def cmd_rom_report(args):
+def cmd_rom_report(args: argparse.Namespace) -> None:
+    """``twin rom report``: the ROM's error against the full FE over orders, methods and scenarios.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+    """
     from ..core.machine import build_machine
     from .report import error_report, format_markdown, format_summary
 
@@ -70,8 +107,14 @@ def cmd_rom_report(args):
         print(f"table written to {args.out}")
 
 
-def register(sub):
-    """Add the ``rom`` command with its ``build`` and ``report`` subcommands."""
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``rom`` command with its ``build`` and ``report`` subcommands.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of the ``twin`` command.
+    """
     rom = sub.add_parser("rom", help="build reduced-order models and report their error against the FE")
     rsub = rom.add_subparsers(dest="rom_command", required=True)
     build = rsub.add_parser("build", help="build (or read from cache) a machine's ROM")

@@ -48,12 +48,16 @@ import functools
 import hashlib
 import json
 import time
+import zipfile
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
+from numpy.typing import ArrayLike, NDArray
 
 from fea.inputs import interval_means
 from fea.linsolve import factorize
@@ -66,6 +70,11 @@ from ..core.scenario import Scenario, load_scenario
 from ..core.simulate import condition_channels
 from ..errors import TwinInputError
 
+if TYPE_CHECKING:
+    from fea.heat import ThermalSystem
+
+    from ..core.machine import Machine
+
 FORMAT = "thermal-twin-rom"
 FORMAT_VERSION = 1
 METHODS = ("krylov", "modal")
@@ -74,6 +83,7 @@ DEFAULT_ORDER = 80
 #: time constant τ₁ unless given: s = 0, 1/τ₁·{10, 100, 1000} spread the order over the hours to
 #: seconds range of machine-tool thermal dynamics.
 DEFAULT_POINT_FACTORS = (0.0, 10.0, 100.0, 1000.0)
+DEFAULT_N_POINTS = len(DEFAULT_POINT_FACTORS)
 #: Relative M-norm below which a new Krylov direction counts as linearly dependent (deflated).
 DEFLATION_TOLERANCE = 1e-9
 DEFAULT_KINDS = ("temperature", "air", "displacement", "strain")
@@ -84,8 +94,19 @@ class ROMError(TwinInputError):
 
 
 # ----------------------------------------------------------------------------- helpers
-def machine_digest(machine):
-    """SHA-256 (16 hex) of everything the ROM depends on: M, A, B, C, c, D, names and power models."""
+def machine_digest(machine: Machine) -> str:
+    """SHA-256 (16 hex) of everything the ROM depends on: M, A, B, C, c, D, names and power models.
+
+    Parameters
+    ----------
+    machine : Machine
+        A built machine.
+
+    Returns
+    -------
+    str
+        16 hex digits.
+    """
     h = hashlib.sha256()
     system = machine.thermal
     for m in (system.mass, system.stiffness, system.input_matrix, machine.outputs.matrix):
@@ -112,6 +133,11 @@ def _check_lti(system):
     if len(system.fixed_nodes):
         raise ROMError("the thermal system has fixed-temperature nodes; the ROM supports convection-"
                        "anchored systems only (no Dirichlet lifting)")
+
+
+def _start_vector(n):
+    """A seeded start vector for ARPACK: without one it draws its own, and a rebuilt ROM differs in the last digits."""
+    return np.random.default_rng(0).standard_normal(n)
 
 
 def _spd_factor(matrix):
@@ -162,7 +188,8 @@ class _MOrthonormalBasis:
         return self.V[:, :self.k]
 
 
-def krylov_basis(system, order, points, uniform=True):
+def krylov_basis(system: ThermalSystem, order: int, points: Sequence[float], uniform: bool = True
+                 ) -> NDArray[np.float64]:
     """M-orthonormal block-Krylov basis (n, order) of the pencil (A + sM)⁻¹ at the expansion ``points``.
 
     The blocks are taken round-robin over the points: the first block of each
@@ -170,6 +197,22 @@ def krylov_basis(system, order, points, uniform=True):
     order/len(points) directions.  Raises :class:`ROMError` when the order
     exceeds the number of unknowns or the Krylov spaces of all points are
     exhausted (breakdown: an invariant subspace smaller than the order).
+
+    Parameters
+    ----------
+    system : ThermalSystem
+        The FE thermal system (M, A, B).
+    order : int
+        Number of basis vectors r.
+    points : sequence of float
+        Expansion points s ≥ 0, 1/s.
+    uniform : bool, default True
+        Put the uniform field 1 first.
+
+    Returns
+    -------
+    ndarray, shape (n_nodes, order)
+        V with Vᵀ M V = I.
     """
     n = system.n_nodes
     A, M = sp.csr_matrix(system.stiffness), sp.csr_matrix(system.mass)
@@ -200,8 +243,21 @@ def krylov_basis(system, order, points, uniform=True):
     return basis.basis
 
 
-def modal_basis(system, order):
-    """The ``order`` slowest M-orthonormal modes of A φ = λ M φ (shift-invert about 0)."""
+def modal_basis(system: ThermalSystem, order: int) -> NDArray[np.float64]:
+    """The ``order`` slowest M-orthonormal modes of A φ = λ M φ (shift-invert about 0).
+
+    Parameters
+    ----------
+    system : ThermalSystem
+        The FE thermal system.
+    order : int
+        Number of modes, < n_nodes − 1.
+
+    Returns
+    -------
+    ndarray, shape (n_nodes, order)
+        Modes, slowest first, M-orthonormal to machine precision.
+    """
     n = system.n_nodes
     if order >= n - 1:
         raise ROMError(f"modal ROM order {order} is too high for the {n} thermal unknowns of this mesh "
@@ -209,7 +265,7 @@ def modal_basis(system, order):
     A, M = sp.csc_matrix(system.stiffness), sp.csc_matrix(system.mass)
     solve = _spd_factor(A)
     OPinv = sla.LinearOperator(A.shape, matvec=lambda x: solve(np.asarray(x, float)), dtype=float)
-    lam, phi = sla.eigsh(A, k=order, M=M, sigma=0.0, which="LM", OPinv=OPinv, tol=1e-10)
+    lam, phi = sla.eigsh(A, k=order, M=M, sigma=0.0, which="LM", OPinv=OPinv, tol=1e-10, v0=_start_vector(n))
     idx = np.argsort(lam)
     phi = phi[:, idx]
     # eigsh returns M-orthonormal vectors to its tolerance; re-orthonormalise to machine precision.
@@ -218,19 +274,43 @@ def modal_basis(system, order):
     return np.linalg.solve(L, phi.T).T
 
 
-def slowest_rate(system):
-    """Smallest eigenvalue λ₁ (1/s) of A φ = λ M φ: 1/λ₁ is the slowest thermal time constant."""
+def slowest_rate(system: ThermalSystem) -> float:
+    """Smallest eigenvalue λ₁ (1/s) of A φ = λ M φ: 1/λ₁ is the slowest thermal time constant.
+
+    Parameters
+    ----------
+    system : ThermalSystem
+        The FE thermal system.
+
+    Returns
+    -------
+    float
+        λ₁, 1/s.
+    """
     A, M = sp.csc_matrix(system.stiffness), sp.csc_matrix(system.mass)
     solve = _spd_factor(A)
     OPinv = sla.LinearOperator(A.shape, matvec=lambda x: solve(np.asarray(x, float)), dtype=float)
-    lam = sla.eigsh(A, k=1, M=M, sigma=0.0, which="LM", OPinv=OPinv, tol=1e-8, return_eigenvectors=False)
+    lam = sla.eigsh(A, k=1, M=M, sigma=0.0, which="LM", OPinv=OPinv, tol=1e-8, return_eigenvectors=False,
+                    v0=_start_vector(A.shape[0]))
     return float(lam[0])
 
 
 # ----------------------------------------------------------------------------- the model
 @dataclass
 class StateSpace:
-    """ẋ = A x + B u, y = C x + D u + offset (continuous time); x0 for a uniform 1 °C start."""
+    """ẋ = A x + B u, y = C x + D u + offset (continuous time); x0 for a uniform 1 °C start.
+
+    Attributes
+    ----------
+    A, B, C, D : ndarray
+        Continuous-time matrices (A in 1/s); outputs in their units (°C, µm, µε).
+    offset : ndarray, shape (p,)
+        Output offset.
+    uniform_state : ndarray
+        State of a uniform 1 °C start.
+    input_names, output_names, output_units : list of str
+        Names of u and y, and y's units.
+    """
 
     A: np.ndarray
     B: np.ndarray
@@ -242,8 +322,19 @@ class StateSpace:
     output_names: list
     output_units: list
 
-    def initial_state(self, temperature_C):
-        """State of a uniform start at ``temperature_C`` (exact for a Krylov ROM)."""
+    def initial_state(self, temperature_C: float) -> NDArray[np.float64]:
+        """State of a uniform start at ``temperature_C`` (exact for a Krylov ROM).
+
+        Parameters
+        ----------
+        temperature_C : float
+            Uniform temperature, °C.
+
+        Returns
+        -------
+        ndarray
+            The state.
+        """
         return float(temperature_C) * self.uniform_state
 
 
@@ -280,18 +371,37 @@ class ReducedModel:
 
     # ------------------------------------------------------------------ shape
     @property
-    def order(self):
+    def order(self) -> int:
+        """Number of states r."""
         return len(self.eigenvalues)
 
     @property
-    def n_inputs(self):
+    def n_inputs(self) -> int:
+        """Number of thermal inputs m."""
         return len(self.input_names)
 
     @property
-    def n_outputs(self):
+    def n_outputs(self) -> int:
+        """Number of outputs p."""
         return len(self.output_names)
 
-    def output_index(self, name):
+    def output_index(self, name: str) -> int:
+        """Position of an output channel.
+
+        Parameters
+        ----------
+        name : str
+            Channel name (``Z``, ``T05`` …).
+
+        Returns
+        -------
+        int
+
+        Raises
+        ------
+        ROMError
+            For an unknown name (the message lists the outputs).
+        """
         try:
             return self.output_names.index(name)
         except ValueError:
@@ -302,37 +412,116 @@ class ReducedModel:
                 f"{self.n_outputs} outputs, machine {self.machine!r})")
 
     # ------------------------------------------------------------------ state space
-    def state_space(self):
-        """Continuous-time ``StateSpace`` (A, B, C, D, offset) on the thermal inputs u, in modal coordinates."""
+    def state_space(self) -> StateSpace:
+        """Continuous-time ``StateSpace`` (A, B, C, D, offset) on the thermal inputs u, in modal coordinates.
+
+        Returns
+        -------
+        StateSpace
+            Copies; A = −diag λ (1/s).
+        """
         return StateSpace(-np.diag(self.eigenvalues), self.input_matrix.copy(), self.output_matrix.copy(),
                           self.feedthrough.copy(), self.offset.copy(), self.uniform_state.copy(),
                           list(self.input_names), list(self.output_names), list(self.output_units))
 
-    def uniform(self, temperature_C):
-        """State of a uniform temperature field (°C); exact for a Krylov ROM (1 is in its basis)."""
+    def uniform(self, temperature_C: float) -> NDArray[np.float64]:
+        """State of a uniform temperature field (°C); exact for a Krylov ROM (1 is in its basis).
+
+        Parameters
+        ----------
+        temperature_C : float
+            Uniform temperature, °C.
+
+        Returns
+        -------
+        ndarray, shape (r,)
+        """
         return float(temperature_C) * self.uniform_state
 
-    def steady_state(self, u):
-        """Steady state for a constant input vector ``u`` (exact DC gain for a Krylov ROM)."""
+    def steady_state(self, u: ArrayLike) -> NDArray[np.float64]:
+        """Steady state for a constant input vector ``u`` (exact DC gain for a Krylov ROM).
+
+        Parameters
+        ----------
+        u : array_like, shape (m,)
+            Thermal inputs (°C, K/m, W).
+
+        Returns
+        -------
+        ndarray, shape (r,)
+        """
         return (self.input_matrix @ np.asarray(u, float)) / self.eigenvalues
 
-    def project(self, T, mass):
-        """State of a temperature field T (n,) by M-orthogonal projection (needs the kept ``basis``)."""
+    def project(self, T: ArrayLike, mass: sp.spmatrix | NDArray[np.float64]) -> NDArray[np.float64]:
+        """State of a temperature field T (n,) by M-orthogonal projection (needs the kept ``basis``).
+
+        Parameters
+        ----------
+        T : array_like, shape (n,)
+            Nodal temperatures, °C.
+        mass : sparse matrix or ndarray, shape (n, n)
+            The FE capacity matrix M.
+
+        Returns
+        -------
+        ndarray, shape (r,)
+
+        Raises
+        ------
+        ROMError
+            If the ROM has no basis.
+        """
         if self.basis is None:
             raise ROMError("this ROM was saved without its basis; it cannot project temperature fields")
         return self.basis.T @ (mass @ np.asarray(T, float))
 
-    def outputs(self, z, u):
-        """Outputs (p,) or (k, p) for states z (r,)/(k, r) and inputs u (m,)/(k, m)."""
+    def outputs(self, z: ArrayLike, u: ArrayLike) -> NDArray[np.float64]:
+        """Outputs (p,) or (k, p) for states z (r,)/(k, r) and inputs u (m,)/(k, m).
+
+        Parameters
+        ----------
+        z : array_like, shape (r,) or (k, r)
+            States.
+        u : array_like, shape (m,) or (k, m)
+            Thermal inputs (°C, K/m, W).
+
+        Returns
+        -------
+        ndarray, shape (p,) or (k, p)
+            Outputs in their units (°C, µm, µε).
+        """
         z, u = np.asarray(z, float), np.asarray(u, float)
         return z @ self.output_matrix.T + u @ self.feedthrough.T + self.offset
 
     # ------------------------------------------------------------------ operating conditions → u
-    def inputs_from_conditions(self, spindle_rpm, feed_mm_min, ambient_C, gradient_K_per_m=0.0):
+    def inputs_from_conditions(self, spindle_rpm: ArrayLike, feed_mm_min: dict[str, ArrayLike] | None,
+                               ambient_C: dict[str, ArrayLike] | ArrayLike,
+                               gradient_K_per_m: ArrayLike = 0.0) -> NDArray[np.float64]:
         """Thermal inputs (k, m) from operating conditions, as :meth:`twin.core.machine.Machine.input_matrix`.
 
         ``spindle_rpm`` (k,), ``feed_mm_min`` dict axis → (k,), ``ambient_C``
         dict zone → (k,) (or a number/array for every zone), ``gradient_K_per_m``.
+
+        Parameters
+        ----------
+        spindle_rpm : array_like, shape (k,)
+            Spindle speed, rpm.
+        feed_mm_min : dict of str to array_like, or None
+            Axis (``x``, ``y``, ``z``) → feed, mm/min; a missing axis is 0.
+        ambient_C : dict of str to array_like, or array_like
+            Zone → air temperature, °C, or one value for every zone.
+        gradient_K_per_m : array_like, default 0.0
+            Vertical ambient gradient, K/m.
+
+        Returns
+        -------
+        ndarray, shape (k, m)
+            Columns as :attr:`input_names` (°C, K/m, W).
+
+        Raises
+        ------
+        ROMError
+            For a zone without an ambient.
         """
         rpm = np.atleast_1d(np.asarray(spindle_rpm, float))
         k = len(rpm)
@@ -350,7 +539,8 @@ class ReducedModel:
         return U
 
     # ------------------------------------------------------------------ time integration
-    def simulate(self, times_s, inputs, z0, scheme="zoh", theta=1.0):
+    def simulate(self, times_s: ArrayLike, inputs: ArrayLike, z0: ArrayLike, scheme: Literal["zoh", "theta"] = "zoh",
+                 theta: float = 1.0) -> NDArray[np.float64]:
         """Outputs (k, p) at ``times_s`` from inputs (k, m) and the initial state ``z0``.
 
         ``scheme="zoh"``: exact for inputs held piecewise constant — ``inputs[i]``
@@ -360,6 +550,24 @@ class ReducedModel:
 
         ``scheme="theta"``: the FE solver's θ-method on the same grid with
         inputs sampled at the step ends (θ = 1 backward Euler); outputs at tᵢ use ``inputs[i]``.
+
+        Parameters
+        ----------
+        times_s : array_like, shape (k,)
+            Strictly increasing times, s.
+        inputs : array_like, shape (k, m)
+            Thermal inputs (°C, K/m, W).
+        z0 : array_like, shape (r,)
+            State at ``times_s[0]``.
+        scheme : {"zoh", "theta"}, default "zoh"
+            Time stepping (above).
+        theta : float, default 1.0
+            θ of the θ-method.
+
+        Returns
+        -------
+        ndarray, shape (k, p)
+            Outputs in their units (°C, µm, µε).
         """
         z, Z = self.states(times_s, inputs, z0, scheme, theta)
         U = np.asarray(inputs, float)
@@ -367,12 +575,42 @@ class ReducedModel:
             U = np.vstack([U[:1], U[:-1]])
         return self.outputs(Z, U)
 
-    def states(self, times_s, inputs, z0, scheme="zoh", theta=1.0, means=None):
+    def states(self, times_s: ArrayLike, inputs: ArrayLike | None, z0: ArrayLike,
+               scheme: Literal["zoh", "theta"] = "zoh", theta: float = 1.0,
+               means: ArrayLike | None = None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Final state and the states (k, r) at ``times_s`` (see :meth:`simulate`).
 
         ``means`` (k − 1, m), when given, are the inputs driving each step
         instead of ``inputs``: their mean over the step (held over it by
         ``zoh``, or as the θ-method's ū), so each step gets exactly ∫ u dt.
+
+        Parameters
+        ----------
+        times_s : array_like, shape (k,)
+            Strictly increasing times, s.
+        inputs : array_like, shape (k, m), or None
+            Thermal inputs (°C, K/m, W); not used when ``means`` is given.
+        z0 : array_like, shape (r,)
+            State at ``times_s[0]``.
+        scheme : {"zoh", "theta"}, default "zoh"
+            Time stepping.
+        theta : float, default 1.0
+            θ of the θ-method.
+        means : array_like, shape (k - 1, m), optional
+            Step means of the inputs.
+
+        Returns
+        -------
+        final : ndarray, shape (r,)
+            The state at the last time.
+        states : ndarray, shape (k, r)
+            The states at ``times_s``.
+
+        Raises
+        ------
+        ROMError
+            An unknown scheme, a row count that does not match the times, non-finite inputs, or times that
+            do not increase.
         """
         t = np.asarray(times_s, float)
         if scheme not in ("zoh", "theta"):
@@ -418,24 +656,36 @@ class ReducedModel:
         denom = 1.0 / h + theta * lam
         return (1.0 / h - (1.0 - theta) * lam) / denom, 1.0 / denom
 
-    def discretize(self, step_s):
-        """Exact ZOH discretisation for step h: (Φ, Γ) diagonal/dense with z⁺ = Φ z + Γ u."""
+    def discretize(self, step_s: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Exact ZOH discretisation for step h: (Φ, Γ) diagonal/dense with z⁺ = Φ z + Γ u.
+
+        Parameters
+        ----------
+        step_s : float
+            Step h, s.
+
+        Returns
+        -------
+        Phi : ndarray, shape (r, r)
+            Diagonal e^{−λh}.
+        Gamma : ndarray, shape (r, m)
+        """
         a, g = self._step_coefficients(float(step_s))
         return np.diag(a), g[:, None] * self.input_matrix
 
     # ------------------------------------------------------------------ plant inputs: zone lags as states
     @property
-    def lagged_zones(self):
+    def lagged_zones(self) -> list[str]:
         """Zones whose air follows the room through a first-order lag (``[[zones]] lag_h``), in zone order."""
         return [z for z in self.zones if float(self.zone_lags_s.get(z, 0.0)) > 0.0]
 
     @property
-    def measured_zones(self):
+    def measured_zones(self) -> list[str]:
         """Zones whose ambient is a plant input (every zone but the lagged ones)."""
         return [z for z in self.zones if z not in self.lagged_zones]
 
     @property
-    def plant_input_names(self):
+    def plant_input_names(self) -> list[str]:
         """Inputs of the plant model: :attr:`input_names` without the lagged zones' ambients."""
         lagged = {f"ambient:{z}" for z in self.lagged_zones}
         return [n for n in self.input_names if n not in lagged]
@@ -449,10 +699,29 @@ class ReducedModel:
         lagged = [self.input_names.index(f"ambient:{z}") for z in self.lagged_zones]
         return plant, lagged, self.plant_input_names.index(f"ambient:{room}")
 
-    def plant_inputs_from_conditions(self, spindle_rpm, feed_mm_min, ambient_C, gradient_K_per_m=0.0):
+    def plant_inputs_from_conditions(self, spindle_rpm: ArrayLike, feed_mm_min: dict[str, ArrayLike] | None,
+                                     ambient_C: dict[str, ArrayLike] | ArrayLike,
+                                     gradient_K_per_m: ArrayLike = 0.0) -> NDArray[np.float64]:
         """Plant inputs (k, m_p) (:attr:`plant_input_names`) from conditions.
 
         As :meth:`inputs_from_conditions`, with ``ambient_C`` over :attr:`measured_zones` only.
+
+        Parameters
+        ----------
+        spindle_rpm : array_like, shape (k,)
+            Spindle speed, rpm.
+        feed_mm_min : dict of str to array_like, or None
+            Axis → feed, mm/min.
+        ambient_C : dict of str to array_like, or array_like
+            Measured zone → air temperature, °C (the lagged zones take the room's value here; they are
+            dropped from the result), or one value for every zone.
+        gradient_K_per_m : array_like, default 0.0
+            Vertical ambient gradient, K/m.
+
+        Returns
+        -------
+        ndarray, shape (k, m_p)
+            Columns as :attr:`plant_input_names`.
         """
         if isinstance(ambient_C, dict):
             room = ambient_C.get(room_zone(self.zones))
@@ -469,12 +738,17 @@ class ReducedModel:
         U[:, lagged] = np.atleast_2d(lag_air)
         return U
 
-    def plant_state_space(self):
+    def plant_state_space(self) -> StateSpace:
         """Continuous ``StateSpace`` on the plant inputs; states x = [z (r), lagged zone air (l), °C].
 
         ż = −λ ⊙ z + B_z u,  ẇ_l = (u_room − w_l)/τ_l,  y = C_z z + D u + offset, where u is
         the thermal input with each lagged zone's ambient replaced by its state w_l.  A, B, C, D
         are dense; ``uniform_state`` is the state of a uniform 1 °C machine in 1 °C air.
+
+        Returns
+        -------
+        StateSpace
+            On :attr:`plant_input_names`, r + l states.
         """
         plant, lagged, room = self._plant_layout()
         r, l = self.order, len(lagged)
@@ -491,30 +765,77 @@ class ReducedModel:
                           np.r_[self.uniform_state, np.ones(l)], self.plant_input_names, list(self.output_names),
                           list(self.output_units))
 
-    def plant_uniform(self, temperature_C, room_C=None):
-        """Plant state of a uniform machine at ``temperature_C``, the lagged air at ``room_C`` (default the same)."""
+    def plant_uniform(self, temperature_C: float, room_C: float | None = None) -> NDArray[np.float64]:
+        """Plant state of a uniform machine at ``temperature_C``, the lagged air at ``room_C`` (default the same).
+
+        Parameters
+        ----------
+        temperature_C : float
+            Machine temperature, °C.
+        room_C : float, optional
+            Air temperature of the lagged zones, °C.
+
+        Returns
+        -------
+        ndarray, shape (r + l,)
+        """
         room_C = temperature_C if room_C is None else room_C
         return np.r_[self.uniform(temperature_C), np.full(len(self.lagged_zones), float(room_C))]
 
-    def plant_steady_state(self, u_plant):
-        """Plant state in equilibrium with constant plant inputs (the lagged air at the room's)."""
+    def plant_steady_state(self, u_plant: ArrayLike) -> NDArray[np.float64]:
+        """Plant state in equilibrium with constant plant inputs (the lagged air at the room's).
+
+        Parameters
+        ----------
+        u_plant : array_like, shape (m_p,)
+            Plant inputs (°C, K/m, W).
+
+        Returns
+        -------
+        ndarray, shape (r + l,)
+        """
         u_plant = np.asarray(u_plant, float)
         w = np.full(len(self.lagged_zones), u_plant[self._plant_layout()[2]])
         return np.r_[self.steady_state(self._full_inputs(u_plant, w)[0]), w]
 
-    def plant_outputs(self, x, u_plant):
-        """Outputs (p,) or (k, p) for plant states x (r + l,)/(k, ·) and plant inputs (m_p,)/(k, m_p)."""
+    def plant_outputs(self, x: ArrayLike, u_plant: ArrayLike) -> NDArray[np.float64]:
+        """Outputs (p,) or (k, p) for plant states x (r + l,)/(k, ·) and plant inputs (m_p,)/(k, m_p).
+
+        Parameters
+        ----------
+        x : array_like, shape (r + l,) or (k, r + l)
+            Plant states.
+        u_plant : array_like, shape (m_p,) or (k, m_p)
+            Plant inputs.
+
+        Returns
+        -------
+        ndarray, shape (p,) or (k, p)
+            Outputs in their units (°C, µm, µε).
+        """
         x = np.asarray(x, float)
         U = self._full_inputs(u_plant, np.atleast_2d(x)[:, self.order:])
         y = self.outputs(np.atleast_2d(x)[:, :self.order], U)
         return y if x.ndim == 2 else y[0]
 
-    def plant_step_coefficients(self, h):
+    def plant_step_coefficients(self, h: float) -> tuple[NDArray[np.float64], NDArray[np.float64],
+                                                         NDArray[np.float64], NDArray[np.float64]]:
         """Exact ZOH coefficients of the plant model for a step ``h`` (s): (a, g, e, E).
 
         a = e^{−λh}, g = (1 − e^{−λh})/λ per mode; e = e^{−h/τ} per lagged zone; E (r, l) =
         ∫₀ʰ e^{−λ(h−s)} e^{−s/τ} ds = (e^{−h/τ} − e^{−λh})/(λ − 1/τ), evaluated without
         cancellation.
+
+        Parameters
+        ----------
+        h : float
+            Step, s.
+
+        Returns
+        -------
+        a, g : ndarray, shape (r,)
+        e : ndarray, shape (l,)
+        E : ndarray, shape (r, l)
         """
         lam = self.eigenvalues
         mu = np.array([1.0 / float(self.zone_lags_s[z]) for z in self.lagged_zones])
@@ -525,11 +846,29 @@ class ReducedModel:
             E = np.where(d == 0.0, h, -np.expm1(-np.abs(d) * h) / np.abs(d)) * np.exp(-slow * h)
         return a, g, np.exp(-mu * h), E
 
-    def plant_states(self, times_s, inputs, x0):
+    def plant_states(self, times_s: ArrayLike, inputs: ArrayLike, x0: ArrayLike) -> NDArray[np.float64]:
         """States (k, r + l) at ``times_s`` for plant inputs (k, m_p), row i held over [tᵢ, tᵢ₊₁) (exact ZOH).
 
         The lagged zones' air w follows the held room value u_room exactly,
         w ← u_room + (w − u_room) e^{−h/τ}, and drives the modes through the cross term E.
+
+        Parameters
+        ----------
+        times_s : array_like, shape (k,)
+            Strictly increasing times, s.
+        inputs : array_like, shape (k, m_p)
+            Plant inputs (°C, K/m, W).
+        x0 : array_like, shape (r + l,)
+            Plant state at ``times_s[0]``.
+
+        Returns
+        -------
+        ndarray, shape (k, r + l)
+
+        Raises
+        ------
+        ROMError
+            A row count that does not match the times, non-finite inputs, or times that do not increase.
         """
         t = np.asarray(times_s, float)
         Up = np.atleast_2d(np.asarray(inputs, float))
@@ -557,8 +896,23 @@ class ReducedModel:
         return X
 
     # ------------------------------------------------------------------ persistence
-    def save(self, path, keep_basis=False):
-        """Write a versioned ``.npz`` (no pickle); the basis only with ``keep_basis``."""
+    def save(self, path: Path | str, keep_basis: bool = False) -> Path:
+        """Write a versioned ``.npz`` (no pickle); the basis only with ``keep_basis``.
+
+        Written to a temporary file beside ``path`` and renamed (atomic); the folder is created.
+
+        Parameters
+        ----------
+        path : Path or str
+            The ``.npz`` file.
+        keep_basis : bool, default False
+            Also store V (n, r).
+
+        Returns
+        -------
+        Path
+            ``path``.
+        """
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         meta = dict(format=FORMAT, version=FORMAT_VERSION, method=self.method, input_names=self.input_names,
@@ -577,13 +931,30 @@ class ReducedModel:
         return path
 
     @classmethod
-    def load(cls, path):
-        """Read a ROM written by :meth:`save`; raise :class:`ROMError` on another format or version."""
+    def load(cls, path: Path | str) -> ReducedModel:
+        """Read a ROM written by :meth:`save`; raise :class:`ROMError` on another format or version.
+
+        Parameters
+        ----------
+        path : Path or str
+            The ``.npz`` file.
+
+        Returns
+        -------
+        ReducedModel
+
+        Raises
+        ------
+        ROMError
+            A missing, empty, truncated or foreign file, or another format or version.
+        """
         path = Path(path)
         try:
             data = np.load(path, allow_pickle=False)
             meta = json.loads(str(data["meta"]))
-        except Exception as exc:
+        # missing/unreadable (OSError), empty (EOFError), not an npz or pickled or bad JSON (ValueError),
+        # no "meta" in it (LookupError), a truncated or corrupt archive (BadZipFile)
+        except (OSError, EOFError, ValueError, LookupError, zipfile.BadZipFile) as exc:
             raise ROMError(f"{path}: not a readable ROM file ({exc})") from None
         if meta.get("format") != FORMAT or meta.get("version") != FORMAT_VERSION:
             raise ROMError(f"{path}: ROM format {meta.get('format')!r} version {meta.get('version')!r}; "
@@ -596,8 +967,26 @@ class ReducedModel:
                    meta.get("output_labels", []))
 
 
-def source_power(src, spindle_rpm, feed_mm_min):
-    """Power (W) of a source model dict (see :class:`twin.core.machine_definition.HeatSource`)."""
+def source_power(src: dict, spindle_rpm: ArrayLike, feed_mm_min: dict[str, ArrayLike]) -> NDArray[np.float64]:
+    """Power (W) of a source model dict (see :class:`twin.core.machine_definition.HeatSource`).
+
+    ``P = coefficient_W · (n / reference)^exponent`` with n the |speed| of the source's driver (the spindle,
+    the fastest of the x/y or x/y/z feeds, or one axis), or the constant ``coefficient_W``.
+
+    Parameters
+    ----------
+    src : dict
+        ``driver``, ``coefficient_W`` (W), ``reference`` (rpm or mm/min), ``exponent``.
+    spindle_rpm : array_like, shape (k,)
+        Spindle speed, rpm.
+    feed_mm_min : dict of str to array_like
+        Axis → feed, mm/min (the axes the driver needs).
+
+    Returns
+    -------
+    ndarray, shape (k,)
+        Power, W.
+    """
     rpm = np.asarray(spindle_rpm, float)
     driver = src["driver"]
     if driver == "constant":
@@ -614,17 +1003,54 @@ def source_power(src, spindle_rpm, feed_mm_min):
 
 
 # ----------------------------------------------------------------------------- building
-def default_points(system, n_points=len(DEFAULT_POINT_FACTORS)):
-    """Expansion points 0 and λ₁·{10, 100, 1000, …} (1/s) with λ₁ the slowest thermal rate."""
+def default_points(system: ThermalSystem, n_points: int = DEFAULT_N_POINTS) -> list[float]:
+    """Expansion points 0 and λ₁·{10, 100, 1000, …} (1/s) with λ₁ the slowest thermal rate.
+
+    Parameters
+    ----------
+    system : ThermalSystem
+        The FE thermal system.
+    n_points : int, default :data:`DEFAULT_N_POINTS` (4)
+        Points taken from :data:`DEFAULT_POINT_FACTORS`.
+
+    Returns
+    -------
+    list of float
+        Points, 1/s.
+    """
     lam1 = slowest_rate(system)
     return [f * lam1 for f in DEFAULT_POINT_FACTORS[:n_points]]
 
 
-def compute_basis(machine, order, method="krylov", points=None):
+def compute_basis(machine: Machine, order: int, method: Literal["krylov", "modal"] = "krylov",
+                  points: Sequence[float] | None = None) -> tuple[NDArray[np.float64], list[float]]:
     """The projection basis V (n, order) and the expansion points used (Krylov) or [] (modal).
 
     Bases are nested: the first r columns of an order-R basis are the order-r basis
     (the construction is sequential), which :func:`twin.rom.report.error_report` uses.
+
+    Parameters
+    ----------
+    machine : Machine
+        A built machine.
+    order : int
+        Number of basis vectors, ≥ 1.
+    method : {"krylov", "modal"}, default "krylov"
+        Reduction method.
+    points : sequence of float, optional
+        Krylov expansion points, 1/s (default :func:`default_points`).
+
+    Returns
+    -------
+    V : ndarray, shape (n_nodes, order)
+        M-orthonormal basis.
+    points : list of float
+        The Krylov points used, 1/s ([] for modal).
+
+    Raises
+    ------
+    ROMError
+        An unknown method, an order < 1 or too high, negative points, or a nonlinear system.
     """
     if method not in METHODS:
         raise ROMError(f"unknown ROM method {method!r}; methods: {list(METHODS)}")
@@ -641,8 +1067,9 @@ def compute_basis(machine, order, method="krylov", points=None):
     return krylov_basis(system, order, points), points
 
 
-def build_rom(machine, order=DEFAULT_ORDER, method="krylov", points=None, kinds=DEFAULT_KINDS,
-              keep_basis=False):
+def build_rom(machine: Machine, order: int = DEFAULT_ORDER, method: Literal["krylov", "modal"] = "krylov",
+              points: Sequence[float] | None = None, kinds: Sequence[str] = DEFAULT_KINDS,
+              keep_basis: bool = False) -> ReducedModel:
     """Reduce a built :class:`~twin.core.machine.Machine` to a :class:`ReducedModel` of ``order`` states.
 
     Parameters
@@ -652,6 +1079,11 @@ def build_rom(machine, order=DEFAULT_ORDER, method="krylov", points=None, kinds=
     points : Krylov expansion points in 1/s (default :func:`default_points`)
     kinds : channel kinds kept as outputs (``"camera"`` adds the 525 camera spots)
     keep_basis : keep V (n, r) in the model to project or reconstruct temperature fields
+
+    Returns
+    -------
+    ReducedModel
+        With ``info`` (build times, time constants, basis quality, points).
     """
     start = time.perf_counter()
     V, points = compute_basis(machine, order, method, points)
@@ -697,8 +1129,32 @@ def _basis_quality(M, V, Vq):
     return uniform, residual, orth
 
 
-def reduce_with_basis(machine, V, method="krylov", kinds=DEFAULT_KINDS, keep_basis=False):
-    """The :class:`ReducedModel` of a machine for an M-orthonormal basis V (n, r)."""
+def reduce_with_basis(machine: Machine, V: NDArray[np.float64], method: str = "krylov",
+                      kinds: Sequence[str] = DEFAULT_KINDS, keep_basis: bool = False) -> ReducedModel:
+    """The :class:`ReducedModel` of a machine for an M-orthonormal basis V (n, r).
+
+    Parameters
+    ----------
+    machine : Machine
+        A built machine.
+    V : ndarray, shape (n_nodes, r)
+        M-orthonormal basis.
+    method : str, default "krylov"
+        Recorded in the model.
+    kinds : sequence of str
+        Channel kinds kept as outputs.
+    keep_basis : bool, default False
+        Keep the basis (rotated to modal coordinates) in the model.
+
+    Returns
+    -------
+    ReducedModel
+
+    Raises
+    ------
+    ROMError
+        If the reduced stiffness is not positive definite (no heat path to an ambient).
+    """
     start = time.perf_counter()
     system = machine.thermal
     A = sp.csr_matrix(system.stiffness)
@@ -729,8 +1185,21 @@ def reduce_with_basis(machine, V, method="krylov", kinds=DEFAULT_KINDS, keep_bas
                         dict(getattr(definition, "zone_lags_s", {}) or {}), channel_labels(machine, channels))
 
 
-def channel_labels(machine, channels=None):
-    """``"<label> at (x, y, z) m"`` per channel (default: every channel of the machine), for descriptions."""
+def channel_labels(machine: Machine, channels: Sequence | None = None) -> list[str]:
+    """``"<label> at (x, y, z) m"`` per channel (default: every channel of the machine), for descriptions.
+
+    Parameters
+    ----------
+    machine : Machine
+        A built machine.
+    channels : sequence of Channel, optional
+        Channels to label (default: all of the machine's).
+
+    Returns
+    -------
+    list of str
+        One per channel (no position part for a channel without a position).
+    """
     out = []
     for c in machine.channels if channels is None else channels:
         where = "" if c.position is None else " at ({}) m".format(", ".join(f"{float(v):.4g}" for v in c.position))
@@ -738,19 +1207,53 @@ def channel_labels(machine, channels=None):
     return out
 
 
-def rom_cache_path(machine, order, method="krylov", points=None, kinds=DEFAULT_KINDS, keep_basis=False):
+def rom_cache_path(machine: Machine, order: int, method: str = "krylov", points: Sequence[float] | None = None,
+                   kinds: Sequence[str] = DEFAULT_KINDS, keep_basis: bool = False) -> Path:
+    """Where :func:`cached_rom` keeps the ROM of these settings: ``rom-<method>-r<order>-<key>[-basis].npz`` in the
+    user cache.
+
+    Parameters
+    ----------
+    machine : Machine
+        A built machine.
+    order, method, points, kinds
+        As for :func:`build_rom`; with the machine digest they make the key.
+    keep_basis : bool, default False
+        The file of the ROM that keeps its basis V (a file of its own).
+
+    Returns
+    -------
+    Path
+    """
     key = hashlib.sha256(json.dumps([machine_digest(machine), int(order), method,
                                      None if points is None else [float(p) for p in points],
                                      sorted(kinds)]).encode()).hexdigest()[:16]
     return user_cache_dir() / f"rom-{method}-r{int(order)}-{key}{'-basis' if keep_basis else ''}.npz"
 
 
-def cached_rom(machine, order=DEFAULT_ORDER, method="krylov", points=None, kinds=DEFAULT_KINDS, rebuild=False,
-               keep_basis=False):
+def cached_rom(machine: Machine, order: int = DEFAULT_ORDER, method: Literal["krylov", "modal"] = "krylov",
+               points: Sequence[float] | None = None, kinds: Sequence[str] = DEFAULT_KINDS,
+               rebuild: bool = False, keep_basis: bool = False) -> ReducedModel:
     """:func:`build_rom`, or the ROM saved earlier for the same machine matrices and settings.
 
-    ``keep_basis`` keeps (and caches, in a file of its own) the basis V (n, r), e.g. to add point
-    thermometers (:func:`twin.rom.points.with_point_thermometers`).
+    A ROM read from the cache takes the machine's name and channel labels (they are not in the key);
+    ``info["from_cache"]`` is the file read, or None for one built (and saved) now.
+
+    Parameters
+    ----------
+    machine : Machine
+        A built machine.
+    order, method, points, kinds
+        As for :func:`build_rom`.
+    rebuild : bool, default False
+        Build (and save) even if cached.
+    keep_basis : bool, default False
+        Keep (and cache, in a file of its own) the basis V (n, r), e.g. to add point thermometers
+        (:func:`twin.rom.points.with_point_thermometers`).
+
+    Returns
+    -------
+    ReducedModel
     """
     path = rom_cache_path(machine, order, method, points, kinds, keep_basis)
     if path.exists() and not rebuild and checked(path) is not None:
@@ -769,6 +1272,22 @@ def cached_rom(machine, order=DEFAULT_ORDER, method="krylov", points=None, kinds
 # ----------------------------------------------------------------------------- scenarios
 @dataclass
 class ScenarioConditions:
+    """A scenario's operating conditions at some times.
+
+    Attributes
+    ----------
+    times_s : ndarray, shape (k,)
+        Times, s.
+    spindle_rpm : ndarray, shape (k,)
+        Spindle speed, rpm.
+    feed_mm_min : dict of str to ndarray
+        Axis → feed, mm/min.
+    ambient_C : dict of str to ndarray
+        Zone → air temperature, °C.
+    gradient_K_per_m : ndarray, shape (k,)
+        Vertical ambient gradient, K/m.
+    """
+
     times_s: np.ndarray
     spindle_rpm: np.ndarray
     feed_mm_min: dict
@@ -776,16 +1295,44 @@ class ScenarioConditions:
     gradient_K_per_m: np.ndarray
 
 
-def scenario_conditions(scenario, zones, times, lags_s=None):
-    """Operating conditions of a scenario at ``times`` (as :class:`twin.core.simulate.ScenarioInputs` gives them)."""
+def scenario_conditions(scenario: Scenario, zones: Sequence[str], times: ArrayLike,
+                        lags_s: dict[str, float] | None = None) -> ScenarioConditions:
+    """Operating conditions of a scenario at ``times`` (as :class:`twin.core.simulate.ScenarioInputs` gives them).
+
+    Parameters
+    ----------
+    scenario : Scenario
+    zones : sequence of str
+        The machine's ambient zones.
+    times : array_like
+        Times, s.
+    lags_s : dict of str to float, optional
+        Zone → lag of its air behind the room, s.
+
+    Returns
+    -------
+    ScenarioConditions
+    """
     t = np.atleast_1d(np.asarray(times, float))
     rpm, feeds = scenario.operating(t)
     ambient = scenario.zone_ambient(t, zones, lags_s) if lags_s else scenario.zone_ambient(t, zones)
     return ScenarioConditions(t, rpm, feeds, ambient, np.full(t.shape, scenario.ambient.gradient_K_per_m))
 
 
-def initial_state(rom, scenario):
-    """The scenario's initial state: uniform (its temperature, or the t = 0 ambient) or steady."""
+def initial_state(rom: ReducedModel, scenario: Scenario) -> NDArray[np.float64]:
+    """The scenario's initial state: uniform (its temperature, or the t = 0 ambient) or steady.
+
+    A steady start is in equilibrium with the scenario's idle conditions at t = 0 (:meth:`Scenario.idle_start`).
+
+    Parameters
+    ----------
+    rom : ReducedModel
+    scenario : Scenario
+
+    Returns
+    -------
+    ndarray, shape (r,)
+    """
     init = scenario.initial
     cond = scenario_conditions(scenario, rom.zones, [0.0], rom.zone_lags_s)
     if init["kind"] == "uniform":
@@ -796,13 +1343,29 @@ def initial_state(rom, scenario):
     return rom.steady_state(u)
 
 
-def held_conditions(scenario, zones, times, lags_s=None):
+def held_conditions(scenario: Scenario, zones: Sequence[str], times: ArrayLike,
+                    lags_s: dict[str, float] | None = None) -> ScenarioConditions:
     """Conditions held over each step [tᵢ, tᵢ₊₁): the scenario's value at tᵢ₊₁ (left limit).
 
     This is the scenario module's convention (a step ending when the spindle
     stops still carries the running power) and the table an FMU master feeds:
     row i is applied at tᵢ for the step to tᵢ₊₁.  The last row repeats the
     value at the last time.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    zones : sequence of str
+        The machine's ambient zones.
+    times : array_like, shape (k,)
+        Step times, s.
+    lags_s : dict of str to float, optional
+        Zone → lag of its air behind the room, s.
+
+    Returns
+    -------
+    ScenarioConditions
+        At ``times`` shifted by one step (its ``times_s`` are those sampled, not ``times``).
     """
     t = np.asarray(times, float)
     return scenario_conditions(scenario, zones, np.r_[t[1:], t[-1]], lags_s)
@@ -813,8 +1376,21 @@ def _project_version():
     return project_version()
 
 
-def scenario_step_means(rom, scenario, step_times):
-    """Mean ROM inputs over each step (len − 1, m), as the FE run takes them (see ``ScenarioInputs``)."""
+def scenario_step_means(rom: ReducedModel, scenario: Scenario, step_times: ArrayLike) -> NDArray[np.float64]:
+    """Mean ROM inputs over each step (len − 1, m), as the FE run takes them (see ``ScenarioInputs``).
+
+    Parameters
+    ----------
+    rom : ReducedModel
+    scenario : Scenario
+    step_times : array_like, shape (k,)
+        Step times, s.
+
+    Returns
+    -------
+    ndarray, shape (k - 1, m)
+        Thermal inputs (°C, K/m, W).
+    """
     def inputs_at(t):
         c = scenario_conditions(scenario, rom.zones, t, rom.zone_lags_s)
         return rom.inputs_from_conditions(c.spindle_rpm, c.feed_mm_min, c.ambient_C, c.gradient_K_per_m)
@@ -822,7 +1398,9 @@ def scenario_step_means(rom, scenario, step_times):
     return interval_means(inputs_at, step_times, scenario.breakpoints_s(rom.zone_lags_s))
 
 
-def simulate_rom(rom, scenario, scheme="zoh", theta=None, sample_times=None, inputs="mean"):
+def simulate_rom(rom: ReducedModel, scenario: Scenario | Path | str, scheme: Literal["zoh", "theta"] = "zoh",
+                 theta: float | None = None, sample_times: ArrayLike | None = None,
+                 inputs: Literal["mean", "held"] = "mean") -> Dataset:
     """Run a scenario (name, path or Scenario) on a ROM; return a :class:`~twin.core.dataset.Dataset`.
 
     Channels as in :func:`twin.core.simulate.simulate` (conditions, then the ROM's
@@ -834,6 +1412,26 @@ def simulate_rom(rom, scenario, scheme="zoh", theta=None, sample_times=None, inp
     step's end instead (left limits, :func:`held_conditions`): what an FMU
     master feeds from :func:`twin.fmu.export.input_table`, equal to the mean for
     duty cycles on the step grid and a constant ambient.
+
+    Parameters
+    ----------
+    rom : ReducedModel
+    scenario : Scenario, Path or str
+        The scenario (name, TOML path or object).
+    scheme : {"zoh", "theta"}, default "zoh"
+        Time stepping.
+    theta : float, optional
+        θ of the θ-method (default the scenario's).
+    sample_times : array_like, optional
+        Output times, s (default the scenario's samples).
+    inputs : {"mean", "held"}, default "mean"
+        How each step is driven (above).
+
+    Returns
+    -------
+    Dataset
+        Conditions (rpm, mm/min, °C, K/m, W) and the ROM's outputs (°C, µm, µε), ``metadata["model"]``
+        naming the ROM.
     """
     if inputs not in ("mean", "held"):
         raise ROMError(f"unknown inputs {inputs!r}; use 'mean' or 'held'")

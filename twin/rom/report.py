@@ -22,7 +22,9 @@ computes one basis at the largest order and truncates it.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -30,6 +32,10 @@ from ..core.scenario import SCENARIOS_DIR, load_scenario
 from ..core.simulate import simulate
 from ..infra.tables import markdown_table
 from .reduction import compute_basis, reduce_with_basis, simulate_rom
+
+if TYPE_CHECKING:
+    from ..core.dataset import Dataset
+    from ..core.machine import Machine
 
 GROUPS = (("temperature", "K"), ("displacement", "um"), ("strain", "ue"))
 #: The issue's goals: largest TCP drift and sensor temperature errors with r ≤ 100.
@@ -39,28 +45,76 @@ GOAL_TEMPERATURE_K = 0.01
 
 @dataclass
 class ReportRow:
+    """One ROM run of the report against the FE.
+
+    Attributes
+    ----------
+    scenario : str
+    method : str
+        ``krylov`` or ``modal``.
+    order : int
+        Number of states.
+    errors : dict of str to float
+        Channel kind (``temperature``, ``displacement``, ``strain``) → largest |ROM − FE|, K, µm, µε.
+    rom_seconds : float
+        Wall time of the ROM run, s.
+    """
+
     scenario: str
     method: str
     order: int
     errors: dict                 # kind → max abs error (K, µm, µε)
     rom_seconds: float
 
-    def meets_goal(self):
-        """Whether this run meets the issue's TCP and temperature goals."""
+    def meets_goal(self) -> bool:
+        """Whether this run meets the issue's TCP and temperature goals.
+
+        Returns
+        -------
+        bool
+            TCP drift error ≤ :data:`GOAL_TCP_UM` µm and thermometer error ≤ :data:`GOAL_TEMPERATURE_K` K
+            (a kind the run lacks counts as met).
+        """
         return (self.errors.get("displacement", 0.0) <= GOAL_TCP_UM and
                 self.errors.get("temperature", 0.0) <= GOAL_TEMPERATURE_K)
 
 
 @dataclass
 class ErrorReport:
+    """The result of :func:`error_report`.
+
+    Attributes
+    ----------
+    rows : list of ReportRow
+        One per scenario, method and order.
+    fe_seconds : dict of str to float
+        Scenario → wall time of its full FE run, s.
+    basis_seconds : dict of str to float
+        Method → wall time of its largest basis, s.
+    zoh_errors : dict
+        Scenario → {kind: error} of the zero-order-hold ROM of the first method at the largest order.
+    failures : dict of str to str
+        Scenario → why it is not in the report.
+    """
+
     rows: list
     fe_seconds: dict             # scenario → wall s of the full FE run
     basis_seconds: dict          # method → wall s of its largest basis
     zoh_errors: dict = field(default_factory=dict)   # scenario → {kind: error} of the ZOH ROM at the largest order
     failures: dict = field(default_factory=dict)     # scenario → message
 
-    def passes(self, method="krylov", max_order=100):
-        """Smallest order ≤ max_order meeting the goals on every scenario, or None."""
+    def passes(self, method: str = "krylov", max_order: int = 100) -> int | None:
+        """Smallest order ≤ max_order meeting the goals on every scenario, or None.
+
+        Parameters
+        ----------
+        method : str, default "krylov"
+        max_order : int, default 100
+
+        Returns
+        -------
+        int or None
+        """
         orders = sorted({r.order for r in self.rows if r.method == method and r.order <= max_order})
         for order in orders:
             rows = [r for r in self.rows if r.method == method and r.order == order]
@@ -69,12 +123,30 @@ class ErrorReport:
         return None
 
 
-def shipped_scenarios():
+def shipped_scenarios() -> list[str]:
+    """Names of the scenarios shipped in ``scenarios/``, sorted.
+
+    Returns
+    -------
+    list of str
+    """
     return sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))
 
 
-def max_errors(rom_dataset, fe_dataset):
-    """Largest |ROM − FE| per channel kind, over time and the channels both datasets have."""
+def max_errors(rom_dataset: Dataset, fe_dataset: Dataset) -> dict[str, float]:
+    """Largest |ROM − FE| per channel kind, over time and the channels both datasets have.
+
+    Parameters
+    ----------
+    rom_dataset, fe_dataset : Dataset
+        The same scenario on the same times.
+
+    Returns
+    -------
+    dict of str to float
+        Kind (``temperature``, ``displacement``, ``strain``) → error in K, µm, µε; a kind they do not share is
+        absent.
+    """
     out = {}
     for kind, _ in GROUPS:
         names = [c.name for c in fe_dataset.channels if c.kind == kind and c.name in rom_dataset]
@@ -83,9 +155,34 @@ def max_errors(rom_dataset, fe_dataset):
     return out
 
 
-def error_report(machine, orders=(10, 20, 30, 40, 60, 80, 100), methods=("krylov", "modal"), scenarios=None,
-                 points=None, progress=None):
-    """Run the report; ``progress(message)`` is called as it goes (e.g. ``print``)."""
+def error_report(machine: Machine, orders: Sequence[int] = (10, 20, 30, 40, 60, 80, 100),
+                 methods: Sequence[str] = ("krylov", "modal"), scenarios: Sequence[str] | None = None,
+                 points: Sequence[float] | None = None, progress: Callable[[str], object] | None = None
+                 ) -> ErrorReport:
+    """Run the report; ``progress(message)`` is called as it goes (e.g. ``print``).
+
+    A scenario that cannot be run on ``machine`` (another machine, a bad file, a failed FE run) is left out
+    and its reason kept in ``failures``.
+
+    Parameters
+    ----------
+    machine : Machine
+        A built machine.
+    orders : sequence of int
+        ROM orders.
+    methods : sequence of str
+        ``krylov`` and/or ``modal``.
+    scenarios : sequence of str, optional
+        Scenario names or paths (default :func:`shipped_scenarios`).
+    points : sequence of float, optional
+        Krylov expansion points, 1/s.
+    progress : callable, optional
+        Receives one line per step.
+
+    Returns
+    -------
+    ErrorReport
+    """
     say = progress or (lambda message: None)
     orders = sorted(int(r) for r in orders)
     scenarios = shipped_scenarios() if scenarios is None else list(scenarios)
@@ -100,7 +197,8 @@ def error_report(machine, orders=(10, 20, 30, 40, 60, 80, 100), methods=("krylov
             references[name] = (scenario, simulate(scenario, machine, noise=False).dataset)
             fe_seconds[name] = time.perf_counter() - start
             say(f"FE {name}: {fe_seconds[name]:.1f} s")
-        except Exception as exc:            # a broken scenario must not hide the others
+        except Exception as exc:  # noqa: BLE001 - a scenario may fail in any way (bad file, FE input, solver);
+            # the report names it in ``failures`` and goes on with the others
             failures[name] = f"{type(exc).__name__}: {exc}"
             say(f"FE {name}: failed ({failures[name]})")
     rows, basis_seconds, zoh = [], {}, {}
@@ -138,8 +236,18 @@ def _ordered_methods(report):
     return sorted({r.method for r in report.rows}, key=lambda m: known.index(m) if m in known else len(known))
 
 
-def format_summary(report):
-    """One Markdown table: per order, the worst error over all scenarios for each method."""
+def format_summary(report: ErrorReport) -> str:
+    """One Markdown table: per order, the worst error over all scenarios for each method.
+
+    Parameters
+    ----------
+    report : ErrorReport
+
+    Returns
+    -------
+    str
+        A title line and the table (K, µm, µε; and on how many scenarios Krylov meets the goal).
+    """
     methods = [m for m in ("krylov", "modal") if any(r.method == m for r in report.rows)]
     n = len({r.scenario for r in report.rows})
     table = []
@@ -169,8 +277,18 @@ def _scenario_section(report, name, methods):
     return lines + [""]
 
 
-def format_markdown(report):
-    """The error-vs-order tables (one per scenario: Krylov vs modal side by side) in Markdown."""
+def format_markdown(report: ErrorReport) -> str:
+    """The error-vs-order tables (one per scenario: Krylov vs modal side by side) in Markdown.
+
+    Parameters
+    ----------
+    report : ErrorReport
+
+    Returns
+    -------
+    str
+        The tables, then one line per scenario left out.
+    """
     methods = _ordered_methods(report)
     lines = [line for name in sorted({r.scenario for r in report.rows})
              for line in _scenario_section(report, name, methods)]
