@@ -6,7 +6,7 @@ Usage::
     python bench/api_coverage.py -v meshes                                      # and every function that misses
 
 The scan and what it counts are in ``tests/api_docs.py``; ``tests/test_api_docs.py`` enforces it per
-package (its ``COVERED`` and ``NOT_YET_COVERED`` list which).  This script only prints it.
+package (its ``COVERED`` lists which).  This script only prints it.
 """
 from __future__ import annotations
 

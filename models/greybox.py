@@ -41,7 +41,10 @@ run, pass the whole history from a rest state and read off the tail.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 from scipy.signal import lfilter
 from sklearn.base import BaseEstimator, RegressorMixin
@@ -109,9 +112,12 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
     n_features_in_
     """
 
-    def __init__(self, n_poles=2, speed_reference=1000.0, exponent=1.0, fit_exponent=True,
-                 exponent_bounds=(0.5, 3.0), time_constant_bounds=(60.0, 1e6), temperature_inputs=None,
-                 observed=(), observed_weight=1.0, process_noise=0.01, max_nfev=200, sampling_interval=None):
+    def __init__(self, n_poles: int = 2, speed_reference: float = 1000.0, exponent: float = 1.0,
+                 fit_exponent: bool = True, exponent_bounds: tuple[float, float] = (0.5, 3.0),
+                 time_constant_bounds: tuple[float, float] = (60.0, 1e6),
+                 temperature_inputs: Sequence[int] | None = None, observed: Sequence[int] = (),
+                 observed_weight: float = 1.0, process_noise: float = 0.01, max_nfev: int = 200,
+                 sampling_interval: float | None = None):
         self.n_poles = n_poles
         self.speed_reference = speed_reference
         self.exponent = exponent
@@ -274,12 +280,26 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
                 best = result
         return best
 
-    def fit(self, X, y, sample_weight=None):
+    def fit(self, X: ArrayLike, y: ArrayLike, sample_weight: ArrayLike | None = None) -> GreyBoxRegressor:
         """Fit on a time-ordered record; ``sample_weight`` (≥ 0) weights the residuals.
 
         A weight of 0 leaves a row's target out of the fit while the model
         still runs through it (its inputs are known): blocked cross-validation
         holds out a middle block this way.
+
+        Parameters
+        ----------
+        X : array-like, shape (n_samples, n_features)
+            The record in the layout of the class docstring: time (s), spindle speed (rpm), temperatures (°C).
+        y : array-like, shape (n_samples,)
+            The target, e.g. a drift in µm.
+        sample_weight : array-like, shape (n_samples,), optional
+            Non-negative residual weights; default all 1.
+
+        Returns
+        -------
+        self : GreyBoxRegressor
+            The fitted model.
         """
         n_poles, (lo, hi) = self._checked_settings()
         X, y, w = self._checked_data(X, y, sample_weight)
@@ -338,29 +358,61 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         time, speed = self._check_x(X, inputs, allow_nan_in=observed if allow_nan_observed else ())
         return X, time, observed, self._inputs(X, speed, inputs, self.exponent_)
 
-    def predict_outputs(self, X):
-        """Simulated outputs (n, 1 + n_observed): y, then the observed thermometers (°C)."""
+    def predict_outputs(self, X: ArrayLike) -> np.ndarray:
+        """Simulated outputs (n, 1 + n_observed): y, then the observed thermometers (°C).
+
+        Parameters
+        ----------
+        X : array-like, shape (n_samples, n_features)
+            A record in the layout of the fit; observed columns may hold NaN (they are not used).
+
+        Returns
+        -------
+        outputs : ndarray, shape (n_samples, 1 + n_observed)
+            y (its unit) and the simulated observed thermometers, °C.
+        """
         _, time, _, U = self._fitted_inputs(X, allow_nan_observed=True)
         S = self._states(time, U, -self.poles_)
         return (self.offset_ + np.einsum("kij,nij->nk", self.gains_, S) + U[:, 1:] @ self.feedthrough_.T)
 
-    def predict(self, X):
+    def predict(self, X: ArrayLike) -> np.ndarray:
         """y from equilibrium at the first row of ``X``: simulated, or observed (see below).
 
         Without ``observed`` columns this is the pure simulation (no measured
         output is used); with them it is :meth:`predict_filtered`, which fuses
         those thermometers as the model runs.
+
+        Parameters
+        ----------
+        X : array-like, shape (n_samples, n_features)
+            A record in the layout of the fit.
+
+        Returns
+        -------
+        y : ndarray, shape (n_samples,)
+            The predicted target, in the unit of the training target (e.g. µm).
         """
         if self.observed:
             return self.predict_filtered(X)
         return self.predict_outputs(X)[:, 0]
 
     # ------------------------------------------------------------ observer
-    def state_space(self):
+    def state_space(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Continuous ``(A, B, C, D)`` with inputs ``[P, ΔT…, 1]`` and outputs ``[y, observed…]``.
 
         States are ordered pole-major (x_00, x_01, …); the last input is a
         constant 1 carrying the offsets.
+
+        Returns
+        -------
+        A : ndarray, shape (n_states, n_states)
+            State matrix, 1/s (diagonal, −1/τ).
+        B : ndarray, shape (n_states, n_inputs + 1)
+            Input matrix, 1/s.
+        C : ndarray, shape (1 + n_observed, n_states)
+            Output matrix (the gains g).
+        D : ndarray, shape (1 + n_observed, n_inputs + 1)
+            Feed-through: none for spindle heat, d for the temperature inputs, the offsets c₀ last.
         """
         check_is_fitted(self, "time_constants_")
         n_outputs, n_poles, m = self.gains_.shape
@@ -372,13 +424,28 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         D = np.column_stack([np.zeros(n_outputs), self.feedthrough_, self.offset_])
         return A, B, C, D
 
-    def predict_filtered(self, X, return_std=False):
+    def predict_filtered(self, X: ArrayLike,
+                         return_std: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """y estimated by the Kalman observer that fuses the ``observed`` thermometers (NaN = missing).
 
         The model runs as in :meth:`predict`; at every row the readings of the
         observed columns correct the states (measurement noise: their training
         RMSE; process noise: ``process_noise``). Without observed columns this
         is the simulation. Returns y, and its standard deviation with ``return_std``.
+
+        Parameters
+        ----------
+        X : array-like, shape (n_samples, n_features)
+            A record in the layout of the fit; NaN in an observed column is a missing reading.
+        return_std : bool, default False
+            Also return the observer's standard deviation of y.
+
+        Returns
+        -------
+        y : ndarray, shape (n_samples,)
+            The filtered estimate of y (its unit, e.g. µm).
+        std : ndarray, shape (n_samples,)
+            Its standard deviation, same unit; only with ``return_std``.
         """
         X, time, observed, U = self._fitted_inputs(X, allow_nan_observed=True)
         A, B, C, D = self.state_space()

@@ -28,11 +28,13 @@ How a fold is fitted depends on the kind of model (:func:`model_kind`):
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.stats import spearmanr
-from sklearn.base import clone
+from sklearn.base import BaseEstimator, clone
 
 from .grey import GreySeriesRegressor
 from .greybox import GreyBoxRegressor
@@ -41,12 +43,24 @@ from .metrics import rmse
 SCHEMES = ("leave-one-block-out", "rolling-origin")
 
 
-def regime_blocks(speed, min_rows: int = 2) -> list[tuple[int, int]]:
+def regime_blocks(speed: ArrayLike, min_rows: int = 2) -> list[tuple[int, int]]:
     """Row ranges ``[start, stop)`` of the operating-regime blocks of a speed record (rpm).
 
     A block starts at every run start (speed from 0 to > 0, or a new speed
     while running) and ends where the next one starts. Blocks shorter than
     ``min_rows`` are merged into the previous one.
+
+    Parameters
+    ----------
+    speed : array-like, shape (n_samples,)
+        Spindle speed per row, rpm.
+    min_rows : int, default 2
+        Fewest rows of a block.
+
+    Returns
+    -------
+    blocks : list of (int, int)
+        ``[start, stop)`` row ranges, in time order, covering every row.
     """
     speed = np.asarray(speed, float)
     if speed.ndim != 1 or len(speed) < 2 or not np.all(np.isfinite(speed)):
@@ -74,11 +88,25 @@ class Fold:
 
     @property
     def name(self) -> str:
+        """Scheme and 1-based test block, e.g. ``"rolling-origin block 3"``."""
         return f"{self.scheme} block {self.test_block + 1}"
 
 
-def blocked_folds(blocks, schemes=SCHEMES) -> list[Fold]:
-    """Folds of leave-one-block-out and rolling origin over ``blocks`` (from :func:`regime_blocks`)."""
+def blocked_folds(blocks: Sequence[tuple[int, int]], schemes: Sequence[str] = SCHEMES) -> list[Fold]:
+    """Folds of leave-one-block-out and rolling origin over ``blocks`` (from :func:`regime_blocks`).
+
+    Parameters
+    ----------
+    blocks : sequence of (int, int)
+        ``[start, stop)`` row ranges of the regime blocks, in time order.
+    schemes : sequence of str, default :data:`SCHEMES`
+        Which schemes to make folds of.
+
+    Returns
+    -------
+    folds : list of Fold
+        Leave-one-block-out folds (one per block), then rolling-origin folds (one per block but the first).
+    """
     unknown = sorted(set(schemes) - set(SCHEMES))
     if unknown:
         raise ValueError(f"blocked_folds: unknown scheme {unknown[0]!r}; known: {', '.join(SCHEMES)}.")
@@ -99,8 +127,19 @@ def blocked_folds(blocks, schemes=SCHEMES) -> list[Fold]:
     return folds
 
 
-def model_kind(estimator) -> str:
-    """``"weighted"``, ``"series"`` or ``"static"``: how a fold fits it (see the module docstring)."""
+def model_kind(estimator: BaseEstimator) -> str:
+    """``"weighted"``, ``"series"`` or ``"static"``: how a fold fits it (see the module docstring).
+
+    Parameters
+    ----------
+    estimator : BaseEstimator
+        A model of :mod:`models`.
+
+    Returns
+    -------
+    kind : str
+        ``"weighted"``, ``"series"`` or ``"static"``.
+    """
     if isinstance(estimator, GreyBoxRegressor):
         return "weighted"
     if isinstance(estimator, GreySeriesRegressor):
@@ -108,8 +147,25 @@ def model_kind(estimator) -> str:
     return "static"
 
 
-def fold_prediction(estimator, X, y, fold: Fold) -> np.ndarray:
-    """Fit a clone of ``estimator`` for ``fold`` and return its prediction of the test rows."""
+def fold_prediction(estimator: BaseEstimator, X: np.ndarray, y: np.ndarray, fold: Fold) -> np.ndarray:
+    """Fit a clone of ``estimator`` for ``fold`` and return its prediction of the test rows.
+
+    Parameters
+    ----------
+    estimator : BaseEstimator
+        Unfitted model; it is cloned, never changed.
+    X : ndarray, shape (n_samples, n_features)
+        Time-ordered inputs (the model's own columns).
+    y : ndarray, shape (n_samples,)
+        Target, e.g. a drift in µm.
+    fold : Fold
+        The fold.
+
+    Returns
+    -------
+    prediction : ndarray, shape (n_test_rows,)
+        Prediction of ``y`` on the fold's test rows, in the unit of ``y``.
+    """
     model = clone(estimator)
     start, stop = fold.test
     kind = model_kind(model)
@@ -137,6 +193,7 @@ class Selection:
 
     @property
     def best(self) -> str:
+        """The chosen candidate: the first of the ranking."""
         return self.ranking[0]
 
 
@@ -147,17 +204,32 @@ def _fold_score(y_true, pred) -> float:
     return rmse(y_true, pred)
 
 
-def select_by_blocked_cv(candidates, X, y, speed, schemes=SCHEMES, unit="µm", min_rows: int = 2) -> Selection:
+def select_by_blocked_cv(candidates: Mapping[str, tuple[BaseEstimator, Sequence[int]]], X: ArrayLike,
+                         y: ArrayLike, speed: ArrayLike, schemes: Sequence[str] = SCHEMES, unit: str = "µm",
+                         min_rows: int = 2) -> Selection:
     """Rank candidate models by blocked cross-validation across the operating regimes of ``speed``.
 
     Parameters
     ----------
     candidates : dict name → (estimator, columns)
         Unfitted estimators and the columns of ``X`` each one takes.
-    X : (n, d) time-ordered array holding every candidate's columns
-    y : (n,) target (e.g. a drift in µm)
-    speed : (n,) spindle speed, rpm: it defines the regime blocks
-    unit : unit of ``y`` for the reason text
+    X : array-like, shape (n_samples, n_features)
+        Time-ordered array holding every candidate's columns.
+    y : array-like, shape (n_samples,)
+        Target (e.g. a drift in µm).
+    speed : array-like, shape (n_samples,)
+        Spindle speed, rpm: it defines the regime blocks.
+    schemes : sequence of str, default :data:`SCHEMES`
+        Cross-validation schemes to score on.
+    unit : str, default "µm"
+        Unit of ``y`` for the reason text.
+    min_rows : int, default 2
+        Fewest rows of a regime block (see :func:`regime_blocks`).
+
+    Returns
+    -------
+    selection : Selection
+        Ranking, per-fold and mean held-out-block RMSE (unit of ``y``) and the reason text.
     """
     X = np.asarray(X, float)
     y = np.asarray(y, float)
@@ -204,7 +276,18 @@ def _reason(ranking, mean, worst, folds, unit) -> str:
 
 
 def rank_agreement(scores_a: dict, scores_b: dict) -> float:
-    """Spearman rank correlation of two score dicts (lower = better) over their common names."""
+    """Spearman rank correlation of two score dicts (lower = better) over their common names.
+
+    Parameters
+    ----------
+    scores_a, scores_b : dict of str to float
+        Candidate name → score (e.g. RMSE); ``inf`` (diverged) ranks last.
+
+    Returns
+    -------
+    rho : float
+        Spearman's ρ over the names both hold, in [−1, 1].
+    """
     names = sorted(set(scores_a) & set(scores_b))
     if len(names) < 3:
         raise ValueError(f"rank_agreement needs at least 3 common candidates, got {len(names)}.")

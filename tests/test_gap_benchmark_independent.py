@@ -88,3 +88,14 @@ def test_cli_runs_the_independent_benchmark_and_refuses_an_unknown_case_before_a
     assert main(["gap", "benchmark", "--independent", "column_source,teleport", "--out", str(out)]) == 2
     assert "unknown independent case 'teleport'" in capsys.readouterr().err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("flag, value", [("--holdout", "0.5"), ("--truth-mesh-size", "0.045")])
+def test_cli_refuses_blind_benchmark_settings_the_independent_cases_fix_themselves(tmp_path, capsys, flag, value):
+    """Each independent case has its own truth mesh and hold-out: a flag that would be ignored is an error."""
+    from twin.cli import main
+
+    out = tmp_path / "independent"
+    assert main(["gap", "benchmark", "--independent", "column_source", flag, value, "--out", str(out)]) == 2
+    assert f"{flag} do(es) not apply" in capsys.readouterr().err
+    assert not out.exists()

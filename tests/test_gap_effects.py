@@ -185,3 +185,20 @@ def test_fitted_lags_leave_the_amplitudes_linear(machine, engine, drive, name, a
     np.testing.assert_allclose(y3, 3.0 * y1, atol=1e-9 * np.abs(y3).max())
     other_lag = model.predict([(e, np.r_[amplitude, 4 * np.array(rest)])]).values - base
     assert np.abs(other_lag - y1).max() > 0.05 * np.abs(y1).max()
+
+
+def test_reassemble_refuses_a_change_of_what_the_output_operator_is_made_of(machine):
+    """A part's expansion coefficient enters the drift rows: reusing the operator would give a silently wrong
+    drift, so reassemble refuses it (a convection change, which the operator does not see, is taken)."""
+    from meshes.tomlspec import DefinitionError
+
+    d = machine.definition
+    material = d.part_material("ram")
+    name = next(k for k, v in d.materials.items() if v is material)
+    hotter = replace(d, materials={**d.materials, name: replace(material, expansion=material.expansion * 1.1)})
+    with pytest.raises(DefinitionError, match="elastic properties"):
+        reassemble(machine, hotter)
+    moved = replace(d, support_points=[tuple(np.add(p, 0.01)) for p in d.support_points])
+    with pytest.raises(DefinitionError, match="build the machine anew"):
+        reassemble(machine, moved)
+    assert reassemble(machine, replace(d, convection=list(d.convection))).outputs is machine.outputs

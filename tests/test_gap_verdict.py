@@ -245,3 +245,13 @@ def test_90_percent_intervals_cover_the_truth(machine):
             inside.append(p["interval90"][0] <= true <= p["interval90"][1])
     assert np.mean(inside) >= 0.8, inside
 
+
+
+def test_a_group_without_held_out_readings_hides_no_gap_elsewhere():
+    """A NaN group ratio (its channels missing in the held-out part) must not decide the gate by its order."""
+    channels = _channels(0.03, 0.5)
+    for groups in ({"temperature": np.nan, "displacement": 0.5}, {"displacement": 0.5, "temperature": np.nan}):
+        nominal = _result("nominal", groups, channels, 0, [])
+        assert verdict.leaves_a_gap(nominal, SCALES)
+    assert verdict.worst([np.nan, 5.0]) == verdict.worst([5.0, np.nan]) == 5.0
+    assert np.isnan(verdict.worst([np.nan]))

@@ -334,6 +334,11 @@ def operator_cache_key(definition: MachineDefinition, mesh: fea.TetMesh, specs: 
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=float).encode()).hexdigest()[:16]
 
 
+def _operator_key(definition, mesh):
+    """:func:`operator_cache_key` of ``definition``'s own output specifications."""
+    return operator_cache_key(definition, mesh, _output_specs(definition)[0])
+
+
 def _elastic_properties(material):
     """E, ν, α as floats; ``None`` for a missing one (the elastic problem then says which)."""
     values = (getattr(material, a) for a in ("youngs_modulus", "poisson_ratio", "expansion"))
@@ -502,12 +507,18 @@ def reassemble(machine: Machine, definition: MachineDefinition) -> Machine:
     Raises
     ------
     DefinitionError
-        The joint pairs or the thermal numbering differ.
+        The joint pairs or the thermal numbering differ, or anything the output operator is computed from
+        (elastic properties such as a part's expansion coefficient, supports, sensors): reusing the operator
+        would then give silently wrong drift.
     """
     pairs = [(a, b) for a, b, _ in definition.joints]
     if pairs != [(a, b) for a, b, _ in machine.definition.joints]:
         raise DefinitionError(f"{definition.source}: reassemble keeps the joint pairs of the machine "
                               f"({[(a, b) for a, b, _ in machine.definition.joints]}); got {pairs}")
+    if _operator_key(definition, machine.mesh) != _operator_key(machine.definition, machine.mesh):
+        raise DefinitionError(f"{definition.source}: reassemble reuses the output operator, but the definition "
+                              "changes what it is computed from (elastic properties, supports, reference "
+                              "temperature, sensors); build the machine anew with build_machine")
     groups, _ = _facet_groups(definition, machine.mesh)
     thermal, _ = _thermal_system(definition, machine.mesh, groups)
     if thermal.n_nodes != machine.thermal.n_nodes or not np.array_equal(thermal.node_of, machine.thermal.node_of):

@@ -51,7 +51,13 @@ class MachineSpec:
         return self.source_scale != 1.0 or self.convection_scale != 1.0
 
     def build(self) -> Machine:
-        """The machine, built once per process and kept (a sweep worker reuses it for every task)."""
+        """The machine, built once per process and kept (a sweep worker reuses it for every task).
+
+        Returns
+        -------
+        Machine
+            The built (possibly perturbed) machine.
+        """
         return _built_machine(self)
 
 
@@ -101,10 +107,32 @@ def perturbed_definition(definition: MachineDefinition, source_scale: tuple | fl
 
 
 def as_scenario(scenario: Scenario | str) -> Scenario:
-    """A :class:`~twin.core.scenario.Scenario` from itself, a scenario name or a TOML path."""
+    """A :class:`~twin.core.scenario.Scenario` from itself, a scenario name or a TOML path.
+
+    Parameters
+    ----------
+    scenario : Scenario or str
+        A scenario, or the name or TOML path of one.
+
+    Returns
+    -------
+    Scenario
+        The scenario (loaded if given by name or path).
+    """
     return scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
 
 
 def zero_referenced(values: np.ndarray) -> np.ndarray:
-    """``values`` minus their first row: the change since the start of a record (same unit as ``values``)."""
+    """``values`` minus their first row: the change since the start of a record (same unit as ``values``).
+
+    Parameters
+    ----------
+    values : numpy.ndarray
+        (n, …) a time-ordered record, first axis time.
+
+    Returns
+    -------
+    numpy.ndarray
+        Same shape and unit, first row zero.
+    """
     return values - values[:1]

@@ -20,12 +20,14 @@ the nodes of each region (part) attributes a drift change to the parts:
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import scipy.sparse as sp
 
-from .fit import Coordinates
-from .model import output_effects
-from .structure import facet_table, point_info
+from .fit import Coordinates, Evaluator, FitResult, Residual
+from .model import GapModel, output_effects
+from .structure import Structure, facet_table, point_info
 
 
 def _drift_rows(structure, names):
@@ -33,8 +35,21 @@ def _drift_rows(structure, names):
     return [structure.index[n] for n in names if structure.kinds[structure.index[n]] in ("displacement", "strain")]
 
 
-def region_influence(structure, channel_rows):
-    """g (len(rows), n_regions): drift per kelvin of uniform warming of each region (channel units per K)."""
+def region_influence(structure: Structure, channel_rows: Sequence[int]) -> np.ndarray:
+    """g (len(rows), n_regions): drift per kelvin of uniform warming of each region (channel units per K).
+
+    Parameters
+    ----------
+    structure : Structure
+        Gives the output matrix (FE channels, channel units) and the region of every node.
+    channel_rows : sequence of int
+        Rows of the structure's FE channels (drift or strain lines).
+
+    Returns
+    -------
+    ndarray, shape (len(channel_rows), n_regions)
+        Channel change per kelvin of each region of :attr:`Structure.region_names` (µm/K, µε/K).
+    """
     regions = structure.region_names
     C = structure.output_matrix
     g = np.zeros((len(channel_rows), len(regions)))
@@ -80,8 +95,33 @@ def _drift_shares(c, g, R, names, d_cols, regions):
     return shares
 
 
-def region_estimate(structure, evaluator, residual, names, ridge=1.0):
-    """Model-free attribution (see the module docstring) → dict with c_r(t), per-axis shares and the influence table."""
+def region_estimate(structure: Structure, evaluator: Evaluator, residual: Residual, names: Sequence[str],
+                    ridge: float = 1.0) -> dict[str, object] | None:
+    """Model-free attribution (see the module docstring) → dict with c_r(t), per-axis shares and the influence table.
+
+    Parameters
+    ----------
+    structure : Structure
+        Gives the regions, the thermometers' parts and the region influence.
+    evaluator : Evaluator
+        With weights set (``sigma`` per group, channel units); its channels are ``names``.
+    residual : Residual
+        Residuals ``R`` (n_times, p) in channel units (K, µm, µε), e.g. of the nominal twin.
+    names : sequence of str, length p
+        Channel names of the evaluator's columns.
+    ridge : float, default 1.0
+        Ridge weight (dimensionless): the prior sd of c_r is the thermometers' residual RMS (at least 0.05 K)
+        divided by √ridge.
+
+    Returns
+    -------
+    dict or None
+        ``regions`` (list of str); ``c`` ndarray, shape (n_times, n_regions), the uniform temperature error
+        per region, K; ``rms_K`` per region, K; ``shares`` per drift/strain line and region: ``share`` of the
+        line's residual (dimensionless) and ``rms`` (channel units); ``observed_regions`` (regions with a
+        thermometer); ``influence`` per line and region (channel units per K); ``units`` per line.  None when
+        there is neither a thermometer nor a drift or strain line.
+    """
     regions = structure.region_names
     info = structure.thermometer_info()
     part_of = dict(zip([structure.names[i] for i in structure.thermometers], info["part"]))
@@ -103,8 +143,29 @@ def region_estimate(structure, evaluator, residual, names, ridge=1.0):
             "units": {names[j]: "µm" if evaluator.kinds[j] == "displacement" else "µε" for j in d_cols}}
 
 
-def effect_attribution(model, result, nominal, names):
-    """Split the winner's drift change over the parts through the reduced basis (see the module docstring)."""
+def effect_attribution(model: GapModel, result: FitResult, nominal: FitResult,
+                       names: Sequence[str]) -> dict[str, object] | None:
+    """Split the winner's drift change over the parts through the reduced basis (see the module docstring).
+
+    Parameters
+    ----------
+    model : GapModel
+        The diagnosis model; its backend must keep its reduced basis.
+    result : FitResult
+        The winner (its prediction with the reduced run).
+    nominal : FitResult
+        The nominal twin (its prediction with the reduced run).
+    names : sequence of str
+        Channel names; the drift and strain lines among them are attributed.
+
+    Returns
+    -------
+    dict or None
+        ``shares``: per drift/strain line, per region and ``sensor/fixture`` (the sensor models' part),
+        ``share`` of the line's change (dimensionless) and ``rms`` (channel units: µm, µε) at the measured
+        times; ``field_time_s``, s: the grid time of the largest change; ``field``: ndarray, shape (n_nodes,),
+        the temperature change at that time, K.  None without a basis, a reduced run or a drift/strain line.
+    """
     backend = model.backend
     if getattr(backend, "basis", None) is None or result.prediction is None or result.prediction.run is None:
         return None
@@ -141,8 +202,25 @@ def effect_attribution(model, result, nominal, names):
     return {"shares": out, "field_time_s": float(model.drive.grid[k_star]), "field": field}
 
 
-def candidate_points(structure, count=300, seed=0):
-    """Candidate thermometer locations: outer-surface thermal nodes, farthest-point sampled → (nodes, points)."""
+def candidate_points(structure: Structure, count: int = 300, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Candidate thermometer locations: outer-surface thermal nodes, farthest-point sampled → (nodes, points).
+
+    Parameters
+    ----------
+    structure : Structure
+        Gives the machine; nodes of convection facets other than inside ones and the floor are candidates.
+    count : int, default 300
+        Number of points (at most the number of candidate nodes).
+    seed : int, default 0
+        Seed of the random first point.
+
+    Returns
+    -------
+    nodes : ndarray of int, shape (k,)
+        Thermal node ids.
+    points : ndarray, shape (k, 3)
+        Their positions, m.
+    """
     machine = structure.machine
     nodes, _, _, groups, _, _ = facet_table(machine)
     inside = {r.name for r in machine.definition.convection if r.inside or r.name == "floor"}
@@ -159,8 +237,32 @@ def candidate_points(structure, count=300, seed=0):
     return cand[chosen], pts[chosen]
 
 
-def separating_sensor(model, result_a, result_b, nominal, noise_K=0.05, count=300):
-    """Where a new surface thermometer would tell effects A and B apart (dict), or None without a basis."""
+def separating_sensor(model: GapModel, result_a: FitResult, result_b: FitResult, nominal: FitResult,
+                      noise_K: float = 0.05, count: int = 300) -> dict[str, object] | None:
+    """Where a new surface thermometer would tell effects A and B apart (dict), or None without a basis.
+
+    Parameters
+    ----------
+    model : GapModel
+        The diagnosis model; its backend must keep its reduced basis.  The candidate points are cached on it.
+    result_a, result_b : FitResult
+        The two fitted effects (predictions with their reduced runs).
+    nominal : FitResult
+        The nominal twin.
+    noise_K : float, default 0.05
+        Thermometer noise level, K (for ``difference_over_noise``; at least 1e-6).
+    count : int, default 300
+        Number of candidate points (:func:`candidate_points`).
+
+    Returns
+    -------
+    dict or None
+        ``a``, ``b`` (model names); the best candidate's ``position_m`` (m, rounded to mm), ``part``, ``zone``,
+        ``difference_rms_K`` (RMS over the grid of the mean-free difference of the two effects' temperature
+        changes, K) and ``difference_over_noise``; the ``nearest_sensor`` and its distance
+        ``nearest_sensor_distance_m`` (m); the ``best_existing_sensor`` and its
+        ``best_existing_difference_rms_K`` (K).
+    """
     backend = model.backend
     if getattr(backend, "basis", None) is None:
         return None

@@ -25,21 +25,23 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ..core.dataset import Dataset, json_default
+from ..core.machine import Machine
 from ..core.machine_definition import HeatSource
 from ..core.noise import apply_noise
-from ..core.scenario import load_scenario
+from ..core.scenario import Scenario, load_scenario
 from ..errors import TwinInputError
 from ..infra.outdir import atomic_directory, check_output_folder
 from ..infra.sweep import describe_scheduler, run_tasks
 from ..infra.tables import markdown_table
 from .attribution import separating_sensor
-from .diagnose import _machine, diagnose
+from .diagnose import Diagnosis, _machine, diagnose
 from .effects import default_library
 from .sensor_errors import apply_sensor_errors, resample, sample_times
 from .truth import PhysicsChange, physics_truth, truth_dataset
@@ -88,12 +90,29 @@ class Case:
     seed: int | None = None
 
     @property
-    def kind(self):
+    def kind(self) -> str:
+        """``none``, ``single`` or ``pair``, by the number of effects switched on."""
         return {0: "none", 1: "single"}.get(len(self.effects), "pair")
 
 
-def cases(which="all"):
-    """Benchmark cases: ``singles``, ``pairs``, ``none``, ``all`` or a comma list of effect names / ``a+b``."""
+def cases(which: str | None = "all") -> list[Case]:
+    """Benchmark cases: ``singles``, ``pairs``, ``none``, ``all`` or a comma list of effect names / ``a+b``.
+
+    Parameters
+    ----------
+    which : str or None, default "all"
+        Groups and effect names, comma-separated (None or empty: ``all``); effects at :data:`TRUTH_VALUES`.
+
+    Returns
+    -------
+    list of Case
+        The cases, in the order asked.
+
+    Raises
+    ------
+    TwinInputError
+        On a name that is neither a group nor an effect of :data:`TRUTH_VALUES`.
+    """
     singles = [Case(n, ((n, v),)) for n, v in TRUTH_VALUES.items()]
     pairs = [Case(f"{a}+{b}", ((a, TRUTH_VALUES[a]), (b, TRUTH_VALUES[b]))) for a, b in PAIRS]
     none = [Case("none" if i == 0 else f"none (seed {s})", (), s) for i, s in enumerate(NO_EFFECT_SEEDS)]
@@ -113,8 +132,27 @@ def cases(which="all"):
     return out
 
 
-def case_record(case, scenario=SCENARIO, machine="vmc_ram", truth_mesh_size_m=TRUTH_MESH_SIZE_M):
-    """The "measured" record of a case: the truth run with the effects' truth variants, the rig's channels only."""
+def case_record(case: Case, scenario: str | Path | Scenario = SCENARIO, machine: str | Machine = "vmc_ram",
+                truth_mesh_size_m: float | None = TRUTH_MESH_SIZE_M) -> Dataset:
+    """The "measured" record of a case: the truth run with the effects' truth variants, the rig's channels only.
+
+    Parameters
+    ----------
+    case : Case
+        The effects switched on, and the noise seed.
+    scenario : str, Path or Scenario, default :data:`SCENARIO`
+        The truth scenario.
+    machine : str or Machine, default "vmc_ram"
+        Machine name (built once per process), or a built machine (then ``truth_mesh_size_m`` is not used).
+    truth_mesh_size_m : float or None, default :data:`TRUTH_MESH_SIZE_M`
+        Mesh size of the truth, m (None: the nominal mesh).
+
+    Returns
+    -------
+    Dataset
+        Spindle speed (rpm), feeds (mm/min) and sensors (°C, µm, µε) with noise; no powers or ambients.  Its
+        metadata holds the truth (see :func:`twin.gap.truth.truth_dataset`).
+    """
     library = {e.name: e for e in default_library()}
     truth_machine = _machine(machine, truth_mesh_size_m)
     active = [(library[n].variant(**TRUTH_HIDDEN.get(n, {})), np.array(v, float)) for n, v in case.effects]
@@ -148,8 +186,26 @@ class BenchmarkTask:
         return out
 
 
-def summarise(case, d):
-    """The benchmark's view of a :class:`~twin.gap.diagnose.Diagnosis` of a case (a small, JSON-able dict)."""
+def summarise(case: Case, d: Diagnosis) -> dict[str, object]:
+    """The benchmark's view of a :class:`~twin.gap.diagnose.Diagnosis` of a case (a small, JSON-able dict).
+
+    Parameters
+    ----------
+    case : Case
+        The case (its effects are the truth).
+    d : Diagnosis
+        The diagnosis of the case's record.
+
+    Returns
+    -------
+    dict
+        ``case``, ``kind``, ``truth``, ``top``, ``correct``, ``partially``, ``significant``, ``verdict``,
+        ``ranking`` ((name, ΔBIC) of the top 6), ``runner_up``, ``evidence_ratio``, ``gap_over_noise`` and
+        ``gap_over_tolerance`` per group, ``shrink_top`` (held-out drift RMS and max, µm, temperature RMS, K,
+        before and after, and reductions as fractions), ``drift_gap`` (held-out drift RMS / σ_g); with the
+        true model among the fits ``truth_fit`` (fitted against true parameters) and ``shrink_truth``; for a
+        missed single effect ``separation`` (where a thermometer would tell them apart).
+    """
     true_names = [n for n, _ in case.effects]
     top = d.winner.name if d.winner is not None else "none"
     correct = set(top.split("+")) == set(true_names) if true_names else top == "none"
@@ -222,6 +278,13 @@ def _shrink(d, result):
 
 @dataclass
 class BenchmarkResult:
+    """What :func:`benchmark` or :func:`independent_benchmark` returns.
+
+    ``results``: one dict per case (see :func:`summarise`, :func:`score_independent`); ``markdown``: the report;
+    ``out_dir``: the result folder, or None when none was written; ``wall_seconds``: wall time of the sweep, s;
+    ``top1_rate``: fraction of (library) single-effect cases named correctly; ``metrics``: the goal figures.
+    """
+
     results: list
     markdown: str
     out_dir: Path | None
@@ -230,12 +293,45 @@ class BenchmarkResult:
     metrics: dict = field(default_factory=dict)
 
 
-def benchmark(which="all", scheduler="local", out_dir=None, scenario=SCENARIO, truth_mesh_size_m=TRUTH_MESH_SIZE_M,
-              nominal_mesh_size_m=None, holdout_fraction=0.3, progress=None, n_workers=None, engine_options=(),
-              overwrite=False):
+def benchmark(which: str | None = "all", scheduler: str | object | None = "local", out_dir: str | Path | None = None,
+              scenario: str = SCENARIO, truth_mesh_size_m: float | None = TRUTH_MESH_SIZE_M,
+              nominal_mesh_size_m: float | None = None, holdout_fraction: float = 0.3,
+              progress: Callable[[int, int], None] | None = None, n_workers: int | None = None,
+              engine_options: Sequence[tuple[str, int | float | bool]] = (),
+              overwrite: bool = False) -> BenchmarkResult:
     """Run the blind benchmark (see the module docstring); write ``out_dir`` (Markdown, JSON, PNG) if given.
 
     ``out_dir`` is checked before the work (``overwrite``: see :func:`twin.infra.outdir.check_output_folder`).
+
+    Parameters
+    ----------
+    which : str or None, default "all"
+        The cases (see :func:`cases`).
+    scheduler : str or distributed.Client, default "local"
+        ``local``, ``serial``, ``tcp://HOST:PORT`` or a client (:func:`twin.infra.sweep.run_tasks`).
+    out_dir : str or Path, optional
+        Result folder (``benchmark.md``, ``benchmark.json``, ``confusion.png``); None: nothing written.
+    scenario : str, default :data:`SCENARIO`
+        The truth scenario.
+    truth_mesh_size_m : float or None, default :data:`TRUTH_MESH_SIZE_M`
+        Mesh size of the truth, m (None: the nominal mesh).
+    nominal_mesh_size_m : float, optional
+        Mesh size of the diagnosis's nominal machine, m (None: the default mesh).
+    holdout_fraction : float, default 0.3
+        Held-out last fraction of each record.
+    progress : callable, optional
+        ``progress(done, total)`` over the cases.
+    n_workers : int, optional
+        Local Dask workers (default: one per core).
+    engine_options : sequence of (str, value) pairs, default ()
+        Backend options of the diagnosis (see :func:`twin.gap.diagnose.engine`).
+    overwrite : bool, default False
+        Replace an existing ``out_dir``.
+
+    Returns
+    -------
+    BenchmarkResult
+        Per-case results, the report, and the goal metrics (top-1 rate and drift shrinkage as fractions).
     """
     check_output_folder(out_dir, overwrite, inputs=(scenario,))
 
@@ -380,8 +476,26 @@ def _missed_lines(results):
     return lines
 
 
-def format_benchmark(results, metrics, wall, settings):
-    """The benchmark report (Markdown; tables by :func:`twin.infra.tables.markdown_table`)."""
+def format_benchmark(results: list[dict], metrics: dict, wall: float, settings: dict) -> str:
+    """The benchmark report (Markdown; tables by :func:`twin.infra.tables.markdown_table`).
+
+    Parameters
+    ----------
+    results : list of dict
+        One per case (:func:`summarise`, with ``truth_seconds`` and ``diagnosis_seconds``, s).
+    metrics : dict
+        The goal figures of the cases.
+    wall : float
+        Wall time of the sweep, s.
+    settings : dict
+        ``scenario``, ``truth_mesh_size_m`` (m), ``nominal_mesh_size_m`` (m), ``holdout_fraction``,
+        ``scheduler``.
+
+    Returns
+    -------
+    str
+        The Markdown.
+    """
     timing = markdown_table([(r["case"], f"{r.get('truth_seconds', 0):.0f}", f"{r.get('diagnosis_seconds', 0):.0f}")
                              for r in results], ["case", "truth run (s)", "diagnosis (s)"])
     parts = [
@@ -401,8 +515,21 @@ def format_benchmark(results, metrics, wall, settings):
     return "\n".join(parts) + "\n"
 
 
-def plot_confusion(results, path):
-    """Heat map of true effect against top-ranked effect (PNG)."""
+def plot_confusion(results: list[dict], path: str | Path) -> Path:
+    """Heat map of true effect against top-ranked effect (PNG).
+
+    Parameters
+    ----------
+    results : list of dict
+        One per case (:func:`summarise`: ``truth`` and ``top``).
+    path : str or Path
+        The PNG to write.
+
+    Returns
+    -------
+    Path
+        The PNG written.
+    """
     # imported on use, and first: twin.infra.plots switches matplotlib to its Agg backend
     from ..infra.plots import save_figure
 
@@ -530,8 +657,24 @@ _CONTROL_CASES = (
 )
 
 
-def independent_cases(which="all"):
-    """The independent cases: ``library``, ``outside``, ``pairs``, ``controls``, ``all`` or a comma list of names."""
+def independent_cases(which: str | None = "all") -> list[IndependentCase]:
+    """The independent cases: ``library``, ``outside``, ``pairs``, ``controls``, ``all`` or a comma list of names.
+
+    Parameters
+    ----------
+    which : str or None, default "all"
+        Groups and case names, comma-separated (None or empty: ``all``).
+
+    Returns
+    -------
+    list of IndependentCase
+        The cases, in the order asked.
+
+    Raises
+    ------
+    TwinInputError
+        On a name that is neither a group nor a case.
+    """
     groups = {"library": _LIBRARY_CASES, "outside": _OUTSIDE_CASES, "pairs": _PAIR_CASES, "controls": _CONTROL_CASES}
     groups["all"] = sum(groups.values(), ())
     by_name = {c.name: c for c in groups["all"]}
@@ -547,8 +690,24 @@ def independent_cases(which="all"):
     return out
 
 
-def independent_record(case, scenario=INDEPENDENT_SCENARIO, seed=None):
-    """The record of an independent case: noise-free full-FE truth (cached), sensor errors, sampling, noise."""
+def independent_record(case: IndependentCase, scenario: str | Path = INDEPENDENT_SCENARIO,
+                       seed: int | None = None) -> Dataset:
+    """The record of an independent case: noise-free full-FE truth (cached), sensor errors, sampling, noise.
+
+    Parameters
+    ----------
+    case : IndependentCase
+        The physics change, sensor errors and sampling of the case.
+    scenario : str or Path, default :data:`INDEPENDENT_SCENARIO`
+        The truth scenario (name or file).
+    seed : int, optional
+        Seed of the noise (default the scenario's) and of an irregular sampling (default 0).
+
+    Returns
+    -------
+    Dataset
+        The rig's channels (rpm, mm/min, °C, µm, µε), noise on the sensors.
+    """
     sc = load_scenario(scenario)
     data = physics_truth(sc, case.change, noise=False)
     data = apply_sensor_errors(data, case.sensors, sc)
@@ -562,8 +721,23 @@ def independent_record(case, scenario=INDEPENDENT_SCENARIO, seed=None):
     return Dataset(data.time_s, values, list(data.channels), data.metadata)
 
 
-def source_centre(machine, part, box):
-    """Volume centroid (3,) of the tetrahedra of ``part`` whose centroids lie in ``box`` (the true source)."""
+def source_centre(machine: Machine, part: str, box: Sequence[float]) -> np.ndarray:
+    """Volume centroid (3,) of the tetrahedra of ``part`` whose centroids lie in ``box`` (the true source).
+
+    Parameters
+    ----------
+    machine : Machine
+        The built machine (its mesh).
+    part : str
+        Part (mesh region) name.
+    box : sequence of float
+        ``(x_min, x_max, y_min, y_max, z_min, z_max)``, m.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        The centroid, m.
+    """
     mesh = machine.mesh
     cents = mesh.points[mesh.tets].mean(axis=1)
     inside = np.all((cents >= np.array(box[::2])) & (cents <= np.array(box[1::2])), axis=1)
@@ -593,8 +767,25 @@ class IndependentTask:
         return out
 
 
-def score_independent(case, d, machine):
-    """Scores of one case: explained-with-gap, discovered-source distance and power error, interval coverage."""
+def score_independent(case: IndependentCase, d: Diagnosis, machine: Machine) -> dict[str, object]:
+    """Scores of one case: explained-with-gap, discovered-source distance and power error, interval coverage.
+
+    Parameters
+    ----------
+    case : IndependentCase
+        The case (its ``source`` is scored against the discovery).
+    d : Diagnosis
+        The diagnosis of the case's record.
+    machine : Machine
+        The nominal machine (the true source's centroid on its mesh).
+
+    Returns
+    -------
+    dict
+        ``explained_with_gap`` ("explained" while more than :data:`REMAINING_DRIFT` of the held-out drift RMS
+        remains), ``drift_reduction`` (fraction), ``discovery`` (as a dict, or None) and, for a case with a source,
+        ``source``: ``distance_m`` (m), ``power_W`` and ``truth_W`` (W), ``ok``, ``interval`` (W), ``covers``.
+    """
     drift = d.drift_shrinkage(d.winner) if d.winner is not None else 0.0
     out = {"explained_with_gap": bool(d.outcome == "explained" and drift is not None
                                       and 1.0 - drift > REMAINING_DRIFT),
@@ -622,8 +813,19 @@ def _covered(p):
     return bool(lo <= p["truth"] <= hi)
 
 
-def independent_metrics(results):
-    """The issue's goal table from the case results (see :func:`independent_benchmark`)."""
+def independent_metrics(results: list[dict]) -> dict[str, object]:
+    """The issue's goal table from the case results (see :func:`independent_benchmark`).
+
+    Parameters
+    ----------
+    results : list of dict
+        One per independent case (:func:`summarise` and :func:`score_independent` together).
+
+    Returns
+    -------
+    dict
+        Goal → ``(cases passing, cases)``, and ``median_drift_reduction`` (fraction, or None).
+    """
     lib, outside, controls, pairs = (_of_kind(results, kind) for kind in ("library", "outside", "control", "pair"))
     sources = [r for r in outside if r.get("source") is not None]
     params = [p for r in lib + pairs for p in (r.get("truth_fit") or {}).get("params", [])]
@@ -670,8 +872,25 @@ def _case_rows(results):
     return rows
 
 
-def format_independent(results, metrics, wall, settings):
-    """The independent benchmark's report (Markdown, tables by :func:`twin.infra.tables.markdown_table`)."""
+def format_independent(results: list[dict], metrics: dict, wall: float, settings: dict) -> str:
+    """The independent benchmark's report (Markdown, tables by :func:`twin.infra.tables.markdown_table`).
+
+    Parameters
+    ----------
+    results : list of dict
+        One per independent case.
+    metrics : dict
+        :func:`independent_metrics` of the results.
+    wall : float
+        Wall time of the sweep, s.
+    settings : dict
+        ``scenario`` and ``scheduler``.
+
+    Returns
+    -------
+    str
+        The Markdown.
+    """
     head = ["# Gap diagnosis: independent benchmark", "",
             (f"- truth: scenario `{settings['scenario']}`, physics changed in a copy of the machine definition, "
              "full FE (`twin.core.simulate`), sensor errors and sampling of `twin.gap.sensor_errors`, thesis noise"),
@@ -683,9 +902,34 @@ def format_independent(results, metrics, wall, settings):
     return "\n".join(head) + "\n" + goals + "\n\n## Cases\n\n" + cases_md + "\n"
 
 
-def independent_benchmark(which="all", scheduler="local", out_dir=None, scenario=INDEPENDENT_SCENARIO,
-                          progress=None, n_workers=None, overwrite=False):
-    """Run the independent benchmark; write ``out_dir`` (``independent.md``, ``independent.json``) if given."""
+def independent_benchmark(which: str | None = "all", scheduler: str | object | None = "local",
+                          out_dir: str | Path | None = None, scenario: str = INDEPENDENT_SCENARIO,
+                          progress: Callable[[int, int], None] | None = None, n_workers: int | None = None,
+                          overwrite: bool = False) -> BenchmarkResult:
+    """Run the independent benchmark; write ``out_dir`` (``independent.md``, ``independent.json``) if given.
+
+    Parameters
+    ----------
+    which : str or None, default "all"
+        The cases (see :func:`independent_cases`).
+    scheduler : str or distributed.Client, default "local"
+        ``local``, ``serial``, ``tcp://HOST:PORT`` or a client (:func:`twin.infra.sweep.run_tasks`).
+    out_dir : str or Path, optional
+        Result folder; None (or empty): nothing written.
+    scenario : str, default :data:`INDEPENDENT_SCENARIO`
+        The truth scenario.
+    progress : callable, optional
+        ``progress(done, total)`` over the cases.
+    n_workers : int, optional
+        Local Dask workers (default: one per core).
+    overwrite : bool, default False
+        Replace an existing ``out_dir``.
+
+    Returns
+    -------
+    BenchmarkResult
+        Per-case results, the report, the goal metrics; ``top1_rate`` is that of the library cases.
+    """
     check_output_folder(out_dir, overwrite, inputs=(scenario,))
     t0 = time.perf_counter()
     tasks = [IndependentTask(c, scenario) for c in independent_cases(which)]

@@ -1,6 +1,7 @@
 """CLI commands ``twin gap diagnose``, ``truth`` and ``benchmark``: a thin layer over :mod:`twin.gap`."""
 from __future__ import annotations
 
+import argparse
 import json
 from pathlib import Path
 
@@ -16,7 +17,15 @@ INDEPENDENT_SCENARIO = "gap_independent_24h"
 TRUTH_MESH_SIZE_M = 0.035
 
 
-def cmd_diagnose(args):
+def cmd_diagnose(args: argparse.Namespace) -> None:
+    """``twin gap diagnose``: diagnose a measured record, write the report folder, print the verdict and ranking.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line: ``measured``, ``machine``, ``scenario``, ``column_map``, ``holdout``
+        (fraction), ``effects``, ``pairs``, ``backend``, ``step`` (s), ``no_render``, ``out``, ``overwrite``.
+    """
     from ..core.dataset import sidecar_path
     from .diagnose import diagnose
     from .report import write_report
@@ -38,10 +47,23 @@ def cmd_diagnose(args):
     print(f"report in {out}/report.md ({d.timings['total_s']:.0f} s)")
 
 
-def cmd_benchmark(args):
+def cmd_benchmark(args: argparse.Namespace) -> None:
+    """``twin gap benchmark``: run the blind (or, with ``--independent``, the independent) benchmark; print its report.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line: ``cases``, ``independent``, ``scenario``, ``truth_mesh_size`` (m; ≤ 0: the
+        nominal mesh), ``holdout`` (fraction), ``scheduler``, ``workers``, ``out``, ``overwrite``.
+    """
     from .benchmark import benchmark, independent_benchmark
 
     if args.independent:
+        given = [flag for flag, value in (("--holdout", args.holdout), ("--truth-mesh-size", args.truth_mesh_size))
+                 if value is not None]
+        if given:
+            raise TwinInputError(f"twin gap benchmark --independent: {' and '.join(given)} do(es) not apply; each "
+                                 "independent case fixes its own truth mesh and hold-out (docs/gap_benchmark.md)")
         res = independent_benchmark(args.independent, scheduler=args.scheduler, out_dir=args.out,
                                     scenario=args.scenario or INDEPENDENT_SCENARIO,
                                     progress=progress_bar("independent cases", unit="case"), n_workers=args.workers,
@@ -49,15 +71,24 @@ def cmd_benchmark(args):
         print(res.markdown)
         print(f"results in {res.out_dir}/")
         return
+    mesh_size = TRUTH_MESH_SIZE_M if args.truth_mesh_size is None else args.truth_mesh_size
     res = benchmark(args.cases, scheduler=args.scheduler, out_dir=args.out, scenario=args.scenario or SCENARIO,
-                    truth_mesh_size_m=None if args.truth_mesh_size <= 0 else args.truth_mesh_size,
-                    holdout_fraction=args.holdout, progress=progress_bar("blind cases", unit="case"),
-                    n_workers=args.workers, overwrite=args.overwrite)
+                    truth_mesh_size_m=None if mesh_size <= 0 else mesh_size,
+                    holdout_fraction=0.3 if args.holdout is None else args.holdout,
+                    progress=progress_bar("blind cases", unit="case"), n_workers=args.workers, overwrite=args.overwrite)
     print(res.markdown)
     print(f"results in {res.out_dir}/")
 
 
-def cmd_truth(args):
+def cmd_truth(args: argparse.Namespace) -> None:
+    """``twin gap truth``: write a benchmark case's "measured" CSV, its hidden truth in ``<stem>.truth.json`` beside it.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line: ``effect`` (one effect, an ``a+b`` pair or ``none``), ``scenario``, ``machine``,
+        ``truth_mesh_size`` (m; ≤ 0: the nominal mesh), ``out``, ``overwrite``.
+    """
     from ..core.dataset import sidecar_path
     from .benchmark import case_record, cases
 
@@ -78,8 +109,14 @@ def cmd_truth(args):
           f"hidden truth in {truth.name}: {json.dumps(data.metadata['effects'])}")
 
 
-def register(sub):
-    """Add the ``gap`` command with its ``diagnose``, ``truth`` and ``benchmark`` subcommands."""
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``gap`` command with its ``diagnose``, ``truth`` and ``benchmark`` subcommands.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of the ``twin`` command line.
+    """
     gap = sub.add_parser("gap", help="sim-to-real gap diagnosis of the twin against measured data")
     gsub = gap.add_subparsers(dest="gap_command", required=True)
     d = gsub.add_parser("diagnose", help="where the twin misses, which effect explains it, how far it shrinks")
@@ -120,9 +157,10 @@ def register(sub):
                         "| all | comma list of case names")
     b.add_argument("--scenario", help=f"truth scenario (default {SCENARIO}; with --independent "
                                       f"{INDEPENDENT_SCENARIO})")
-    b.add_argument("--truth-mesh-size", type=float, default=TRUTH_MESH_SIZE_M,
-                   help=f"truth mesh size, m (default {TRUTH_MESH_SIZE_M}; 0 = the nominal mesh)")
-    b.add_argument("--holdout", type=float, default=0.3)
+    b.add_argument("--truth-mesh-size", type=float,
+                   help=f"truth mesh size, m (default {TRUTH_MESH_SIZE_M}; 0 = the nominal mesh; not with "
+                        "--independent)")
+    b.add_argument("--holdout", type=float, help="held-out last fraction (default 0.3; not with --independent)")
     b.add_argument("--scheduler", default="local", help="local (default), serial, or tcp://HOST:8786")
     b.add_argument("--workers", type=int, help="local Dask workers (default: one per core)")
     b.add_argument("--out", default="runs/gap_benchmark", help="result folder (default runs/gap_benchmark)")

@@ -16,30 +16,34 @@ in the scales.  When a gap remains, the effect discovery of
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
-from ..core.machine import build_machine
+from ..core.dataset import Dataset
+from ..core.machine import Machine, build_machine
 from ..core.scenario import Scenario, load_scenario
 from ..errors import TwinInputError
 from ..infra.sweep import cached
 from . import attribution, verdict, where
 from .drive import measured_drive
-from .effects import library_by_name
-from .engine import make_backend
+from .effects import Effect, library_by_name
+from .engine import FullBackend, ReducedBackend, make_backend
 from .fit import (
     Evaluator,
+    FitResult,
     effective_samples,
     fit_effects,
     model_names,
     nominal_result,
     score,
 )
-from .measured import check_scale, match_record, read_measured
+from .measured import Record, check_scale, match_record, read_measured
 from .model import GapModel
 from .signals import noise_level, uniform_grid
-from .structure import build_structure
+from .structure import Structure, build_structure
 
 DEFAULT_STEP_S = 60.0
 #: Shortest record the diagnosis accepts, s: a fit part and a held-out part that each see the machine's
@@ -76,32 +80,38 @@ class Diagnosis:
     skipped: list = field(default_factory=list)
 
     @property
-    def names(self):
+    def names(self) -> list[str]:
+        """The record's sensor channels used in the residuals (machine channel names), in column order."""
         return self.record.names
 
     @property
-    def outcome(self):
+    def outcome(self) -> str:
+        """``no_significant_gap``, ``explained``, ``partly_explained`` or ``not_explained``."""
         return self.decision.outcome
 
     @property
-    def winner(self):
+    def winner(self) -> FitResult | None:
+        """The model the verdict names, or None."""
         return self.decision.winner
 
     @property
-    def runner_up(self):
+    def runner_up(self) -> FitResult | None:
+        """The best single-effect fit sharing no effect with the named model (without one, the best after the
+        best), or None."""
         return self.decision.runner_up
 
     @property
-    def significant(self):
+    def significant(self) -> bool:
+        """Whether a model is named."""
         return self.decision.significant
 
     @property
-    def gap_over_tolerance(self):
+    def gap_over_tolerance(self) -> dict[str, float]:
         """Held-out RMS / σ_g of the nominal twin per channel group (σ_g with the timing floor)."""
         return self.decision.nominal_gap
 
     @property
-    def evidence_ratio(self):
+    def evidence_ratio(self) -> float:
         """The Bayes-factor equivalent of ΔBIC over the runner-up (inf when it overflows a float; no clamp)."""
         ev = self.decision.evidence()
         if "log10_ratio_vs_runner_up" not in ev:
@@ -109,14 +119,44 @@ class Diagnosis:
         with np.errstate(over="ignore"):
             return float(np.power(10.0, ev["log10_ratio_vs_runner_up"]))
 
-    def result(self, name):
+    def result(self, name: str) -> FitResult:
+        """The fitted model of that name: the nominal twin, an effect or a pair.
+
+        Parameters
+        ----------
+        name : str
+            Model name (``nominal``, an effect, or ``a+b``).
+
+        Returns
+        -------
+        FitResult
+            The model.
+
+        Raises
+        ------
+        KeyError
+            When no model has that name.
+        """
         for r in [self.nominal] + self.ranking:
             if r.name == name:
                 return r
         raise KeyError(name)
 
-    def shrinkage(self, result=None):
-        """Held-out RMS and max before (nominal) and after ``result`` (default the winner), per group and axis."""
+    def shrinkage(self, result: FitResult | None = None) -> dict[str, dict[str, float]]:
+        """Held-out RMS and max before (nominal) and after ``result`` (default the winner), per group and axis.
+
+        Parameters
+        ----------
+        result : FitResult, optional
+            The model (default the winner).
+
+        Returns
+        -------
+        dict of str to dict
+            Channel group, then each displacement channel (drift axis) → ``before_rms``, ``after_rms``,
+            ``before_max``, ``after_max`` (the group's unit: K, µm, µε) and ``reduction`` of the RMS (fraction;
+            NaN when the nominal RMS is 0).  Empty when there is no model.
+        """
         result = result or self.winner
         out = {}
         if result is None:
@@ -130,8 +170,19 @@ class Diagnosis:
                         "reduction": 1.0 - a["hold_rms"] / b["hold_rms"] if b["hold_rms"] > 0 else float("nan")}
         return out
 
-    def drift_shrinkage(self, result=None):
-        """Reduction of the held-out drift RMS pooled over the displacement channels (fraction), or None."""
+    def drift_shrinkage(self, result: FitResult | None = None) -> float | None:
+        """Reduction of the held-out drift RMS pooled over the displacement channels (fraction), or None.
+
+        Parameters
+        ----------
+        result : FitResult, optional
+            The model (default the winner).
+
+        Returns
+        -------
+        float or None
+            1 − RMS after / RMS before; None without a model, a drift channel or a nominal drift residual.
+        """
         result = result or self.winner
         if result is None or "displacement" not in self.nominal.summary["groups"]:
             return None
@@ -151,8 +202,29 @@ def _pair_candidates(ranked, n_pairs):
     return out
 
 
-def engine(machine, effects, backend="rom", **options):
-    """(structure, backend) for a machine and a library, built once per process (:func:`twin.infra.sweep.cached`)."""
+def engine(machine: Machine, effects: Sequence[Effect], backend: str = "rom",
+           **options: int | float | bool) -> tuple[Structure, ReducedBackend | FullBackend]:
+    """(structure, backend) for a machine and a library, built once per process (:func:`twin.infra.sweep.cached`).
+
+    Parameters
+    ----------
+    machine : Machine
+        The built machine (cached by its identity).
+    effects : sequence of Effect
+        The library the structure is built for.
+    backend : str, default "rom"
+        ``rom`` (parametric reduced model) or ``fe`` (full finite elements).
+    **options
+        Options of the backend (:func:`twin.gap.engine.make_backend`): ``nominal_order``, ``term_order``,
+        ``keep_basis`` (rom) or ``theta`` (fe).
+
+    Returns
+    -------
+    structure : Structure
+        The effects' structure on the machine.
+    backend : ReducedBackend or FullBackend
+        The backend; its ``structure_seconds`` is the structure's build time, s.
+    """
     key = ("gap-engine", id(machine), tuple(e.name for e in effects), backend, tuple(sorted(options.items())))
 
     def build():
@@ -167,9 +239,9 @@ def engine(machine, effects, backend="rom", **options):
 
 
 def _machine(machine, mesh_size_m=None):
-    """A built machine as given, or one built by name (and mesh size) once per process."""
-    if isinstance(machine, str):
-        return cached(("machine", machine, mesh_size_m), lambda: build_machine(machine, mesh_size_m))
+    """A built machine as given, or one built by name or TOML path (and mesh size) once per process."""
+    if isinstance(machine, (str, Path)):
+        return cached(("machine", str(machine), mesh_size_m), lambda: build_machine(str(machine), mesh_size_m))
     return machine
 
 
@@ -195,7 +267,9 @@ def _check_length(record, holdout_fraction):
 POSITIONS = (0.0, 0.5, 1.0)
 
 
-def reconstruct_inputs(machine, structure, be, grid, record, sc, initial, evaluator):
+def reconstruct_inputs(machine: Machine, structure: Structure, be: ReducedBackend | FullBackend, grid: np.ndarray,
+                       record: Record, sc: Scenario | None, initial: str,
+                       evaluator: Evaluator) -> tuple[GapModel, float, np.ndarray]:
     """The record's twin with its input change times placed by the data, and the timing floor.
 
     The nominal twin runs with every spindle/feed change at the earliest, middle and latest time the sampling
@@ -204,6 +278,34 @@ def reconstruct_inputs(machine, structure, be, grid, record, sc, initial, evalua
     property of the record, chosen on training data).  The timing floor per sensor is the held-out RMS of half
     the residual change between the earliest and latest placements: what ± half a sample of timing does.
     Returns (model, position, floor (p,)).
+
+    Parameters
+    ----------
+    machine : Machine
+        The nominal machine.
+    structure : Structure
+        The effects' structure on it.
+    be : ReducedBackend or FullBackend
+        The backend.
+    grid : ndarray, shape (n_grid,)
+        The twin's time grid, s.
+    record : Record
+        The matched measured record.
+    sc : Scenario or None
+        Fallback for missing spindle or feeds.
+    initial : str
+        ``steady`` or ``uniform``.
+    evaluator : Evaluator
+        The record's evaluator (its weights are set here).
+
+    Returns
+    -------
+    model : GapModel
+        The nominal twin with the chosen placement.
+    position : float
+        The chosen placement, a fraction of the sample interval (one of :data:`POSITIONS`).
+    floor : ndarray, shape (n_sensors,)
+        Timing floor per sensor, in the sensor's unit (K, µm, µε).
     """
     evaluator.set_weights()
     models, residuals = {}, {}
@@ -241,10 +343,27 @@ def _fit_library(model, ev, applicable, nominal, n_pairs, progress):
     return singles, pairs, score(singles + pairs, nominal, n_eff_hold), n_eff_hold
 
 
-def split_half_sd(model, ev, result, effects):
+def split_half_sd(model: GapModel, ev: Evaluator, result: FitResult, effects: Sequence[Effect]) -> np.ndarray:
     """Delete-a-half jackknife sd of a model's parameters: |θ(first half) − θ(second half)| / 2, each half of
     the fit rows fitted alone.  A parameter that drifts through the record (model discrepancy the Jacobian and
-    the HAC sandwich do not see) shows here; :func:`diagnose` reports the larger of the two sds."""
+    the HAC sandwich do not see) shows here; :func:`diagnose` reports the larger of the two sds.
+
+    Parameters
+    ----------
+    model : GapModel
+        The twin the model was fitted with.
+    ev : Evaluator
+        The record's evaluator (its fit rows are halved).
+    result : FitResult
+        The fitted model (its values start both fits).
+    effects : sequence of Effect
+        The model's effects, in its parameter order.
+
+    Returns
+    -------
+    ndarray, shape (n_params,)
+        Jackknife sd per parameter, in the parameter's unit.
+    """
     n = len(ev.fit_rows)
     rows = np.flatnonzero(ev.fit_rows)
     first = np.arange(n) < rows[len(rows) // 2]
@@ -326,27 +445,54 @@ def _discover(d):
         return None
 
 
-def diagnose(measured, machine="vmc_ram", scenario=None, column_map=None, holdout_fraction=0.3, effects=None,
-             n_pairs=3, backend="rom", step_s=DEFAULT_STEP_S, initial=None, progress=None, engine_options=None,
-             discovery=True):
+def diagnose(measured: Dataset | str | Path, machine: str | Path | Machine = "vmc_ram",
+             scenario: str | Path | Scenario | None = None, column_map: dict[str, str] | None = None,
+             holdout_fraction: float = 0.3, effects: Sequence[str] | None = None, n_pairs: int = 3,
+             backend: str = "rom", step_s: float = DEFAULT_STEP_S, initial: str | None = None,
+             progress: Callable[[int, int], None] | None = None,
+             engine_options: Mapping[str, int | float | bool] | None = None, discovery: bool = True) -> Diagnosis:
     """Diagnose the sim-to-real gap of a measured record; return a :class:`Diagnosis`.
 
     Parameters
     ----------
-    measured : a :class:`~twin.core.dataset.Dataset`, a twin dataset path (CSV with sidecar) or a measured CSV
-    machine : machine name or a built :class:`~twin.core.machine.Machine`
-    scenario : optional scenario (name, path or object): fallback for missing spindle/feeds/ambient and the
-        initial state
-    column_map : dict csv column → ``<name>_<unit>`` for measured CSVs
-    holdout_fraction : the last fraction of the record (by time) held out from the fits
-    effects : names of library effects to consider (default: all that apply to the machine)
-    n_pairs : pairs fitted: the leading single effect with every other one, and the pairs among the top
-        ``n_pairs`` singles (0: no pairs)
-    backend : ``rom`` (parametric reduced model) or ``fe`` (full finite elements, slow)
-    step_s : the twin's time step, s
-    initial : ``steady`` (idle steady state at the first sample, the default) or ``uniform``
-    progress : optional callable ``progress(done, total)`` over the fits
-    discovery : search beyond the library (:mod:`twin.gap.discovery`) when a gap remains unexplained
+    measured : Dataset, str or Path
+        A :class:`~twin.core.dataset.Dataset`, a twin dataset path (CSV with sidecar) or a measured CSV.
+    machine : str, Path or Machine, default "vmc_ram"
+        Machine name or TOML path, or a built :class:`~twin.core.machine.Machine`.
+    scenario : str, Path or Scenario, optional
+        Scenario (name, path or object): fallback for missing spindle/feeds/ambient and the initial state.
+    column_map : dict of str to str, optional
+        CSV column → ``<name>_<unit>`` for measured CSVs.
+    holdout_fraction : float, default 0.3
+        The last fraction of the record (by time) held out from the fits, in [0.05, 0.8].
+    effects : sequence of str, optional
+        Names of library effects to consider (default: all that apply to the machine).
+    n_pairs : int, default 3
+        Pairs fitted: the leading single effect with every other one, and the pairs among the top ``n_pairs``
+        singles (0: no pairs).
+    backend : str, default "rom"
+        ``rom`` (parametric reduced model) or ``fe`` (full finite elements, slow).
+    step_s : float, default :data:`DEFAULT_STEP_S`
+        The twin's time step, s.
+    initial : str, optional
+        ``steady`` (idle steady state at the first sample) or ``uniform``; default ``uniform`` when the scenario
+        starts uniform, else ``steady``.
+    progress : callable, optional
+        ``progress(done, total)``, called after each fit.
+    engine_options : mapping of str to int, float or bool, optional
+        Backend options (see :func:`engine`).
+    discovery : bool, default True
+        Search beyond the library (:mod:`twin.gap.discovery`) when a gap remains unexplained.
+
+    Returns
+    -------
+    Diagnosis
+        The verdict, ranking, fits, where the gap lies and the timings (s).
+
+    Raises
+    ------
+    TwinInputError
+        On a bad hold-out fraction, an unreadable or too short record, or unknown effects, channels or units.
     """
     timings = {}
     t0 = time.perf_counter()

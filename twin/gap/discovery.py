@@ -75,18 +75,24 @@ residual when the held-out misfit is larger (model discrepancy).
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import scipy.sparse as sp
 
+from ..core.machine import Machine
 from ..errors import TwinInputError
 from ..infra.sweep import cached
 from ..rom.reduction import krylov_basis, slowest_rate
+from .drive import Drive
 from .effects import scaled_definition, system_difference
-from .engine import m_orthonormal_union
-from .fit import GROUP_UNIT, effective_samples, nominal_result
+from .engine import FullBackend, ReducedBackend, m_orthonormal_union
+from .fit import GROUP_UNIT, Evaluator, FitResult, effective_samples, nominal_result
+from .model import GapModel, Prediction
+from .structure import Structure
 
 #: Grid spacing and source cube edge, m.
 GRID_M = 0.2
@@ -130,7 +136,14 @@ class Discovery:
     delta_bic: float = 0.0
     held_out: dict = field(default_factory=dict)
 
-    def sentence(self):
+    def sentence(self) -> str:
+        """One line in words: a source's power, driver, position and part; else the label and the value.
+
+        Returns
+        -------
+        str
+            With the value and its 90 % interval in :attr:`unit`.
+        """
         lo, hi = self.interval
         if self.kind == "source":
             what = "source" if self.value >= 0 else "sink"
@@ -151,12 +164,27 @@ class DiscoveryResult:
     seconds: float
     rejected: list = field(default_factory=list)
 
-    def summary(self):
+    def summary(self) -> list[str]:
+        """One line per discovery (:meth:`Discovery.sentence`), or one line saying none was accepted.
+
+        Returns
+        -------
+        list of str
+            The lines.
+        """
         if not self.items:
             return ["no atom of the dictionary is accepted on held-out data"]
         return [d.sentence() for d in self.items]
 
-    def as_dict(self):
+    def as_dict(self) -> dict[str, object]:
+        """JSON-able form (for ``diagnosis.json``), with the :meth:`summary` lines.
+
+        Returns
+        -------
+        dict
+            ``base``, ``candidates``, ``seconds`` (s), ``held_out``, ``items`` (each :class:`Discovery` as a
+            dict), ``rejected`` and ``summary``.
+        """
         return {"base": self.base, "candidates": self.candidates, "seconds": self.seconds,
                 "held_out": self.held_out, "items": [asdict(d) for d in self.items],
                 "rejected": self.rejected, "summary": self.summary()}
@@ -164,9 +192,21 @@ class DiscoveryResult:
 
 # ============================================================================= the response model
 class ResponseModel:
-    """Galerkin reduced model for arbitrary loads (see the module docstring), in modal coordinates."""
+    """Galerkin reduced model for arbitrary loads (see the module docstring), in modal coordinates.
 
-    def __init__(self, structure, backend_basis=None, order=ADJOINT_ORDER):
+    Nodal temperatures are ``VQ @ w`` (K) for modal states w, whose rates are :attr:`lam` (1/s).
+
+    Parameters
+    ----------
+    structure : Structure
+        Gives M, A (W/K) and the output matrix (FE channels, channel units).
+    backend_basis : ndarray, shape (n_nodes, r_b), optional
+        The diagnosis engine's M-orthonormal basis, added to the adjoint Krylov basis.
+    order : int, default ADJOINT_ORDER
+        Order of the adjoint (output-side) Krylov basis (at most n_nodes − 1).
+    """
+
+    def __init__(self, structure: Structure, backend_basis: np.ndarray | None = None, order: int = ADJOINT_ORDER):
         s = structure
         M, A = s.mass, s.stiffness
         lam1 = slowest_rate(SimpleNamespace(mass=M, stiffness=A))
@@ -182,12 +222,38 @@ class ResponseModel:
         self.C = np.asarray(s.output_matrix @ self.VQ)    # FE outputs ← modal coordinates
         self.structure = s
 
-    def modal(self, loads):
-        """Modal input weights (r, k) of load columns (n, k)."""
+    def modal(self, loads: np.ndarray | sp.spmatrix) -> np.ndarray:
+        """Modal input weights (r, k) of load columns (n, k).
+
+        Parameters
+        ----------
+        loads : ndarray or sparse matrix, shape (n_nodes, k)
+            Nodal heat loads per unit of some input (e.g. W/W, W/K).
+
+        Returns
+        -------
+        ndarray, shape (r, k)
+            ``(VQ)ᵀ loads``.
+        """
         return np.asarray((sp.csr_matrix(loads).T @ self.VQ).T) if sp.issparse(loads) else self.VQ.T @ loads
 
-    def filter(self, F, step_s, start=None):
-        """Modal states (N, r) for modal inputs F (N, r) held over each step (exact ZOH), from ``start`` or zero."""
+    def filter(self, F: np.ndarray, step_s: float, start: np.ndarray | None = None) -> np.ndarray:
+        """Modal states (N, r) for modal inputs F (N, r) held over each step (exact ZOH), from ``start`` or zero.
+
+        Parameters
+        ----------
+        F : ndarray, shape (N, r)
+            Modal inputs; row k is held over (t_{k−1}, t_k] (row 0 is not used).
+        step_s : float
+            Grid step, s.
+        start : ndarray, shape (r,), optional
+            Modal state at t₀ (default zero).
+
+        Returns
+        -------
+        ndarray, shape (N, r)
+            Modal states on the grid (nodal temperatures ``VQ @ w``, K).
+        """
         e = np.exp(-self.lam * step_s)
         g = -np.expm1(-self.lam * step_s) / self.lam
         W = np.empty_like(F)
@@ -200,18 +266,44 @@ class ResponseModel:
         return W
 
 
-def response_model(structure, backend):
-    """The :class:`ResponseModel` of a structure, once per process."""
+def response_model(structure: Structure, backend: ReducedBackend | FullBackend) -> ResponseModel:
+    """The :class:`ResponseModel` of a structure, once per process.
+
+    Parameters
+    ----------
+    structure : Structure
+        The diagnosis structure (the cache key is its identity).
+    backend : ReducedBackend or FullBackend
+        Its ``basis``, if it has one, is added to the response model's basis.
+
+    Returns
+    -------
+    ResponseModel
+        Built on the first call for ``structure``, then reused.
+    """
     return cached(("gap-discovery-rom", id(structure)),
                   lambda: ResponseModel(structure, getattr(backend, "basis", None)))
 
 
 # ============================================================================= the dictionary
-def driver_signals(drive, machine):
+def driver_signals(drive: Drive, machine: Machine) -> dict[str, np.ndarray]:
     """Time signals (N,) on the drive's grid, one per :data:`DRIVERS` entry (dimensionless, 1 at the reference).
 
     Held over each step as the drive holds the source powers: its step means where it has them
     (``Drive.step_mean``), else the grid values.
+
+    Parameters
+    ----------
+    drive : Drive
+        Operating conditions on the grid (spindle speed, rpm; feeds, mm/min).
+    machine : Machine
+        Gives the reference speed, rpm: the largest of its spindle-driven sources (9000 rpm without one).
+
+    Returns
+    -------
+    dict of str to ndarray
+        ``spindle``: |speed| / reference; ``spindle_on``: 1 while the spindle turns; ``feed``: the largest
+        |axis feed| / :data:`FEED_REFERENCE_MM_MIN`; each shape (N,).
     """
     refs = [src.reference for src in machine.definition.sources if src.driver == "spindle"]
     ref = max(refs) if refs else 9000.0
@@ -233,8 +325,24 @@ def _cell(part, part_tets, centroids, volumes, centre, grid_m, min_tets=3):
     return part, sel, (volumes[sel] @ centroids[sel]) / volumes[sel].sum()
 
 
-def source_cells(machine, grid_m=GRID_M, min_tets=3):
-    """Candidate source cells: per part and grid point, the tets with centroid in the cube → [(part, tets, centroid)]."""
+def source_cells(machine: Machine, grid_m: float = GRID_M,
+                 min_tets: int = 3) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """Candidate source cells: per part and grid point, the tets with centroid in the cube → [(part, tets, centroid)].
+
+    Parameters
+    ----------
+    machine : Machine
+        Gives the mesh.
+    grid_m : float, default GRID_M
+        Grid spacing and cube edge, m.
+    min_tets : int, default 3
+        Fewest tetrahedra a cell needs.
+
+    Returns
+    -------
+    list of (str, ndarray, ndarray)
+        Part name, its tetrahedron ids in the cube (int), and their volume-weighted centroid (3,), m.
+    """
     mesh = machine.mesh
     cents = mesh.points[mesh.tets].mean(axis=1)
     vol = np.abs(mesh.volumes)
@@ -253,8 +361,21 @@ def source_cells(machine, grid_m=GRID_M, min_tets=3):
     return out
 
 
-def source_loads(machine, cells):
-    """Load columns (n, k): 1 W spread uniformly by volume over each cell's tetrahedra (as a HeatSource box)."""
+def source_loads(machine: Machine, cells: Sequence[tuple[str, np.ndarray, np.ndarray | None]]) -> sp.csc_matrix:
+    """Load columns (n, k): 1 W spread uniformly by volume over each cell's tetrahedra (as a HeatSource box).
+
+    Parameters
+    ----------
+    machine : Machine
+        Gives the mesh and the thermal nodes.
+    cells : sequence of (str, ndarray, ndarray or None)
+        Cells as :func:`source_cells` gives them; only the tetrahedron ids are used.
+
+    Returns
+    -------
+    scipy.sparse.csc_matrix, shape (n_nodes, k)
+        Nodal load per watt of each cell's source (W/W; each column sums to 1).
+    """
     mesh, thermal = machine.mesh, machine.thermal
     vol = np.abs(mesh.volumes)
     rows, cols, vals = [], [], []
@@ -267,8 +388,22 @@ def source_loads(machine, cells):
                          shape=(thermal.n_nodes, len(cells)))
 
 
-def part_output_columns(structure, rows):
-    """Per part: the output rows (k, n) restricted to the part's nodes, interface nodes split by volume share."""
+def part_output_columns(structure: Structure, rows: Sequence[int]) -> dict[str, sp.csr_matrix]:
+    """Per part: the output rows (k, n) restricted to the part's nodes, interface nodes split by volume share.
+
+    Parameters
+    ----------
+    structure : Structure
+        Gives the mesh, the thermal nodes and the output matrix (FE channels, channel units per K).
+    rows : sequence of int
+        Rows of the output matrix (e.g. the drift and strain lines).
+
+    Returns
+    -------
+    dict of str to scipy.sparse.csr_matrix
+        Part → its share of the rows, shape (len(rows), n_nodes) (µm/K, µε/K); the parts' shares sum to
+        the rows.
+    """
     machine = structure.machine
     mesh, thermal = machine.mesh, machine.thermal
     vol = np.abs(mesh.volumes)
@@ -327,9 +462,22 @@ class _Atom:
 
 
 class Dictionary:
-    """The candidate columns of :func:`discover` (see the module docstring), projected like the residual."""
+    """The candidate columns of :func:`discover` (see the module docstring), projected like the residual.
 
-    def __init__(self, model, evaluator, base_prediction, kinds=KINDS):
+    Parameters
+    ----------
+    model : GapModel
+        The diagnosis model (structure, backend, drive, measured times).
+    evaluator : Evaluator
+        With weights set; the atoms are its channels, centred, weighted and nuisance-projected.
+    base_prediction : Prediction
+        The prediction whose residual is searched (its nuisance responses are projected out).
+    kinds : sequence of str, default KINDS
+        Candidate kinds to build (of :data:`KINDS`).
+    """
+
+    def __init__(self, model: GapModel, evaluator: Evaluator, base_prediction: Prediction,
+                 kinds: Sequence[str] = KINDS):
         s = model.structure
         self.model, self.ev, self.structure = model, evaluator, s
         self.rom = response_model(s, model.backend)
@@ -374,8 +522,22 @@ class Dictionary:
         return self._modal_drivers[driver]
 
     # --------------------------------------------------------------- candidates
-    def source_atoms(self, cells, driver):
-        """Projected atoms of unit sources in ``cells`` following ``driver``."""
+    def source_atoms(self, cells: Sequence[tuple[str, np.ndarray, np.ndarray]], driver: str) -> list[_Atom]:
+        """Projected atoms of unit sources in ``cells`` following ``driver``.
+
+        Parameters
+        ----------
+        cells : sequence of (str, ndarray, ndarray)
+            Part, tetrahedron ids and centroid (3,), m, as :func:`source_cells` gives them.
+        driver : str
+            Key of :data:`DRIVERS`.
+
+        Returns
+        -------
+        list of _Atom
+            One per cell: its projected fit and held-out vectors; its value is a power in the unit
+            ``DRIVERS[driver][1]`` (W, at the driver's reference).
+        """
         Z = self._driver_states(driver)
         bm = self.rom.modal(source_loads(self.structure.machine, cells))
         unit, atoms = DRIVERS[driver][1], []
@@ -631,13 +793,39 @@ def _discoveries(ev, proj, model, chosen, current, r_fit, r_hold, seed):
     return items
 
 
-def discover(model, evaluator, base=None, kinds=KINDS, max_atoms=MAX_ATOMS, seed=0):
+def discover(model: GapModel, evaluator: Evaluator, base: FitResult | None = None, kinds: Sequence[str] = KINDS,
+             max_atoms: int = MAX_ATOMS, seed: int = 0) -> DiscoveryResult:
     """Search the residual of ``base`` (default: the nominal twin) for unmodelled effects; see the module docstring.
 
     ``model`` is the :class:`~twin.gap.model.GapModel` and ``evaluator`` the
     :class:`~twin.gap.fit.Evaluator` of the diagnosis (weights set, e.g. by
     :func:`twin.gap.fit.nominal_result`); ``base`` a :class:`~twin.gap.fit.FitResult`.
     Returns a :class:`DiscoveryResult`; ``seed`` fixes the bootstrap.
+
+    Parameters
+    ----------
+    model : GapModel
+        The diagnosis model.
+    evaluator : Evaluator
+        The diagnosis evaluator, weights set.
+    base : FitResult, optional
+        The fit whose residual is searched (default: the nominal twin).
+    kinds : sequence of str, default KINDS
+        Candidate kinds (of :data:`KINDS`).
+    max_atoms : int, default MAX_ATOMS
+        Most atoms accepted.
+    seed : int, default 0
+        Seed of the bootstrap.
+
+    Returns
+    -------
+    DiscoveryResult
+        The accepted atoms, held-out change per group (channel units), candidate count, time (s), rejections.
+
+    Raises
+    ------
+    TwinInputError
+        A kind not in :data:`KINDS`.
     """
     t0 = time.perf_counter()
     unknown = sorted(set(kinds) - set(KINDS))
@@ -682,8 +870,23 @@ def _bootstrap(ev, chosen, coef, current, times_s, seed):
     return [(c - inflate * (c - low), c + inflate * (high - c)) for c, low, high in zip(coef, lo, hi)]
 
 
-def render_discoveries(result, machine, path):
-    """3-D render (PNG) of the machine with the discovered sources marked and labelled with their power."""
+def render_discoveries(result: DiscoveryResult, machine: Machine, path: str | Path) -> Path | None:
+    """3-D render (PNG) of the machine with the discovered sources marked and labelled with their power.
+
+    Parameters
+    ----------
+    result : DiscoveryResult
+        What :func:`discover` found.
+    machine : Machine
+        The machine rendered.
+    path : str or Path
+        The PNG file.
+
+    Returns
+    -------
+    Path or None
+        ``path``, or None (nothing written) when no source was discovered.
+    """
     from ..infra.render import render_machine
 
     src = [d for d in result.items if d.kind == "source"]

@@ -32,20 +32,44 @@ without sensors take the room.
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping, Sequence
+
 import numpy as np
 
 from fea.inputs import interval_means
 
-from ..core.machine import power_input
+from ..core.machine import Machine, power_input
 from ..core.machine_definition import room_zone
+from ..core.scenario import Scenario
 from ..errors import TwinInputError
+from .measured import Record
 from .signals import lag
 
 
 class Drive:
-    """Conditions on ``grid`` (uniform, step ``step_s``); see the module docstring."""
+    """Conditions on ``grid`` (uniform, step ``step_s``); see the module docstring.
 
-    def __init__(self, grid, spindle_rpm, feed_mm_min, gradient_K_per_m, zones, lags_s, room_zone):
+    Parameters
+    ----------
+    grid : ndarray, shape (n,)
+        Uniform time grid, s.
+    spindle_rpm : ndarray, shape (n,)
+        Spindle speed on the grid, rpm.
+    feed_mm_min : mapping of str to ndarray, shape (n,)
+        Axis (``x``, ``y``, ``z``) → feed on the grid, mm/min.
+    gradient_K_per_m : float or ndarray, shape (n,)
+        Vertical ambient gradient, K/m (a constant is repeated on the grid).
+    zones : sequence of str
+        The machine's convection zones.
+    lags_s : mapping of str to float
+        Zone → air lag behind the room, s (zones without a lag may be absent).
+    room_zone : str
+        The zone whose ambient is the room.
+    """
+
+    def __init__(self, grid: np.ndarray, spindle_rpm: np.ndarray, feed_mm_min: Mapping[str, np.ndarray],
+                 gradient_K_per_m: float | np.ndarray, zones: Sequence[str], lags_s: Mapping[str, float],
+                 room_zone: str):
         self.grid = np.asarray(grid, float)
         self.step_s = float(self.grid[1] - self.grid[0])
         self.spindle_rpm = np.asarray(spindle_rpm, float)
@@ -59,17 +83,48 @@ class Drive:
     def __len__(self):
         return len(self.grid)
 
-    def operating_at(self, times_s):
-        """Spindle speed (k,) and feeds {axis: (k,)} at any times inside the grid (continuous time)."""
+    def operating_at(self, times_s: float | np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Spindle speed (k,) and feeds {axis: (k,)} at any times inside the grid (continuous time).
+
+        Parameters
+        ----------
+        times_s : float or ndarray, shape (k,)
+            Times, s.
+
+        Returns
+        -------
+        spindle_rpm : ndarray, shape (k,)
+            Spindle speed, rpm.
+        feed_mm_min : dict of str to ndarray, shape (k,)
+            Axis → feed, mm/min.
+        """
         raise NotImplementedError
 
-    def breakpoints_s(self):
-        """Times where the operating conditions may jump (interval means split there)."""
+    def breakpoints_s(self) -> Sequence[float] | np.ndarray:
+        """Times where the operating conditions may jump (interval means split there).
+
+        Returns
+        -------
+        sequence of float or ndarray
+            Jump times, s (none for the base class).
+        """
         return ()
 
-    def step_mean(self, fn):
+    def step_mean(self, fn: Callable[[np.ndarray, dict[str, np.ndarray]], np.ndarray]) -> np.ndarray:
         """``fn(rpm, feeds)`` averaged exactly over every grid step → (n, …): row k is the mean over
-        (grid[k−1], grid[k]] (what the solvers hold over step k), row 0 the value at grid[0]."""
+        (grid[k−1], grid[k]] (what the solvers hold over step k), row 0 the value at grid[0].
+
+        Parameters
+        ----------
+        fn : callable
+            ``fn(rpm, feeds)`` of the spindle speed (k,), rpm, and feeds {axis: (k,)}, mm/min; returns values
+            (k,) or (k, …) in any unit (e.g. a source's power, W).
+
+        Returns
+        -------
+        ndarray, shape (n,) or (n, …)
+            Step means on the grid, in the unit of ``fn``.
+        """
         def at(t):
             rpm, feeds = self.operating_at(t)
             return np.asarray(fn(rpm, feeds), float)
@@ -78,26 +133,78 @@ class Drive:
         means = interval_means(at, self.grid, self.breakpoints_s())
         return np.concatenate([first.reshape(1, -1), means]).reshape((len(self.grid),) + first.shape[1:])
 
-    def idle(self):
-        """A copy with the spindle and feeds stopped (for the steady start)."""
+    def idle(self) -> IdleDrive:
+        """A copy with the spindle and feeds stopped (for the steady start).
+
+        Returns
+        -------
+        IdleDrive
+            Wraps this drive; ambients and gradient unchanged.
+        """
         return IdleDrive(self)
 
-    def room(self, extra_gradient=None):
-        """The room's ambient at the reference height (unlagged), °C."""
+    def room(self, extra_gradient: float | np.ndarray | None = None) -> np.ndarray:
+        """The room's ambient at the reference height (unlagged), °C.
+
+        Parameters
+        ----------
+        extra_gradient : float or ndarray, shape (n,), optional
+            Vertical gradient added to the drive's, K/m (moves ambients estimated from air sensors at other
+            heights).
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            Room ambient on the grid, °C.
+        """
         raise NotImplementedError
 
-    def zone_ambient(self, extra_gradient=None, lags_s=None):
-        """Ambient of every zone (dict zone → (n,)) under an extra gradient (K/m, (n,)) and zone lags (s)."""
+    def zone_ambient(self, extra_gradient: float | np.ndarray | None = None,
+                     lags_s: Mapping[str, float] | None = None) -> dict[str, np.ndarray]:
+        """Ambient of every zone (dict zone → (n,)) under an extra gradient (K/m, (n,)) and zone lags (s).
+
+        Parameters
+        ----------
+        extra_gradient : float or ndarray, shape (n,), optional
+            Vertical gradient added to the drive's, K/m.
+        lags_s : mapping of str to float, optional
+            Zone → air lag, s, replacing the drive's lag of that zone.
+
+        Returns
+        -------
+        dict of str to ndarray, shape (n,)
+            Zone → ambient at the reference height on the grid, °C.
+        """
         raise NotImplementedError
 
-    def room_excursion(self):
-        """The room ambient minus its mean over the record, K (drives the stratification effect)."""
+    def room_excursion(self) -> np.ndarray:
+        """The room ambient minus its mean over the record, K (drives the stratification effect).
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            Room ambient excursion on the grid, K.
+        """
         room = self.room()
         return room - room.mean()
 
-    def inputs(self, machine, n_extra=0):
+    def inputs(self, machine: Machine, n_extra: int = 0) -> np.ndarray:
         """The nominal thermal input matrix (n, m + n_extra) of a machine, extra columns zero; source powers
-        as step means (:meth:`step_mean`), the other inputs at the grid points."""
+        as step means (:meth:`step_mean`), the other inputs at the grid points.
+
+        Parameters
+        ----------
+        machine : Machine
+            The built machine (its m thermal inputs).
+        n_extra : int, default 0
+            Number of zero columns appended (the effects' extra inputs).
+
+        Returns
+        -------
+        ndarray, shape (n, m + n_extra)
+            In the order of ``machine.thermal.input_names`` (ambients °C, gradient K/m, powers W), then the
+            extra columns.
+        """
         U = machine.input_matrix(self.spindle_rpm, self.feed_mm_min, self.zone_ambient(), self.gradient_K_per_m)
         names = machine.thermal.input_names
         for src in machine.definition.sources:
@@ -106,9 +213,15 @@ class Drive:
 
 
 class IdleDrive:
-    """A drive with the spindle and feeds stopped; everything else delegates to the drive it wraps."""
+    """A drive with the spindle and feeds stopped; everything else delegates to the drive it wraps.
 
-    def __init__(self, drive):
+    Parameters
+    ----------
+    drive : Drive
+        The drive wrapped (grid, ambients, gradient, zones).
+    """
+
+    def __init__(self, drive: Drive):
         self._drive = drive
         self.spindle_rpm = np.zeros_like(drive.spindle_rpm)
         self.feed_mm_min = {a: np.zeros_like(v) for a, v in drive.feed_mm_min.items()}
@@ -118,17 +231,65 @@ class IdleDrive:
             raise AttributeError(name)
         return getattr(self._drive, name)
 
-    def operating_at(self, times_s):
+    def operating_at(self, times_s: float | np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Zero spindle speed and feeds at any times.
+
+        Parameters
+        ----------
+        times_s : float or ndarray, shape (k,)
+            Times, s.
+
+        Returns
+        -------
+        spindle_rpm : ndarray, shape (k,)
+            Zeros, rpm.
+        feed_mm_min : dict of str to ndarray, shape (k,)
+            Axis → zeros, mm/min.
+        """
         t = np.atleast_1d(np.asarray(times_s, float))
         return np.zeros(t.shape), {a: np.zeros(t.shape) for a in self.feed_mm_min}
 
-    def breakpoints_s(self):
+    def breakpoints_s(self) -> Sequence[float] | np.ndarray:
+        """No jump times: the conditions are constant.
+
+        Returns
+        -------
+        sequence of float or ndarray
+            Empty, s.
+        """
         return ()
 
-    def step_mean(self, fn):
+    def step_mean(self, fn: Callable[[np.ndarray, dict[str, np.ndarray]], np.ndarray]) -> np.ndarray:
+        """As :meth:`Drive.step_mean`, with the spindle and feeds stopped.
+
+        Parameters
+        ----------
+        fn : callable
+            ``fn(rpm, feeds)`` of the spindle speed (k,), rpm, and feeds {axis: (k,)}, mm/min.
+
+        Returns
+        -------
+        ndarray, shape (n,) or (n, …)
+            Step means on the grid, in the unit of ``fn``.
+        """
         return Drive.step_mean(self, fn)
 
-    def inputs(self, machine, n_extra=0):
+    def inputs(self, machine: Machine, n_extra: int = 0) -> np.ndarray:
+        """As :meth:`Drive.inputs`, with the spindle and feeds stopped (the ambients and gradient of the wrapped
+        drive).
+
+        Parameters
+        ----------
+        machine : Machine
+            The built machine (its m thermal inputs).
+        n_extra : int, default 0
+            Number of zero columns appended.
+
+        Returns
+        -------
+        ndarray, shape (n, m + n_extra)
+            Thermal inputs (°C, K/m, W), then zero columns.
+        """
         return Drive.inputs(self, machine, n_extra)
 
 
@@ -138,9 +299,35 @@ class MeasuredDrive(Drive):
     ``air`` maps zone → list of (readings on the grid (n,), height above the
     reference height, m); ``fallback_room`` (n,) is used when the room has no
     air sensor.
+
+    Parameters
+    ----------
+    grid : ndarray, shape (n,)
+        Uniform time grid, s.
+    operating : Operating
+        Spindle speed and feeds in continuous time (their grid values are step means).
+    gradient_K_per_m : float or ndarray, shape (n,)
+        Vertical ambient gradient, K/m.
+    zones : sequence of str
+        The machine's convection zones.
+    lags_s : mapping of str to float
+        Zone → air lag behind the room, s.
+    room_zone : str
+        The zone whose ambient is the room.
+    air : mapping of str to list of (ndarray, float)
+        Zone → (readings on the grid (n,), °C; height above the reference height, m) of its air sensors.
+    fallback_room : ndarray, shape (n,), optional
+        Room ambient, °C, when the room zone has no air sensor.
+
+    Raises
+    ------
+    TwinInputError
+        No air sensor and no ``fallback_room``.
     """
 
-    def __init__(self, grid, operating, gradient_K_per_m, zones, lags_s, room_zone, air, fallback_room=None):
+    def __init__(self, grid: np.ndarray, operating: Operating, gradient_K_per_m: float | np.ndarray,
+                 zones: Sequence[str], lags_s: Mapping[str, float], room_zone: str,
+                 air: Mapping[str, list[tuple[np.ndarray, float]]], fallback_room: np.ndarray | None = None):
         self.operating = operating
         rpm = np.zeros(len(grid))
         super().__init__(grid, rpm, {a: rpm for a in operating.feeds}, gradient_K_per_m, zones, lags_s, room_zone)
@@ -160,10 +347,31 @@ class MeasuredDrive(Drive):
                        else "the room")
                 self.notes.append(f"zone {z!r} has no air sensor: it follows {how}")
 
-    def operating_at(self, times_s):
+    def operating_at(self, times_s: float | np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Measured spindle speed and feeds at any times (:class:`Operating`).
+
+        Parameters
+        ----------
+        times_s : float or ndarray, shape (k,)
+            Times, s.
+
+        Returns
+        -------
+        spindle_rpm : ndarray, shape (k,)
+            Spindle speed, rpm.
+        feed_mm_min : dict of str to ndarray, shape (k,)
+            Axis → feed, mm/min.
+        """
         return self.operating(times_s)
 
-    def breakpoints_s(self):
+    def breakpoints_s(self) -> Sequence[float] | np.ndarray:
+        """The change times of the measured (and scenario) spindle and feed signals.
+
+        Returns
+        -------
+        ndarray
+            ``Operating.edges_s``, s.
+        """
         return self.operating.edges_s
 
     def _measured_zone(self, zone, extra_gradient):
@@ -171,12 +379,40 @@ class MeasuredDrive(Drive):
         sensors = self.air[zone]
         return np.mean([reading - g * height for reading, height in sensors], axis=0)
 
-    def room(self, extra_gradient=None):
+    def room(self, extra_gradient: float | np.ndarray | None = None) -> np.ndarray:
+        """The room's ambient at the reference height: its air sensors' mean, each corrected by the gradient
+        times its height, or ``fallback_room``.
+
+        Parameters
+        ----------
+        extra_gradient : float or ndarray, shape (n,), optional
+            Vertical gradient added to the drive's, K/m.
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            Room ambient on the grid, °C.
+        """
         if self.room_zone in self.air:
             return self._measured_zone(self.room_zone, extra_gradient)
         return self.fallback_room.copy()
 
-    def zone_ambient(self, extra_gradient=None, lags_s=None):
+    def zone_ambient(self, extra_gradient: float | np.ndarray | None = None,
+                     lags_s: Mapping[str, float] | None = None) -> dict[str, np.ndarray]:
+        """Ambient of every zone: from its air sensors, else the room through the zone's lag, else the room.
+
+        Parameters
+        ----------
+        extra_gradient : float or ndarray, shape (n,), optional
+            Vertical gradient added to the drive's, K/m.
+        lags_s : mapping of str to float, optional
+            Zone → air lag, s, replacing the drive's lag of that zone.
+
+        Returns
+        -------
+        dict of str to ndarray, shape (n,)
+            Zone → ambient at the reference height on the grid, °C.
+        """
         lags = {**self.lags_s, **(lags_s or {})}
         room = self.room(extra_gradient)
         out = {}
@@ -191,9 +427,19 @@ class MeasuredDrive(Drive):
 
 
 class ScenarioDrive(Drive):
-    """Conditions of a scenario (the truth of the benchmark): true zone ambients, events and lags."""
+    """Conditions of a scenario (the truth of the benchmark): true zone ambients, events and lags.
 
-    def __init__(self, scenario, machine, grid):
+    Parameters
+    ----------
+    scenario : Scenario
+        The scenario (operating conditions, ambient, events).
+    machine : Machine
+        The built machine (its zones and zone lags).
+    grid : ndarray, shape (n,)
+        Uniform time grid, s.
+    """
+
+    def __init__(self, scenario: Scenario, machine: Machine, grid: np.ndarray):
         rpm, feeds = scenario.operating(grid)
         d = machine.definition
         super().__init__(grid, rpm, feeds, np.full(len(grid), scenario.ambient.gradient_K_per_m), d.zones,
@@ -202,16 +448,65 @@ class ScenarioDrive(Drive):
         self._room = scenario.zone_ambient(self.grid, [self.room_zone])[self.room_zone]
         self._cache = {}
 
-    def room(self, extra_gradient=None):
+    def room(self, extra_gradient: float | np.ndarray | None = None) -> np.ndarray:
+        """The scenario's room ambient at the reference height (true, so ``extra_gradient`` does not move it).
+
+        Parameters
+        ----------
+        extra_gradient : float or ndarray, shape (n,), optional
+            Ignored, K/m.
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            Room ambient on the grid, °C.
+        """
         return self._room.copy()
 
-    def operating_at(self, times_s):
+    def operating_at(self, times_s: float | np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """The scenario's spindle speed and feeds at any times.
+
+        Parameters
+        ----------
+        times_s : float or ndarray, shape (k,)
+            Times, s.
+
+        Returns
+        -------
+        spindle_rpm : ndarray, shape (k,)
+            Spindle speed, rpm.
+        feed_mm_min : dict of str to ndarray, shape (k,)
+            Axis → feed, mm/min.
+        """
         return self.scenario.operating(np.atleast_1d(np.asarray(times_s, float)))
 
-    def breakpoints_s(self):
+    def breakpoints_s(self) -> Sequence[float] | np.ndarray:
+        """The scenario's jump and kink times (:meth:`twin.core.scenario.Scenario.breakpoints_s`).
+
+        Returns
+        -------
+        ndarray
+            Times, s.
+        """
         return self.scenario.breakpoints_s()
 
-    def zone_ambient(self, extra_gradient=None, lags_s=None):
+    def zone_ambient(self, extra_gradient: float | np.ndarray | None = None,
+                     lags_s: Mapping[str, float] | None = None) -> dict[str, np.ndarray]:
+        """The scenario's true ambient of every zone under zone lags (cached per lag set); ``extra_gradient`` does
+        not move the ambients at the reference height.
+
+        Parameters
+        ----------
+        extra_gradient : float or ndarray, shape (n,), optional
+            Ignored, K/m.
+        lags_s : mapping of str to float, optional
+            Zone → air lag, s, replacing the drive's lag of that zone.
+
+        Returns
+        -------
+        dict of str to ndarray, shape (n,)
+            Zone → ambient at the reference height on the grid, °C (copies).
+        """
         lags = {**self.lags_s, **(lags_s or {})}
         key = tuple(sorted(lags.items()))
         if key not in self._cache:
@@ -225,9 +520,21 @@ class Operating:
 
     A measured signal is piecewise constant: sample j holds from ``position`` of the way from sample j−1 to
     sample j up to ``position`` of the way to sample j+1 (see the module docstring).
+
+    Parameters
+    ----------
+    times_s : ndarray, shape (n_samples,)
+        Sample times of the record, s, increasing.
+    measured : mapping of str to ndarray, shape (n_samples,)
+        Channel → samples: ``spindle`` (rpm) and ``feed_x``, ``feed_y``, ``feed_z`` (mm/min), any of them.
+    scenario : Scenario, optional
+        Supplies the channels not measured (else they are zero).
+    position : float, default 0.5
+        Where between two samples a change is put, as a fraction of the sample interval (0 … 1).
     """
 
-    def __init__(self, times_s, measured, scenario=None, position=0.5):
+    def __init__(self, times_s: np.ndarray, measured: Mapping[str, np.ndarray], scenario: Scenario | None = None,
+                 position: float = 0.5):
         t = np.asarray(times_s, float)
         self.position = float(position)
         self.edges = t[:-1] + self.position * np.diff(t)
@@ -253,12 +560,37 @@ class Operating:
         return signal("spindle", rpm_sc), feeds
 
 
-def measured_drive(machine, grid, record, scenario=None, position=0.5):
+def measured_drive(machine: Machine, grid: np.ndarray, record: Record, scenario: Scenario | None = None,
+                   position: float = 0.5) -> MeasuredDrive:
     """A :class:`MeasuredDrive` for a measured record (see :mod:`twin.gap.measured`) on ``grid``.
 
     Spindle speed and feeds are piecewise-constant signals (:class:`Operating`, change times at ``position``
     between samples); ambients are interpolated linearly.  Missing spindle or feed channels come from the
     scenario, or are zero (feeds) / an error (spindle).
+
+    Parameters
+    ----------
+    machine : Machine
+        The built machine (zones, zone lags).
+    grid : ndarray, shape (n,)
+        Uniform time grid of the twin, s.
+    record : Record
+        The measured record matched to the machine.
+    scenario : Scenario, optional
+        Supplies the spindle, feeds, gradient and room ambient the record lacks.
+    position : float, default 0.5
+        Where between two differing samples a spindle or feed change is put, fraction of the sample interval
+        (0: earliest, 0.5: midpoint, 1: latest).
+
+    Returns
+    -------
+    MeasuredDrive
+        With ``notes`` on what came from the scenario or was assumed.
+
+    Raises
+    ------
+    TwinInputError
+        No spindle-speed channel and no scenario, or no ambient at all.
     """
     d = machine.definition
     t = record.time_s

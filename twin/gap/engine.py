@@ -25,7 +25,9 @@ start input plus optional initial-field shapes, and return the FE outputs
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
@@ -33,6 +35,9 @@ import scipy.sparse as sp
 from fea.linsolve import factorize
 
 from ..rom.reduction import krylov_basis, slowest_rate
+
+if TYPE_CHECKING:
+    from .structure import Structure
 
 @dataclass(frozen=True)
 class Pencil:
@@ -45,7 +50,8 @@ class Pencil:
     input_matrix: object
 
     @property
-    def n_nodes(self):
+    def n_nodes(self) -> int:
+        """Number of thermal nodes n."""
         return self.mass.shape[0]
 
 
@@ -58,8 +64,25 @@ def _factor(matrix):
     return factorize(sp.csc_matrix(matrix), symmetric_positive_definite=True)
 
 
-def m_orthonormal_union(mass, blocks, tolerance=1e-7):
-    """An M-orthonormal basis of the span of ``blocks`` (the first must be M-orthonormal already)."""
+def m_orthonormal_union(mass: sp.spmatrix | np.ndarray, blocks: Sequence[np.ndarray],
+                        tolerance: float = 1e-7) -> np.ndarray:
+    """An M-orthonormal basis of the span of ``blocks`` (the first must be M-orthonormal already).
+
+    Parameters
+    ----------
+    mass : sparse matrix or ndarray, shape (n, n)
+        Mass matrix M, J/K.
+    blocks : sequence of ndarray, shape (n, k_i)
+        Bases to unite, on thermal nodes.
+    tolerance : float, default 1e-7
+        Directions of a block whose M-norm after orthogonalisation is below ``tolerance`` times the block's
+        largest column M-norm are dropped.
+
+    Returns
+    -------
+    ndarray, shape (n, r)
+        V with Vᵀ M V = I, the first block's columns first.
+    """
     V = np.asarray(blocks[0], float)
     for W in blocks[1:]:
         W = np.array(W, float, copy=True)
@@ -75,24 +98,64 @@ def m_orthonormal_union(mass, blocks, tolerance=1e-7):
 
 
 class SimulationResult:
-    """Modal states W (N, r) of one reduced run and the map to outputs; see :meth:`ReducedBackend.simulate`."""
+    """Modal states W (N, r) of one reduced run and the map to outputs; see :meth:`ReducedBackend.simulate`.
 
-    def __init__(self, outputs, W=None, Q=None, backend=None, field_outputs=None):
+    Parameters
+    ----------
+    outputs : ndarray, shape (N, p_fe)
+        FE outputs on the grid in edge units (°C, µm, µε), without the constant output offset.
+    W : ndarray, shape (N, r), optional
+        Modal states of a reduced run (None for the full FE).
+    Q : ndarray, shape (r, r), optional
+        Eigenvectors of the reduced stiffness: reduced coordinates = Q · modal states.
+    backend : ReducedBackend or FullBackend, optional
+        The backend that ran.
+    field_outputs : dict of str to ndarray, shape (N, p_fe), optional
+        Field name → free response of the outputs per unit field coefficient.
+    """
+
+    def __init__(self, outputs: np.ndarray, W: np.ndarray | None = None, Q: np.ndarray | None = None,
+                 backend: ReducedBackend | FullBackend | None = None,
+                 field_outputs: dict[str, np.ndarray] | None = None):
         self.outputs = outputs
         self.W, self.Q, self.backend = W, Q, backend
         self.field_outputs = field_outputs or {}
 
-    def rows(self, reduced_rows):
-        """Outputs (N, k) of other rows given in the reduced basis (k, r) (e.g. candidate thermometers)."""
+    def rows(self, reduced_rows: np.ndarray) -> np.ndarray:
+        """Outputs (N, k) of other rows given in the reduced basis (k, r) (e.g. candidate thermometers).
+
+        Parameters
+        ----------
+        reduced_rows : ndarray, shape (k, r)
+            Output rows over thermal nodes times the basis (:meth:`ReducedBackend.reduce_rows`).
+
+        Returns
+        -------
+        ndarray, shape (N, k)
+            The rows' outputs on the grid (°C for rows that pick node temperatures).
+        """
         return self.W @ (np.asarray(reduced_rows) @ self.Q).T
 
 
 class ReducedBackend:
-    """See the module docstring.  ``structure`` is a :class:`~twin.gap.structure.Structure`."""
+    """See the module docstring.  ``structure`` is a :class:`~twin.gap.structure.Structure`.
+
+    Parameters
+    ----------
+    structure : Structure
+        The full-order twin with the library's inputs, system terms and fields.
+    nominal_order : int, default :data:`NOMINAL_ORDER`
+        Order of the nominal block-Krylov basis (at most n_nodes − 1).
+    term_order : int, default :data:`TERM_ORDER`
+        Order of the basis added per system term and bound.
+    keep_basis : bool, default True
+        Keep the basis V (n_nodes, r) for :meth:`reduce_rows`.
+    """
 
     name = "rom"
 
-    def __init__(self, structure, nominal_order=NOMINAL_ORDER, term_order=TERM_ORDER, keep_basis=True):
+    def __init__(self, structure: Structure, nominal_order: int = NOMINAL_ORDER, term_order: int = TERM_ORDER,
+                 keep_basis: bool = True):
         start = time.perf_counter()
         s = structure
         M, A0, B0 = s.mass, s.stiffness, s.input_matrix
@@ -129,18 +192,58 @@ class ReducedBackend:
             out.append((name, [b for b in bounds if abs(b) > 1e-12]))
         return out
 
-    def reduce_rows(self, rows):
-        """Rows over thermal nodes (k, n) in the reduced basis (k, r)."""
+    def reduce_rows(self, rows: np.ndarray | sp.spmatrix) -> np.ndarray:
+        """Rows over thermal nodes (k, n) in the reduced basis (k, r).
+
+        Parameters
+        ----------
+        rows : ndarray or sparse matrix, shape (k, n_nodes)
+            Output rows over thermal nodes.
+
+        Returns
+        -------
+        ndarray, shape (k, r)
+            The rows times the basis.
+
+        Raises
+        ------
+        RuntimeError
+            The backend was built with ``keep_basis=False``.
+        """
         if self.basis is None:
             raise RuntimeError("the reduced backend was built without its basis")
         return np.asarray(sp.csr_matrix(rows) @ self.basis) if sp.issparse(rows) else np.asarray(rows) @ self.basis
 
-    def simulate(self, U, step_s, coefficients=None, u0=None, fields=None, field_responses=()):
+    def simulate(self, U: np.ndarray, step_s: float, coefficients: Mapping[str, float] | None = None,
+                 u0: np.ndarray | None = None, fields: Mapping[str, float] | None = None,
+                 field_responses: Sequence[str] = ()) -> SimulationResult:
         """Outputs (N, p_fe) for inputs U (N, m) on a uniform grid of step ``step_s``.
 
         ``u0`` (m,): the steady start input (default U[0]); ``fields`` {name: coefficient}
         adds initial-field shapes to the start; ``field_responses`` names fields whose
         free responses (N, p_fe) per unit coefficient are returned too.
+
+        Parameters
+        ----------
+        U : ndarray, shape (N, m)
+            Inputs on the grid in the structure's input order (ambients °C, gradient K/m, powers W); row k is
+            held over step k.
+        step_s : float
+            Grid step, s.
+        coefficients : mapping of str to float, optional
+            System term → coefficient a (A₀ + a dA, B₀ + a dB).
+        u0 : ndarray, shape (m,), optional
+            Input of the steady initial state.
+        fields : mapping of str to float, optional
+            Initial-field name → coefficient, K (times the field's shape), added to the start.
+        field_responses : sequence of str, default ()
+            Fields whose free responses are returned.
+
+        Returns
+        -------
+        SimulationResult
+            ``outputs`` (N, p_fe) in edge units (°C, µm, µε) without offset, the modal states, and
+            ``field_outputs``.
         """
         coefficients = coefficients or {}
         Ar, Br = self.Ar0.copy(), self.Br0.copy()
@@ -175,16 +278,38 @@ class ReducedBackend:
 
 
 class FullBackend:
-    """The full FE system (see the module docstring); ``theta`` 1 = backward Euler, ½ = Crank–Nicolson."""
+    """The full FE system (see the module docstring); ``theta`` 1 = backward Euler, ½ = Crank–Nicolson.
+
+    Parameters
+    ----------
+    structure : Structure
+        The full-order twin with the library's inputs, system terms and fields.
+    theta : float, default 1.0
+        Implicitness of the θ-scheme.
+    """
 
     name = "fe"
 
-    def __init__(self, structure, theta=1.0):
+    def __init__(self, structure: Structure, theta: float = 1.0):
         self.structure = structure
         self.theta = float(theta)
         self.build_seconds = 0.0
 
-    def system(self, coefficients):
+    def system(self, coefficients: Mapping[str, float] | None) -> tuple[sp.csr_matrix, sp.csc_matrix]:
+        """The system matrices with the system terms' coefficients applied.
+
+        Parameters
+        ----------
+        coefficients : mapping of str to float or None
+            System term → coefficient a.
+
+        Returns
+        -------
+        A : scipy.sparse.csr_matrix, shape (n_nodes, n_nodes)
+            A₀ + Σ aᵢ dAᵢ, W/K.
+        B : scipy.sparse.csc_matrix, shape (n_nodes, m)
+            B₀ + Σ aᵢ dBᵢ (maps the inputs to nodal heat flows, W).
+        """
         s = self.structure
         A, B = s.stiffness, s.input_matrix
         for name, a in (coefficients or {}).items():
@@ -193,8 +318,31 @@ class FullBackend:
                 B = B + a * s.system_input_change(name)
         return sp.csr_matrix(A), sp.csc_matrix(B)
 
-    def simulate(self, U, step_s, coefficients=None, u0=None, fields=None, field_responses=()):
-        """As :meth:`ReducedBackend.simulate`."""
+    def simulate(self, U: np.ndarray, step_s: float, coefficients: Mapping[str, float] | None = None,
+                 u0: np.ndarray | None = None, fields: Mapping[str, float] | None = None,
+                 field_responses: Sequence[str] = ()) -> SimulationResult:
+        """As :meth:`ReducedBackend.simulate`.
+
+        Parameters
+        ----------
+        U : ndarray, shape (N, m)
+            Inputs on the grid (ambients °C, gradient K/m, powers W).
+        step_s : float
+            Grid step, s.
+        coefficients : mapping of str to float, optional
+            System term → coefficient a.
+        u0 : ndarray, shape (m,), optional
+            Input of the steady initial state (default U[0]).
+        fields : mapping of str to float, optional
+            Initial-field name → coefficient, K, added to the start.
+        field_responses : sequence of str, default ()
+            Fields whose free responses are returned.
+
+        Returns
+        -------
+        SimulationResult
+            ``outputs`` (N, p_fe) in edge units without offset and ``field_outputs``; no modal states.
+        """
         s = self.structure
         A, B = self.system(coefficients)
         M = s.mass
@@ -227,8 +375,26 @@ class FullBackend:
         return SimulationResult(out, backend=self, field_outputs=resp)
 
 
-def make_backend(structure, backend="rom", **options):
-    """A backend by name: ``rom`` (the parametric reduced model) or ``fe`` (full finite elements)."""
+def make_backend(structure: Structure, backend: str = "rom",
+                 **options: int | float | bool) -> ReducedBackend | FullBackend:
+    """A backend by name: ``rom`` (the parametric reduced model) or ``fe`` (full finite elements).
+
+    Parameters
+    ----------
+    structure : Structure
+        The full-order twin.
+    backend : str, default "rom"
+        ``rom`` (the reduced model) or ``fe`` (the full FE).
+    **options : int, float or bool
+        ``nominal_order``, ``term_order``, ``keep_basis`` (rom) or ``theta`` (fe); others are ignored.
+
+    Returns
+    -------
+    ReducedBackend or FullBackend
+        The backend, built.
+    """
+    if backend not in ("rom", "fe"):
+        raise ValueError(f"unknown gap backend {backend!r}; use 'rom' or 'fe'")
     if backend == "rom":
         return ReducedBackend(structure, **{k: v for k, v in options.items()
                                             if k in ("nominal_order", "term_order", "keep_basis")})

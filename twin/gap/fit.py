@@ -34,12 +34,15 @@ residual, times the participation ratio of the channels' correlation).
 from __future__ import annotations
 
 import time
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares, lsq_linear
 
-from .model import Prediction
+from ..core.machine import Machine
+from .effects import Effect
+from .model import GapModel, Prediction
 
 GROUPS = ("temperature", "air", "displacement", "strain")
 #: Model tolerance per channel group (K, K, µm, µε): residuals below it are as good as a twin gets (its
@@ -51,7 +54,19 @@ GROUP_UNIT = {"temperature": "K", "air": "K", "displacement": "µm", "strain": "
 
 @dataclass
 class Residual:
-    """Residuals (n, p) after offsets and nuisance, and the sums of squares on the fit and held-out rows."""
+    """Residuals (n, p) after offsets and nuisance, and the sums of squares on the fit and held-out rows.
+
+    Attributes
+    ----------
+    R : ndarray, shape (n_times, n_channels)
+        Measured − twin, in channel units (K, µm, µε); NaN where the channel has no valid sample.
+    offsets : ndarray, shape (n_channels,)
+        Constant offset per channel removed (mean over the valid fit rows), channel units.
+    nuisance : dict of str to float
+        Nuisance field → coefficient removed (K per unit shape).
+    sse_fit, sse_hold : float
+        Weighted sums of squares on the valid fit and held-out entries (dimensionless).
+    """
 
     R: np.ndarray
     offsets: np.ndarray
@@ -61,9 +76,24 @@ class Residual:
 
 
 class Evaluator:
-    """Residuals of predictions against the record's sensor channels (see the module docstring)."""
+    """Residuals of predictions against the record's sensor channels (see the module docstring).
 
-    def __init__(self, values, channel_index, kinds, fit_rows, hold_rows, noise=None):
+    Parameters
+    ----------
+    values : ndarray, shape (n_times, n_channels)
+        Measured channels at the record's times, in channel units (°C, µm, µε); NaN where missing.
+    channel_index : sequence of int
+        Column of each measured channel among the model's channels (:attr:`Prediction.values`).
+    kinds : sequence of str
+        Kind of each channel, one of :data:`GROUPS`.
+    fit_rows, hold_rows : ndarray of bool, shape (n_times,)
+        Rows of the fit part and of the held-out part.
+    noise : ndarray, shape (n_channels,), optional
+        White-noise level of each channel, channel units (default 0; NaN taken as 0).
+    """
+
+    def __init__(self, values: np.ndarray, channel_index: Sequence[int] | np.ndarray, kinds: Sequence[str],
+                 fit_rows: np.ndarray, hold_rows: np.ndarray, noise: np.ndarray | None = None):
         self.Y = np.asarray(values, float)
         self.mask = np.isfinite(self.Y)
         self.Yz = np.where(self.mask, self.Y, 0.0)
@@ -78,11 +108,18 @@ class Evaluator:
         self.weights = np.ones(len(self.cols))
         self.sqrt_w = np.ones(len(self.cols))
 
-    def groups(self):
+    def groups(self) -> dict[str, list[int]]:
+        """The channel groups present, in the order of :data:`GROUPS`.
+
+        Returns
+        -------
+        dict of str to list of int
+            Group → indices of its channels (among the evaluator's channels).
+        """
         return {g: [j for j, k in enumerate(self.kinds) if k == g] for g in GROUPS
                 if any(k == g for k in self.kinds)}
 
-    def set_weights(self):
+    def set_weights(self) -> None:
         """Group scales σ_g = max(model tolerance, noise level) and weights 1 / (σ_g² n_g); see the module docstring."""
         self.sigma = {}
         for g, idx in self.groups().items():
@@ -95,8 +132,21 @@ class Evaluator:
         """Per-channel mean over the valid fit rows of X (n, p)."""
         return np.where(self.fit_mask, X, 0.0).sum(axis=0) / np.maximum(self.n_fit, 1)
 
-    def residual(self, prediction, nuisance=True):
-        """:class:`Residual` of a :class:`~twin.gap.model.Prediction` (offsets and nuisance eliminated)."""
+    def residual(self, prediction: Prediction, nuisance: bool = True) -> Residual:
+        """:class:`Residual` of a :class:`~twin.gap.model.Prediction` (offsets and nuisance eliminated).
+
+        Parameters
+        ----------
+        prediction : Prediction
+            The twin's channels at the record's times and the nuisance responses.
+        nuisance : bool, default True
+            Eliminate the nuisance fields' free responses (weighted least squares on the fit rows).
+
+        Returns
+        -------
+        Residual
+            Residuals, offsets, nuisance coefficients and weighted sums of squares.
+        """
         P = prediction.values[:, self.cols]
         R0 = self.Yz - P
         names = list(prediction.nuisance) if nuisance else []
@@ -121,14 +171,39 @@ class Evaluator:
     def _flat_fit(self, X):
         return X[self.fit_mask]
 
-    def fit_vector(self, prediction):
-        """Weighted residual entries on the valid fit rows (for least squares)."""
+    def fit_vector(self, prediction: Prediction) -> np.ndarray:
+        """Weighted residual entries on the valid fit rows (for least squares).
+
+        Parameters
+        ----------
+        prediction : Prediction
+            The twin's channels at the record's times.
+
+        Returns
+        -------
+        ndarray, shape (n_entries,)
+            √w · r on the valid fit entries (row-major), dimensionless.
+        """
         res = self.residual(prediction)
         return (np.nan_to_num(res.R) * self.sqrt_w)[self.fit_mask]
 
     # ------------------------------------------------------------------ summaries
-    def summary(self, residual, names):
-        """RMS and max |r| per group and per channel on the fit and held-out rows (in channel units)."""
+    def summary(self, residual: Residual, names: Sequence[str]) -> dict[str, dict[str, dict[str, float]]]:
+        """RMS and max |r| per group and per channel on the fit and held-out rows (in channel units).
+
+        Parameters
+        ----------
+        residual : Residual
+            Residuals of a prediction.
+        names : sequence of str
+            Name of each evaluator channel (e.g. :func:`model_names`).
+
+        Returns
+        -------
+        dict
+            ``{"groups": {group: stats}, "channels": {name: stats}}``, stats ``fit_rms``, ``fit_max``,
+            ``hold_rms``, ``hold_max`` in channel units (K, µm, µε; NaN without samples).
+        """
         out = {"groups": {}, "channels": {}}
         for g, idx in self.groups().items():
             out["groups"][g] = _stats(residual.R[:, idx], self.fit_rows, self.hold_rows)
@@ -147,8 +222,23 @@ def _stats(R, fit_rows, hold_rows):
     return out
 
 
-def effective_samples(residual, evaluator, rows):
-    """Effectively independent residual samples on ``rows`` (see the module docstring)."""
+def effective_samples(residual: Residual, evaluator: Evaluator, rows: np.ndarray) -> float:
+    """Effectively independent residual samples on ``rows`` (see the module docstring).
+
+    Parameters
+    ----------
+    residual : Residual
+        Residuals (usually the nominal twin's).
+    evaluator : Evaluator
+        Defines the channel groups.
+    rows : ndarray of bool, shape (n_times,)
+        The rows counted (fit or held-out).
+
+    Returns
+    -------
+    float
+        n_eff summed over the groups, at least 2.
+    """
     total = 0.0
     for idx in evaluator.groups().values():
         R = residual.R[rows][:, idx]
@@ -176,9 +266,17 @@ def effective_samples(residual, evaluator, rows):
 
 # ============================================================================= parameter coordinates
 class Coordinates:
-    """[0, 1]-scaled (and log where marked) coordinates of the parameters of a set of effects."""
+    """[0, 1]-scaled (and log where marked) coordinates of the parameters of a set of effects.
 
-    def __init__(self, effects, machine):
+    Parameters
+    ----------
+    effects : iterable of Effect
+        The effects, their parameters concatenated in this order.
+    machine : Machine
+        Resolves the parameters' nominals and bounds.
+    """
+
+    def __init__(self, effects: Iterable[Effect], machine: Machine):
         self.effects = list(effects)
         self.params = [(e, p) for e in self.effects for p in e.parameters(machine)]
         self.sizes = [len(e.parameters(machine)) for e in self.effects]
@@ -187,18 +285,54 @@ class Coordinates:
         self.log = np.array([p.log for _, p in self.params])
         self.nominal_values = np.array([p.nominal for _, p in self.params])
 
-    def values(self, u):
+    def values(self, u: Sequence[float] | np.ndarray) -> np.ndarray:
+        """Parameter values from unit coordinates.
+
+        Parameters
+        ----------
+        u : array_like, shape (k,)
+            Unit coordinates, 0 at the lower bound, 1 at the upper (log10-scaled where marked).
+
+        Returns
+        -------
+        ndarray, shape (k,)
+            Parameter values, in each parameter's unit.
+        """
         x = self.lo + np.asarray(u, float) * (self.hi - self.lo)
         out = x.copy()
         out[self.log] = 10.0 ** x[self.log]
         return out
 
-    def unit(self, values):
+    def unit(self, values: Sequence[float] | np.ndarray) -> np.ndarray:
+        """Unit coordinates of parameter values (the inverse of :meth:`values`), clipped to [0, 1].
+
+        Parameters
+        ----------
+        values : array_like, shape (k,)
+            Parameter values, in each parameter's unit.
+
+        Returns
+        -------
+        ndarray, shape (k,)
+            Unit coordinates in [0, 1].
+        """
         v = np.asarray(values, float)
         x = np.where(self.log, np.log10(np.maximum(v, 1e-300)), v)
         return np.clip((x - self.lo) / (self.hi - self.lo), 0.0, 1.0)
 
-    def split(self, values):
+    def split(self, values: Sequence[float] | np.ndarray) -> list[tuple[Effect, np.ndarray]]:
+        """Parameter values split per effect, as :meth:`~twin.gap.model.GapModel.predict` takes them.
+
+        Parameters
+        ----------
+        values : array_like, shape (k,)
+            Parameter values of all the effects, concatenated.
+
+        Returns
+        -------
+        list of (Effect, ndarray)
+            ``[(effect, θ), …]``.
+        """
         out, k = [], 0
         for e, n in zip(self.effects, self.sizes):
             out.append((e, np.asarray(values[k:k + n], float)))
@@ -206,13 +340,42 @@ class Coordinates:
         return out
 
     @property
-    def labels(self):
+    def labels(self) -> list[str]:
+        """``effect.parameter`` label of every parameter."""
         return [f"{e.name}.{p.name}" for e, p in self.params]
 
 
 @dataclass
 class FitResult:
-    """One fitted model (an effect, a pair, or the nominal twin) and its evidence."""
+    """One fitted model (an effect, a pair, or the nominal twin) and its evidence.
+
+    Attributes
+    ----------
+    name : str
+        Effect names joined by ``+``, or ``nominal``.
+    effects, labels, units : list of str
+        Effect names; ``effect.parameter`` label and unit of every parameter.
+    values, sd : ndarray, shape (k,)
+        Fitted parameters and their standard deviations, in the parameters' units.
+    residual : Residual
+        Residuals at the fit.
+    summary : dict
+        :meth:`Evaluator.summary` of the residuals.
+    seconds : float
+        Wall time of the fit, s.
+    nfev : int
+        Model runs of the fit.
+    linear : bool
+        Fitted by linear least squares.
+    bic, delta_bic : float
+        BIC relative to the nominal twin and ΔBIC = −BIC (set by :func:`score`).
+    n_eff_fit : float
+        Effectively independent samples of the fit rows.
+    prediction : Prediction
+        The twin at the fit.
+    notes : list of str
+        Remarks (parameters at a bound).
+    """
 
     name: str
     effects: list
@@ -232,10 +395,18 @@ class FitResult:
     notes: list = field(default_factory=list)
 
     @property
-    def k(self):
+    def k(self) -> int:
+        """Number of fitted parameters."""
         return len(self.values)
 
-    def params(self):
+    def params(self) -> list[dict[str, float | str]]:
+        """The fitted parameters as records.
+
+        Returns
+        -------
+        list of dict
+            ``name``, ``value``, ``sd`` (in ``unit``) and ``unit`` of every parameter.
+        """
         return [{"name": lab, "value": float(v), "sd": float(s), "unit": u}
                 for lab, v, s, u in zip(self.labels, self.values, self.sd, self.units)]
 
@@ -285,8 +456,28 @@ def _fit_nonlinear(model, evaluator, co, start, max_nfev):
     return values, J, len(cache) + len(values)
 
 
-def fit_effects(model, evaluator, effects, start=None, max_nfev=60):
-    """Fit the parameters of ``effects`` (one or several, jointly) → :class:`FitResult`."""
+def fit_effects(model: GapModel, evaluator: Evaluator, effects: Sequence[Effect], start: np.ndarray | None = None,
+                max_nfev: int = 60) -> FitResult:
+    """Fit the parameters of ``effects`` (one or several, jointly) → :class:`FitResult`.
+
+    Parameters
+    ----------
+    model : GapModel
+        The twin of the record.
+    evaluator : Evaluator
+        Residuals and weights (set before, e.g. by :func:`nominal_result`).
+    effects : sequence of Effect
+        The effects fitted jointly; linear fit when all are linear.
+    start : ndarray, shape (k,), optional
+        Extra starting values of a nonlinear fit, in the parameters' units.
+    max_nfev : int, default 60
+        Function evaluations per local nonlinear fit.
+
+    Returns
+    -------
+    FitResult
+        Values, standard deviations, residuals and summary (no BIC yet: :func:`score`).
+    """
     t0 = time.perf_counter()
     co = Coordinates(effects, model.structure.machine)
     linear = all(e.linear for e in effects)
@@ -335,7 +526,21 @@ def _starting_points(co, start, fun):
     return [cands[i] for i in np.argsort(costs)[:N_STARTS]]
 
 
-def model_names(model, evaluator):
+def model_names(model: GapModel, evaluator: Evaluator) -> list[str]:
+    """Names of the evaluator's channels among the model's channels.
+
+    Parameters
+    ----------
+    model : GapModel
+        The twin (its structure names the channels).
+    evaluator : Evaluator
+        Its ``cols`` index the model's channels.
+
+    Returns
+    -------
+    list of str
+        Channel name of every evaluator column.
+    """
     return [model.structure.names[c] for c in evaluator.cols]
 
 
@@ -356,8 +561,19 @@ def _jacobian(fun, values, co, rel=1e-3):
     return -np.column_stack(cols)
 
 
-def hac_bandwidth(scores):
-    """Bartlett bandwidth (lags) of Andrews (1991) from an AR(1) fit to each score series (n, k), capped at n/2."""
+def hac_bandwidth(scores: np.ndarray) -> int:
+    """Bartlett bandwidth (lags) of Andrews (1991) from an AR(1) fit to each score series (n, k), capped at n/2.
+
+    Parameters
+    ----------
+    scores : ndarray, shape (n_rows, k)
+        Score series, one column per parameter (equal weights).
+
+    Returns
+    -------
+    int
+        Bandwidth, lags (time rows), from 1 to max(n_rows // 2, 1).
+    """
     n = len(scores)
     x = scores - scores.mean(axis=0)
     num = np.sum(x[1:] * x[:-1], axis=0)
@@ -367,15 +583,29 @@ def hac_bandwidth(scores):
     return int(np.clip(np.ceil(1.1447 * (alpha * n) ** (1 / 3)), 1, max(n // 2, 1)))
 
 
-def held_out_inflation(residual, evaluator):
+def held_out_inflation(residual: Residual, evaluator: Evaluator) -> float:
     """Mean square of the weighted residual on the held-out entries over that on the fit entries, at least 1: a
-    model that misses held-out data more than the fit data carries discrepancy its Jacobian does not see."""
+    model that misses held-out data more than the fit data carries discrepancy its Jacobian does not see.
+
+    Parameters
+    ----------
+    residual : Residual
+        Residuals of the fitted model.
+    evaluator : Evaluator
+        Its fit and held-out masks count the entries.
+
+    Returns
+    -------
+    float
+        Variance inflation factor, ≥ 1.
+    """
     ms_fit = residual.sse_fit / max(int(evaluator.fit_mask.sum()), 1)
     ms_hold = residual.sse_hold / max(int(evaluator.hold_mask.sum()), 1)
     return max(1.0, ms_hold / max(ms_fit, 1e-300))
 
 
-def parameter_sd(J, r, rows, inflation=1.0, tolerance=True):
+def parameter_sd(J: np.ndarray, r: np.ndarray, rows: np.ndarray, inflation: float = 1.0,
+                 tolerance: bool = True) -> np.ndarray:
     """Standard deviations of least-squares parameters from a HAC (Newey–West, Bartlett) sandwich covariance.
 
     ``J`` (e, k) is the Jacobian of the weighted residual entries ``r`` (e,) that were sampled at time rows
@@ -389,6 +619,24 @@ def parameter_sd(J, r, rows, inflation=1.0, tolerance=True):
     norm n_rows); n_rows · H⁻¹ is added.  Noise averages out over a long record, the mesh and time-step error
     of the twin does not: without this term, a truth made with another integrator and step lay 4 sd from
     its fit (spindle_power_scale, 1.297 for 1.3, in the coverage cases of ``tests/test_gap_verdict.py``).
+
+    Parameters
+    ----------
+    J : ndarray, shape (e, k)
+        Jacobian of the weighted residual entries, per parameter unit (its sign does not matter).
+    r : ndarray, shape (e,)
+        Weighted residual entries (dimensionless).
+    rows : ndarray of int, shape (e,)
+        Time row of each entry.
+    inflation : float, default 1.0
+        Factor on the sandwich covariance (:func:`held_out_inflation`).
+    tolerance : bool, default True
+        Add the model-tolerance term n_rows · H⁻¹.
+
+    Returns
+    -------
+    ndarray, shape (k,)
+        Standard deviations, in the parameters' units (NaN if H cannot be inverted).
     """
     k = J.shape[1]
     if k == 0:
@@ -411,8 +659,21 @@ def parameter_sd(J, r, rows, inflation=1.0, tolerance=True):
     return np.sqrt(np.clip(np.diag(cov), 0, None))
 
 
-def nominal_result(model, evaluator):
-    """The nominal twin as a :class:`FitResult` (nuisance and offsets only); sets the evaluator's weights."""
+def nominal_result(model: GapModel, evaluator: Evaluator) -> FitResult:
+    """The nominal twin as a :class:`FitResult` (nuisance and offsets only); sets the evaluator's weights.
+
+    Parameters
+    ----------
+    model : GapModel
+        The twin of the record.
+    evaluator : Evaluator
+        Residuals; its weights are set here (:meth:`Evaluator.set_weights`).
+
+    Returns
+    -------
+    FitResult
+        Named ``nominal``, no parameters.
+    """
     t0 = time.perf_counter()
     pred = model.predict()
     evaluator.set_weights()
@@ -423,8 +684,23 @@ def nominal_result(model, evaluator):
                      n_eff_fit=n_eff, prediction=pred)
 
 
-def score(results, nominal, n_eff_hold):
-    """Set BIC (relative to the nominal) and ΔBIC vs the nominal on every result; return them ranked."""
+def score(results: list[FitResult], nominal: FitResult, n_eff_hold: float) -> list[FitResult]:
+    """Set BIC (relative to the nominal) and ΔBIC vs the nominal on every result; return them ranked.
+
+    Parameters
+    ----------
+    results : list of FitResult
+        Fitted models; their ``bic`` and ``delta_bic`` are set.
+    nominal : FitResult
+        The nominal twin (its BIC and ΔBIC set to 0).
+    n_eff_hold : float
+        Effectively independent held-out samples (:func:`effective_samples`).
+
+    Returns
+    -------
+    list of FitResult
+        ``results`` by increasing BIC (best first).
+    """
     ref = max(nominal.residual.sse_hold, 1e-300)
     nominal.bic, nominal.delta_bic = 0.0, 0.0
     for r in results:

@@ -14,12 +14,14 @@ sampling interval and its regularity go into the import report.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ..core.dataset import Dataset, sidecar_path
+from ..core.dataset import ChannelInfo, Dataset, sidecar_path
+from ..core.machine import Machine
 from ..errors import TwinInputError
 
 SENSOR_KINDS = ("temperature", "air", "displacement", "strain")
@@ -50,12 +52,26 @@ class Record:
     metadata: dict = field(default_factory=dict)
 
     @property
-    def mask(self):
+    def mask(self) -> np.ndarray:
+        """Where the sensor values are finite: bool ndarray, shape (n_times, len(names))."""
         return np.isfinite(self.values)
 
 
-def read_measured(data, column_map=None):
-    """A :class:`~twin.core.dataset.Dataset` from a path (twin dataset or measured CSV) or a Dataset, NaNs kept."""
+def read_measured(data: Dataset | str | Path, column_map: dict[str, str] | None = None) -> Dataset:
+    """A :class:`~twin.core.dataset.Dataset` from a path (twin dataset or measured CSV) or a Dataset, NaNs kept.
+
+    Parameters
+    ----------
+    data : Dataset, str or Path
+        A dataset (returned as it is), a twin dataset CSV with its sidecar, or a measured CSV.
+    column_map : dict of str to str, optional
+        CSV column → ``<name>_<unit>`` for a measured CSV; when given, a sidecar is not used.
+
+    Returns
+    -------
+    Dataset
+        The record, NaNs kept.
+    """
     if isinstance(data, Dataset):
         return data
     path = Path(data)
@@ -90,8 +106,25 @@ def _hint(kind, value):
     return ""
 
 
-def check_plausible(dataset, channel, kind, values):
-    """Stop with a clear error when a sensor's values lie outside :data:`PLAUSIBLE` for its kind."""
+def check_plausible(dataset: Dataset, channel: ChannelInfo, kind: str, values: np.ndarray) -> None:
+    """Stop with a clear error when a sensor's values lie outside :data:`PLAUSIBLE` for its kind.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The record (its source and times name the bad value).
+    channel : ChannelInfo
+        The record's channel.
+    kind : str
+        The sensor's kind: ``temperature``, ``air``, ``displacement`` or ``strain``.
+    values : ndarray, shape (n_times,)
+        The channel's values in its unit (°C, µm, µε), NaN where missing (ignored).
+
+    Raises
+    ------
+    TwinInputError
+        At the first implausible value, with a hint when it looks like kelvin or nm.
+    """
     lo, hi = PLAUSIBLE[kind]
     bad = np.flatnonzero(np.isfinite(values) & ((values < lo) | (values > hi)))
     if bad.size:
@@ -103,10 +136,28 @@ def check_plausible(dataset, channel, kind, values):
             f"sensor{_hint(kind, float(values[k]))}")
 
 
-def check_scale(record, predicted, columns):
+def check_scale(record: Record, predicted: np.ndarray, columns: Mapping[str, str]) -> None:
     """Stop when a sensor's measured range differs from the nominal twin's by more than :data:`SCALE_FACTOR`
     (mm written under ``_um``), where the twin predicts a clear signal; ``predicted`` (n, p) at the record's
-    times, ``columns`` the record's CSV column names."""
+    times, ``columns`` the record's CSV column names.
+
+    A clear signal: a predicted range (max − min over the rows with a measured value) of at least 0.5 K for a
+    thermometer or air sensor, 2 µm for a displacement, 5 µε for a strain.
+
+    Parameters
+    ----------
+    record : Record
+        The matched record.
+    predicted : ndarray, shape (n_times, len(record.names))
+        The nominal twin's values of the record's sensors at its times (°C, µm, µε).
+    columns : mapping of str to str
+        Sensor name → the record's CSV column (for the message; the name when absent).
+
+    Raises
+    ------
+    TwinInputError
+        When a sensor's measured range is more than :data:`SCALE_FACTOR` times larger or smaller than predicted.
+    """
     floor = {"temperature": 0.5, "air": 0.5, "displacement": 2.0, "strain": 5.0}
     for j, (name, kind) in enumerate(zip(record.names, record.kinds)):
         v = record.values[:, j]
@@ -193,8 +244,27 @@ class _Channels:
             self.feeds[ch.name[-1]] = filled
 
 
-def match_record(dataset, machine):
-    """Match a dataset's channels to a machine; return a :class:`Record` (see the module docstring)."""
+def match_record(dataset: Dataset, machine: Machine) -> Record:
+    """Match a dataset's channels to a machine; return a :class:`Record` (see the module docstring).
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The measured record (at least 10 rows).
+    machine : Machine
+        The built machine whose sensors and operating conditions the channels must name.
+
+    Returns
+    -------
+    Record
+        Sensor values (NaN where missing), filled inputs and the import report.
+
+    Raises
+    ------
+    TwinInputError
+        On too few rows, a channel that matches nothing of the machine, a wrong unit, an implausible value, or no
+        sensor channel at all.
+    """
     t = np.asarray(dataset.time_s, float)
     if len(t) < 10:
         raise TwinInputError(f"{dataset.metadata.get('source', 'dataset')}: {len(t)} rows are too few "

@@ -8,12 +8,16 @@ with the free responses of the initial-state nuisance shapes.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from .drive import Drive, IdleDrive
+from .effects import Effect
+from .engine import FullBackend, ReducedBackend
 from .signals import Interpolator
-from .structure import NUISANCE_FIELDS
+from .structure import NUISANCE_FIELDS, Structure
 
 
 @dataclass
@@ -28,9 +32,27 @@ class Prediction:
 
 
 class GapModel:
-    """See the module docstring.  ``initial`` is ``"steady"`` (idle, steady state at t₀) or ``"uniform"``."""
+    """See the module docstring.  ``initial`` is ``"steady"`` (idle, steady state at t₀) or ``"uniform"``.
 
-    def __init__(self, structure, backend, drive, times_s, initial="steady", initial_temperature=None):
+    Parameters
+    ----------
+    structure : Structure
+        The machine with the effects' terms registered.
+    backend : ReducedBackend or FullBackend
+        Simulates the structure.
+    drive : Drive
+        Operating conditions of the record on the twin's uniform grid (step ``drive.step_s``, s).
+    times_s : ndarray, shape (n,)
+        Measured sample times, s.
+    initial : str, default "steady"
+        ``"steady"``: the steady state of the idle machine at the first grid input; ``"uniform"``: every
+        node at ``initial_temperature``.
+    initial_temperature : float, optional
+        Start temperature for ``"uniform"``, °C; default the room ambient at the first grid point.
+    """
+
+    def __init__(self, structure: Structure, backend: ReducedBackend | FullBackend, drive: Drive,
+                 times_s: np.ndarray, initial: str = "steady", initial_temperature: float | None = None):
         self.structure, self.backend, self.drive = structure, backend, drive
         self.times_s = np.asarray(times_s, float)
         self.initial = initial
@@ -49,8 +71,25 @@ class GapModel:
                      for i in s.displacements]
         self.nuisance_names = [n for n in NUISANCE_FIELDS if n in s.fields]
 
-    def inputs(self, active, drive=None):
-        """Input matrix (N, m) and system coefficients with the effects ``active`` = [(effect, θ), …] on."""
+    def inputs(self, active: Sequence[tuple[Effect, np.ndarray]],
+               drive: Drive | IdleDrive | None = None) -> tuple[np.ndarray, dict[str, float]]:
+        """Input matrix (N, m) and system coefficients with the effects ``active`` = [(effect, θ), …] on.
+
+        Parameters
+        ----------
+        active : sequence of (Effect, ndarray)
+            Effects and their parameters θ (units of :attr:`Effect.params`).
+        drive : Drive or IdleDrive, optional
+            The model's drive (default) or its idle copy ``idle_drive``; any other drive starts from the
+            idle nominal inputs.
+
+        Returns
+        -------
+        U : ndarray, shape (N, m)
+            Thermal inputs on the grid (N points), machine then extra inputs (W, °C, K/m, K).
+        coefficients : dict of str to float
+            System term → coefficient a (A += a·dA, B += a·dB), dimensionless.
+        """
         drive = drive or self.drive
         U = (self.U0 if drive is self.drive else self.U0_idle).copy()
         coefficients = {}
@@ -61,8 +100,26 @@ class GapModel:
                 coefficients[name] = coefficients.get(name, 0.0) + a
         return U, coefficients
 
-    def predict(self, active=(), nuisance=True, on_grid=False):
-        """Channels (see :class:`Prediction`) with the effects ``active`` = [(effect, θ), …] switched on."""
+    def predict(self, active: Sequence[tuple[Effect, np.ndarray]] = (), nuisance: bool = True,
+                on_grid: bool = False) -> Prediction:
+        """Channels (see :class:`Prediction`) with the effects ``active`` = [(effect, θ), …] switched on.
+
+        Parameters
+        ----------
+        active : sequence of (Effect, ndarray)
+            Effects and their parameters θ; empty for the nominal twin.
+        nuisance : bool, default True
+            Also simulate the free responses of the nuisance initial-state fields.
+        on_grid : bool, default False
+            Values on the twin's grid (N points) instead of at the measured times (n).
+
+        Returns
+        -------
+        Prediction
+            Channel values, shape (n, p) (or (N, p) with ``on_grid``), in channel units (°C, µm, µε);
+            nuisance responses per unit coefficient; the values on the grid, the backend's run and the
+            inputs (N, m).
+        """
         s = self.structure
         U, coefficients = self.inputs(active)
         if self.initial == "steady":
@@ -87,8 +144,27 @@ class GapModel:
             return Prediction(Y, responses, Y, run, U)
         return Prediction(self.interp(Y), {k: self.interp(v) for k, v in responses.items()}, Y, run, U)
 
-    def sensor_models(self, active, Y, U, additive=True):
-        """Apply the output effects (mounting, then lag, then fixture drift) to channel values on the grid."""
+    def sensor_models(self, active: Sequence[tuple[Effect, np.ndarray]], Y: np.ndarray, U: np.ndarray,
+                      additive: bool = True) -> np.ndarray:
+        """Apply the output effects (mounting, then lag, then fixture drift) to channel values on the grid.
+
+        Parameters
+        ----------
+        active : sequence of (Effect, ndarray)
+            Effects and their parameters θ; only the output effects act.
+        Y : ndarray, shape (N, p)
+            True channel values on the grid (°C, µm, µε).
+        U : ndarray, shape (N, m)
+            Thermal inputs on the grid (give the air at the thermometers, °C).
+        additive : bool, default True
+            Also apply the displacement changes (fixture drift); False for responses per unit
+            coefficient, which take only the linear thermometer models.
+
+        Returns
+        -------
+        ndarray, shape (N, p)
+            Channel readings (Y itself when no output effect is active).
+        """
         s = self.structure
         outputs = output_effects(active)
         if not outputs:
@@ -111,7 +187,18 @@ class GapModel:
 SENSOR_ORDER = ("sensor_mounting", "sensor_lag")
 
 
-def output_effects(active):
-    """The output effects among ``active`` = [(effect, θ), …], in the order they apply (:data:`SENSOR_ORDER`)."""
+def output_effects(active: Sequence[tuple[Effect, np.ndarray]]) -> list[tuple[Effect, np.ndarray]]:
+    """The output effects among ``active`` = [(effect, θ), …], in the order they apply (:data:`SENSOR_ORDER`).
+
+    Parameters
+    ----------
+    active : sequence of (Effect, ndarray)
+        Effects and their parameters θ.
+
+    Returns
+    -------
+    list of (Effect, ndarray)
+        The pairs with ``kind == "output"``, sorted (stable) by :data:`SENSOR_ORDER`.
+    """
     return sorted([(e, th) for e, th in active if e.kind == "output"],
                   key=lambda p: SENSOR_ORDER.index(p[0].name) if p[0].name in SENSOR_ORDER else len(SENSOR_ORDER))

@@ -9,6 +9,7 @@ uncertainty and evidence); (c) how far the residual shrinks on held-out data.
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from pathlib import Path
 
 import matplotlib
@@ -21,6 +22,7 @@ from ..core.dataset import json_default
 from ..infra.outdir import atomic_directory
 from ..infra.plots import save_figure
 from ..infra.tables import markdown_table
+from .diagnose import Diagnosis
 from .discovery import render_discoveries
 from .fit import GROUP_UNIT
 from .verdict import parameters
@@ -41,10 +43,26 @@ def _save(fig, path):
     return save_figure(fig, path).name
 
 
-def write_report(d, out_dir, render=True, overwrite=False):
+def write_report(d: Diagnosis, out_dir: str | Path, render: bool = True, overwrite: bool = False) -> Path:
     """Write ``report.md``, ``diagnosis.json`` and the figures of a :class:`~twin.gap.diagnose.Diagnosis`.
 
     ``out_dir`` is written as :func:`twin.infra.outdir.atomic_directory` does (``overwrite`` likewise).
+
+    Parameters
+    ----------
+    d : Diagnosis
+        The diagnosis (a failed render adds a note to it).
+    out_dir : str or Path
+        The result folder.
+    render : bool, default True
+        Also make the off-screen 3-D renders (:func:`render_figures`).
+    overwrite : bool, default False
+        Replace an existing result folder.
+
+    Returns
+    -------
+    Path
+        The result folder.
     """
     out_dir = Path(out_dir)
     with atomic_directory(out_dir, overwrite) as tmp:
@@ -64,8 +82,21 @@ def write_report(d, out_dir, render=True, overwrite=False):
     return out_dir
 
 
-def to_json(d):
-    """The machine-readable diagnosis."""
+def to_json(d: Diagnosis) -> dict[str, object]:
+    """The machine-readable diagnosis.
+
+    Parameters
+    ----------
+    d : Diagnosis
+        The diagnosis.
+
+    Returns
+    -------
+    dict
+        The content of ``diagnosis.json``: verdict, named model and ranking (fits, ΔBIC, held-out figures),
+        noise and scales (channel units), nominal residual, shrinkage, where, attribution, import report, notes,
+        timings (s); numpy values are converted by :func:`twin.core.dataset.json_default`.
+    """
     def res(r):
         return {"name": r.name, "params": r.params(), "delta_bic": r.delta_bic, "bic": r.bic,
                 "sse_fit": r.residual.sse_fit, "sse_hold": r.residual.sse_hold, "groups": r.summary["groups"],
@@ -94,8 +125,23 @@ def to_json(d):
 
 
 # ============================================================================= figures
-def plot_residuals(d, path, n_temperatures=6):
-    """Residuals over time: the worst thermometers and every drift axis, nominal and with the winner."""
+def plot_residuals(d: Diagnosis, path: str | Path, n_temperatures: int = 6) -> str:
+    """Residuals over time: the worst thermometers and every drift axis, nominal and with the winner.
+
+    Parameters
+    ----------
+    d : Diagnosis
+        The diagnosis.
+    path : str or Path
+        The PNG to write.
+    n_temperatures : int, default 6
+        Thermometers shown: those with the largest held-out nominal RMS.
+
+    Returns
+    -------
+    str
+        The file name (for the Markdown link).
+    """
     ev, names = d.evaluator, d.names
     th = d.record.time_s / 3600.0
     temps = [j for j, k in enumerate(ev.kinds) if k == "temperature"]
@@ -122,8 +168,23 @@ def plot_residuals(d, path, n_temperatures=6):
     return _save(fig, path)
 
 
-def plot_ranking(d, path, n=12):
-    """ΔBIC vs the nominal twin on held-out data of the leading models."""
+def plot_ranking(d: Diagnosis, path: str | Path, n: int = 12) -> str:
+    """ΔBIC vs the nominal twin on held-out data of the leading models.
+
+    Parameters
+    ----------
+    d : Diagnosis
+        The diagnosis.
+    path : str or Path
+        The PNG to write.
+    n : int, default 12
+        Models shown (ΔBIC below −50 drawn at −50).
+
+    Returns
+    -------
+    str
+        The file name (for the Markdown link).
+    """
     top = d.ranking[:n]
     fig, ax = plt.subplots(figsize=(9, 0.35 * len(top) + 1.5))
     values = [max(r.delta_bic, -50) for r in top]
@@ -138,8 +199,23 @@ def plot_ranking(d, path, n=12):
     return _save(fig, path)
 
 
-def plot_breakdown(d, path):
-    """RMS residual per phase and per frequency band, per channel group, before (and after) the winner."""
+def plot_breakdown(d: Diagnosis, path: str | Path) -> str:
+    """RMS residual per phase and per frequency band, per channel group, before (and after) the winner.
+
+    Bars are the RMS over the group scale σ_g (dimensionless).
+
+    Parameters
+    ----------
+    d : Diagnosis
+        The diagnosis (its ``where`` tables filled).
+    path : str or Path
+        The PNG to write.
+
+    Returns
+    -------
+    str
+        The file name (for the Markdown link).
+    """
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.2))
     for ax, key, title in ((axes[0], "phases", "per operating phase (all rows)"),
                            (axes[1], "bands", "per frequency band (all rows)")):
@@ -163,8 +239,21 @@ def plot_breakdown(d, path):
     return _save(fig, path)
 
 
-def plot_attribution(d, path):
-    """Shares of the drift residual explained by each part (model-free estimate, and through the winner)."""
+def plot_attribution(d: Diagnosis, path: str | Path) -> str | None:
+    """Shares of the drift residual explained by each part (model-free estimate, and through the winner).
+
+    Parameters
+    ----------
+    d : Diagnosis
+        The diagnosis (its ``attribution`` filled).
+    path : str or Path
+        The PNG to write.
+
+    Returns
+    -------
+    str or None
+        The file name (for the Markdown link), or None (no figure) without drift shares.
+    """
     est = d.attribution.get("regions")
     if not est or not est["shares"]:
         return None
@@ -190,8 +279,23 @@ def plot_attribution(d, path):
     return _save(fig, path)
 
 
-def render_figures(d, tmp):
-    """Off-screen renders: sensors and parts coloured by residual; the winner's temperature change."""
+def render_figures(d: Diagnosis, tmp: Path) -> dict[str, str]:
+    """Off-screen renders: sensors and parts coloured by residual; the winner's temperature change.
+
+    Parameters
+    ----------
+    d : Diagnosis
+        The diagnosis.
+    tmp : Path
+        The folder to write the PNGs to.
+
+    Returns
+    -------
+    dict of str to str
+        ``render_residuals`` (parts by estimated error RMS, K; sensors by held-out residual RMS, K), and when there
+        is a winner ``render_effect`` (its temperature change, K) and with a discovery ``render_discoveries`` →
+        file name.
+    """
     from ..infra.render import (
         render_machine,  # on use: pyvista/VTK take seconds to load
     )
@@ -247,8 +351,22 @@ def _breakdown_table(key, table, groups, drift_names, rows=False):
 
 
 # ============================================================================= Markdown
-def format_report(d, figures):
-    """``report.md``: verdict, data, (a) where, (b) which effect, discoveries, (c) shrinkage, timing."""
+def format_report(d: Diagnosis, figures: Mapping[str, str]) -> str:
+    """``report.md``: verdict, data, (a) where, (b) which effect, discoveries, (c) shrinkage, timing.
+
+    Parameters
+    ----------
+    d : Diagnosis
+        The diagnosis.
+    figures : mapping of str to str
+        Figure key (``residuals``, ``ranking``, ``breakdown``, optional ``attribution`` and renders) → file name
+        in the result folder.
+
+    Returns
+    -------
+    str
+        The Markdown.
+    """
     L = [f"# Gap diagnosis: {d.record.report.get('source')} on `{d.machine.name}`", "",
          f"**Verdict ({d.outcome.replace('_', ' ')}): {d.verdict}.**", ""]
     for section in (_data_section, _where_section, _parts_section, _which_section, _discovery_section,

@@ -16,11 +16,14 @@ operating conditions as the scenario's values at the new times.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 from scipy.signal import lsim
 
 from ..core.dataset import Dataset
 from ..core.machine_definition import load_machine, room_zone
+from ..core.scenario import Scenario
 from ..errors import TwinInputError
 
 
@@ -32,10 +35,24 @@ def _check_uniform(t, what):
     return t
 
 
-def second_order_lag(t, y, tau1_s, tau2_s):
+def second_order_lag(t: np.ndarray, y: np.ndarray, tau1_s: float, tau2_s: float) -> np.ndarray:
     """Readings of a sensor with response 1 / ((τ₁s + 1)(τ₂s + 1)) to true signals y (n,) or (n, k), from rest at y[0].
 
     Continuous-time state space simulated by :func:`scipy.signal.lsim` (input linear between samples).
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Uniformly spaced sample times, s (anything else raises :class:`~twin.errors.TwinInputError`).
+    y : ndarray, shape (n,) or (n, k)
+        True signals at ``t`` (any unit, e.g. °C), one column per sensor.
+    tau1_s, tau2_s : float
+        The two time constants, s (> 0).
+
+    Returns
+    -------
+    ndarray, shape of ``y``
+        The readings, in the unit of ``y``.
     """
     t = _check_uniform(t, "second_order_lag")
     if tau1_s <= 0 or tau2_s <= 0:
@@ -55,8 +72,23 @@ def second_order_lag(t, y, tau1_s, tau2_s):
     return out.reshape(y.shape)
 
 
-def dead_time(t, y, delay_s):
-    """Readings delayed by ``delay_s`` (transport delay; the first value held before it)."""
+def dead_time(t: np.ndarray, y: np.ndarray, delay_s: float) -> np.ndarray:
+    """Readings delayed by ``delay_s`` (transport delay; the first value held before it).
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Sample times, s (increasing).
+    y : ndarray, shape (n,) or (n, k)
+        True signals at ``t`` (any unit), one column per sensor.
+    delay_s : float
+        Transport delay, s.
+
+    Returns
+    -------
+    ndarray, shape of ``y``
+        ``y`` at ``t − delay_s`` (linear interpolation), in the unit of ``y``.
+    """
     t = np.asarray(t, float)
     y = np.asarray(y, float)
     cols = y.reshape(len(t), -1)
@@ -64,9 +96,25 @@ def dead_time(t, y, delay_s):
     return out.reshape(y.shape)
 
 
-def sample_times(duration_s, kind, seed=0):
+def sample_times(duration_s: float, kind: str, seed: int = 0) -> np.ndarray:
     """Logger times over [0, duration]: ``"45s"`` / any ``"<n>s"`` regular, ``"irregular"`` (30–70 s steps,
-    seeded), ``"clock_offset"`` (every 60 s, 15 s after the minute)."""
+    seeded), ``"clock_offset"`` (every 60 s, 15 s after the minute).
+
+    Parameters
+    ----------
+    duration_s : float
+        Length of the record, s.
+    kind : str
+        ``"<n>s"`` (regular every n s from 0), ``"irregular"`` or ``"clock_offset"``; anything else raises
+        :class:`~twin.errors.TwinInputError`.
+    seed : int, default 0
+        Random seed of the ``"irregular"`` steps.
+
+    Returns
+    -------
+    ndarray, shape (n_samples,)
+        Increasing sample times within [0, ``duration_s``], s.
+    """
     if kind == "irregular":
         rng = np.random.default_rng(seed)
         steps = rng.uniform(30.0, 70.0, int(duration_s / 30.0) + 2)
@@ -84,8 +132,24 @@ def sample_times(duration_s, kind, seed=0):
     raise TwinInputError(f"unknown sampling {kind!r}; use '<n>s' (e.g. '45s'), 'irregular' or 'clock_offset'")
 
 
-def resample(dataset, times_s, scenario):
-    """The record at other times: sensors interpolated from the fine truth, operating conditions from the scenario."""
+def resample(dataset: Dataset, times_s: np.ndarray, scenario: Scenario) -> Dataset:
+    """The record at other times: sensors interpolated from the fine truth, operating conditions from the scenario.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The finely sampled truth record.
+    times_s : ndarray, shape (n_samples,)
+        New sample times, s, within the record's span.
+    scenario : Scenario
+        The scenario the record was made with (spindle speed, rpm, and feeds, mm/min, at ``times_s``).
+
+    Returns
+    -------
+    Dataset
+        The same channels at ``times_s``; its metadata's ``sampling`` gives the count, first time and median step
+        (s).
+    """
     times_s = np.asarray(times_s, float)
     t = dataset.time_s
     if times_s.min() < t[0] - 1e-9 or times_s.max() > t[-1] + 1e-9:
@@ -106,13 +170,27 @@ def resample(dataset, times_s, scenario):
     return Dataset(times_s, np.column_stack(columns), list(dataset.channels), meta)
 
 
-def apply_sensor_errors(dataset, errors, scenario):
+def apply_sensor_errors(dataset: Dataset, errors: Sequence[tuple], scenario: Scenario) -> Dataset:
     """The record with sensor errors applied to its (uniformly sampled) true readings.
 
     ``errors``: tuples ``("thermometer_lag2", τ₁ s, τ₂ s)`` (every surface thermometer through
     :func:`second_order_lag`), ``("thermometer_dead_time", s)``, ``("fixture", k_x, k_y, k_z µm/K, τ₁ min,
     τ₂ min)`` (each displacement probe += k·(room air through a second-order lag − its start value); the
     room air is the scenario's, which the record does not contain).
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The true record (uniformly sampled when a lag is applied).
+    errors : sequence of tuple
+        The errors, applied in order (see above); an unknown name raises :class:`~twin.errors.TwinInputError`.
+    scenario : Scenario
+        The record's scenario (machine and room air, °C; used by ``fixture``).
+
+    Returns
+    -------
+    Dataset
+        The record with the errors applied, listed in its metadata's ``sensor_errors``.
     """
     t = dataset.time_s
     V = dataset.values.copy()

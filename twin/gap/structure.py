@@ -19,12 +19,19 @@ thermometer, the local air a thermometer sees, the region of every node.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
 import numpy as np
 import scipy.sparse as sp
 
 from fea.mesh import LOCAL_FACES
 
+from ..core.machine import Machine
 from .engine import _factor
+
+if TYPE_CHECKING:
+    from .effects import Effect
 
 #: 4 σ T³ at 20 °C: the linearised radiative coefficient of a black surface, W/(m² K).
 RADIATIVE_COEFFICIENT = 4 * 5.670374419e-8 * 293.15 ** 3
@@ -40,9 +47,15 @@ def _recorded_rows(machine):
 
 
 class Structure:
-    """See the module docstring.  Build with :func:`build_structure`."""
+    """See the module docstring.  Build with :func:`build_structure`.
 
-    def __init__(self, machine):
+    Parameters
+    ----------
+    machine : Machine
+        The built machine: its thermal system (mass, stiffness, input matrix), output operator and channels.
+    """
+
+    def __init__(self, machine: Machine):
         self.machine = machine
         thermal = machine.thermal
         self.mass = sp.csr_matrix(thermal.mass)
@@ -70,60 +83,137 @@ class Structure:
 
     # ------------------------------------------------------------------ registration
     @property
-    def n_nodes(self):
+    def n_nodes(self) -> int:
+        """Number of thermal nodes."""
         return self.mass.shape[0]
 
     @property
-    def n_inputs(self):
+    def n_inputs(self) -> int:
+        """Number of inputs: the machine's, then the extra columns registered by :meth:`add_input`."""
         return len(self.input_names)
 
     @property
-    def input_matrix(self):
+    def input_matrix(self) -> sp.csc_matrix:
+        """B, sparse, shape (n_nodes, n_inputs): nodal heat load per unit of each input (W/K for an ambient,
+        W·m/K for the gradient, W/W for a power), machine inputs then extra columns."""
         B = self._B[0] if len(self._B) == 1 else sp.hstack(self._B).tocsc()
         self._B = [B]
         return B
 
-    def input_index(self, name):
+    def input_index(self, name: str) -> int:
+        """Column of an input by name.
+
+        Parameters
+        ----------
+        name : str
+            Input name (``ambient:<zone>``, ``ambient_gradient``, ``power:<source>`` or an extra ``gap:…``).
+
+        Returns
+        -------
+        int
+            Its column in :attr:`input_matrix`.
+        """
         return self.input_names.index(name)
 
-    def add_input(self, name, column):
-        """An extra input column (n,) named ``name`` (e.g. ``gap:belt_drive``, W)."""
+    def add_input(self, name: str, column: np.ndarray) -> int:
+        """An extra input column (n,) named ``name`` (e.g. ``gap:belt_drive``, W).
+
+        Parameters
+        ----------
+        name : str
+            Input name; an existing name is not added again.
+        column : ndarray, shape (n_nodes,) or (n_nodes, 1)
+            Nodal heat load per unit of the input (W/W for a power, W/K for a temperature).
+
+        Returns
+        -------
+        int
+            The input's column (the existing one when ``name`` is already registered).
+        """
         if name in self.input_names:
             return self.input_index(name)
         self._B.append(sp.csc_matrix(np.asarray(column, float).reshape(-1, 1)))
         self.input_names.append(name)
         return len(self.input_names) - 1
 
-    def add_system_term(self, name, dA, dB):
-        """A system term: A += a·dA, B += a·dB (dB over the machine's inputs; extra inputs get none)."""
+    def add_system_term(self, name: str, dA: sp.spmatrix | np.ndarray, dB: sp.spmatrix | np.ndarray) -> None:
+        """A system term: A += a·dA, B += a·dB (dB over the machine's inputs; extra inputs get none).
+
+        Parameters
+        ----------
+        name : str
+            Term name (the coefficient ``a`` is given under it, e.g. by an effect's ``coefficients``).
+        dA : sparse matrix or ndarray, shape (n_nodes, n_nodes)
+            Change of the stiffness per unit of ``a``, W/K.
+        dB : sparse matrix or ndarray, shape (n_nodes, n_machine_inputs)
+            Change of the input matrix per unit of ``a`` (W per input unit).
+        """
         self.system_terms[name] = (sp.csr_matrix(dA), sp.csc_matrix(dB))
 
-    def system_input_change(self, name):
-        """dB of a system term widened to all (machine + extra) inputs."""
+    def system_input_change(self, name: str) -> sp.csc_matrix:
+        """dB of a system term widened to all (machine + extra) inputs.
+
+        Parameters
+        ----------
+        name : str
+            Term name (see :meth:`add_system_term`).
+
+        Returns
+        -------
+        scipy.sparse.csc_matrix, shape (n_nodes, n_inputs)
+            dB with zero columns for the extra inputs (W per input unit).
+        """
         dB = self.system_terms[name][1]
         extra = self.n_inputs - dB.shape[1]
         return sp.hstack([dB, sp.csc_matrix((dB.shape[0], extra))]).tocsc() if extra else dB
 
-    def add_field(self, name, field):
-        """An initial-state field shape (n,) on thermal nodes."""
+    def add_field(self, name: str, field: np.ndarray) -> None:
+        """An initial-state field shape (n,) on thermal nodes.
+
+        Parameters
+        ----------
+        name : str
+            Field name (e.g. ``initial_uniform``).
+        field : ndarray, shape (n_nodes,)
+            Dimensionless shape; the initial state gains coefficient × field, the coefficient in K.
+        """
         self.fields[name] = np.asarray(field, float)
 
     # ------------------------------------------------------------------ outputs
-    def air_feedthrough(self):
-        """(p_air, n_inputs): the air sensors from the inputs (zero on extra inputs)."""
+    def air_feedthrough(self) -> np.ndarray:
+        """(p_air, n_inputs): the air sensors from the inputs (zero on extra inputs).
+
+        Returns
+        -------
+        ndarray, shape (p_air, n_inputs)
+            Air-sensor reading (°C) per unit of each input.
+        """
         D = np.zeros((len(self.air), self.n_inputs))
         D[:, : self.n_machine_inputs] = self.machine.feedthrough[self.air_rows] * \
             np.array([self.channels[i].scale for i in self.air])[:, None]
         return D
 
-    def channel_values(self, fe_values, U):
-        """All channels (k, p) from FE outputs in edge units without offset (k, p_fe) and inputs (k, m)."""
+    def channel_values(self, fe_values: np.ndarray, U: np.ndarray) -> np.ndarray:
+        """All channels (k, p) from FE outputs in edge units without offset (k, p_fe) and inputs (k, m).
+
+        Parameters
+        ----------
+        fe_values : ndarray, shape (k, p_fe)
+            FE outputs in channel units (°C, µm, µε), without the output offset.
+        U : ndarray, shape (k, n_inputs)
+            Inputs (°C, K/m, W).
+
+        Returns
+        -------
+        ndarray, shape (k, p)
+            Every channel of :attr:`names` in its unit (°C, µm, µε): FE channels then air sensors.
+        """
         return np.hstack([fe_values + self.output_offset, U @ self.air_feedthrough().T])
 
     # ------------------------------------------------------------------ geometry of sensors and nodes
     @property
-    def node_region(self):
-        """Region name of every thermal node (the part of a tetrahedron using it)."""
+    def node_region(self) -> np.ndarray:
+        """Region name of every thermal node (the part of a tetrahedron using it): ndarray of str, shape (n_nodes,)."""
         if self._node_region is None:
             mesh, thermal = self.machine.mesh, self.machine.thermal
             region = np.empty(self.n_nodes, dtype=np.int64)
@@ -132,19 +222,40 @@ class Structure:
         return self._node_region
 
     @property
-    def region_names(self):
+    def region_names(self) -> list[str]:
+        """The mesh's region (part) names, in the order of their region ids."""
         mesh = self.machine.mesh
         return [mesh.region_names[r] for r in sorted(mesh.region_names)]
 
-    def thermometer_info(self):
-        """Per surface thermometer: position (m), part, the zone and height of the air at its surface."""
+    def thermometer_info(self) -> dict[str, np.ndarray]:
+        """Per surface thermometer: position (m), part, the zone and height of the air at its surface.
+
+        Returns
+        -------
+        dict of str to ndarray
+            :func:`point_info` of the thermometers (in the order of :attr:`thermometers`), computed once.
+        """
         if self._thermometer_info is None:
             pos = np.array([self.channels[i].position for i in self.thermometers], float)
             self._thermometer_info = point_info(self, pos, [self.names[i] for i in self.thermometers])
         return self._thermometer_info
 
-    def local_air_matrix(self, zones, heights):
-        """(k, n_inputs): the ambient seen at k points of given zones and heights above the reference."""
+    def local_air_matrix(self, zones: Sequence[str] | np.ndarray, heights: Sequence[float] | np.ndarray) -> np.ndarray:
+        """(k, n_inputs): the ambient seen at k points of given zones and heights above the reference.
+
+        Parameters
+        ----------
+        zones : sequence of str, length k
+            Convection zone of each point.
+        heights : sequence of float, length k
+            Height of each point above the ambient reference height, m.
+
+        Returns
+        -------
+        ndarray, shape (k, n_inputs)
+            Rows L with ``U @ L.T`` the local ambient, °C: 1 on the zone's ambient, the height (m) on the
+            gradient (K/m).
+        """
         L = np.zeros((len(zones), self.n_inputs))
         for i, (z, h) in enumerate(zip(zones, heights)):
             L[i, self.input_index(f"ambient:{z}")] = 1.0
@@ -152,8 +263,29 @@ class Structure:
         return L
 
 
-def facet_table(machine):
-    """All convection facets: (thermal node ids (k, 3), centroids (k, 3), areas (k,), group, h, zone)."""
+def facet_table(machine: Machine) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """All convection facets: (thermal node ids (k, 3), centroids (k, 3), areas (k,), group, h, zone).
+
+    Parameters
+    ----------
+    machine : Machine
+        The built machine; facets of every convection rule with a facet group in the mesh.
+
+    Returns
+    -------
+    nodes : ndarray of int, shape (k, 3)
+        Thermal node ids of each facet.
+    centroids : ndarray, shape (k, 3)
+        Facet centroids, m.
+    areas : ndarray, shape (k,)
+        Facet areas, m².
+    groups : ndarray of str, shape (k,)
+        Convection group (rule name) of each facet.
+    h : ndarray, shape (k,)
+        Convection coefficient, W/(m²·K).
+    zones : ndarray of str, shape (k,)
+        Ambient zone of each facet.
+    """
     mesh = machine.mesh
     rules = {r.name: r for r in machine.definition.convection}
     nodes, cents, areas, groups, hs, zones = [], [], [], [], [], []
@@ -172,11 +304,25 @@ def facet_table(machine):
             np.array(zones))
 
 
-def lumped_facet_load(machine, mask, coefficient):
+def lumped_facet_load(machine: Machine, mask: np.ndarray, coefficient: float | np.ndarray) -> np.ndarray:
     """Load vector (n,) of ``∫ h φ dS`` over the facets of :func:`facet_table` selected by ``mask``.
 
     Exact for P1 (∫ φᵢ over a flat triangle is its area / 3); ``coefficient``
     is a number (W/(m² K)) or one value per facet.
+
+    Parameters
+    ----------
+    machine : Machine
+        The built machine.
+    mask : ndarray of bool, shape (k,)
+        Facets of :func:`facet_table` to include.
+    coefficient : float or ndarray, shape (k,)
+        h, W/(m²·K): one value or one per facet (of all k facets, before ``mask``).
+
+    Returns
+    -------
+    ndarray, shape (n_nodes,)
+        Nodal load per kelvin of the temperature driving it, W/K.
     """
     nodes, _, areas, _, _, _ = facet_table(machine)
     h = np.broadcast_to(np.asarray(coefficient, float), areas.shape)
@@ -186,8 +332,25 @@ def lumped_facet_load(machine, mask, coefficient):
     return b
 
 
-def point_info(structure, positions, names=None):
-    """Part, air zone and air height (above the reference) at points on the surface (dict of arrays)."""
+def point_info(structure: Structure, positions: np.ndarray,
+               names: Sequence[str] | None = None) -> dict[str, np.ndarray]:
+    """Part, air zone and air height (above the reference) at points on the surface (dict of arrays).
+
+    Parameters
+    ----------
+    structure : Structure
+        Gives the machine.
+    positions : ndarray, shape (k, 3) or (3,)
+        Points, m (snapped onto the mesh within ``max(snap_distance_m, 0.02)`` m).
+    names : sequence of str, optional
+        Point names, for the error message of a point outside the mesh.
+
+    Returns
+    -------
+    dict of str to ndarray
+        ``position`` (k, 3) m; ``part`` (k,) the region containing it; ``zone`` and ``group`` (k,) of the
+        nearest convection facet (by centroid); ``height`` (k,) above the ambient reference height, m.
+    """
     machine = structure.machine
     mesh = machine.mesh
     positions = np.atleast_2d(np.asarray(positions, float))
@@ -206,12 +369,27 @@ def point_info(structure, positions, names=None):
 NUISANCE_FIELDS = ("initial_uniform", "initial_residual_heat")
 
 
-def build_structure(machine, effects=(), nuisance=True):
+def build_structure(machine: Machine, effects: Sequence[Effect] = (), nuisance: bool = True) -> Structure:
     """The :class:`Structure` of a machine with every effect's terms registered (see the module docstring).
 
     With ``nuisance`` it also holds the initial-state shapes of :data:`NUISANCE_FIELDS`: a uniform
     offset of the whole machine, and the heat left by earlier spindle running (the steady rise at the
     sources' reference speed).
+
+    Parameters
+    ----------
+    machine : Machine
+        The built machine.
+    effects : sequence of Effect
+        Candidate effects; those applicable to ``machine`` register their terms, and system effects their
+        coefficients at the parameter bounds in ``term_bounds``.
+    nuisance : bool, default True
+        Register the initial-state shapes of :data:`NUISANCE_FIELDS` (both dimensionless, max 1).
+
+    Returns
+    -------
+    Structure
+        With ``term_bounds``: system term name → its coefficients at the lower and upper parameter bounds.
     """
     structure = Structure(machine)
     structure.term_bounds = {}

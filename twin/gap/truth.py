@@ -23,6 +23,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
@@ -31,24 +32,47 @@ import numpy as np
 from meshes.cachefiles import user_cache_dir
 
 from ..core.dataset import ChannelInfo, Dataset, project_version
-from ..core.machine import build_machine, reassemble
-from ..core.machine_definition import HeatSource, load_machine
+from ..core.machine import Machine, build_machine, reassemble
+from ..core.machine_definition import HeatSource, MachineDefinition, load_machine
 from ..core.noise import apply_noise
 from ..core.scenario import Scenario, load_scenario
 from ..core.simulate import simulate
 from ..errors import TwinInputError
 from ..infra.sweep import cached
 from .drive import ScenarioDrive
+from .effects import Effect
 from .engine import FullBackend
 from .model import GapModel
 from .signals import uniform_grid
 from .structure import build_structure
 
 
-def truth_dataset(scenario, machine, active=(), seed=None, noise=True, step_s=None):
+def truth_dataset(scenario: str | Path | Scenario, machine: Machine, active: Sequence[tuple[Effect, np.ndarray]] = (),
+                  seed: int | None = None, noise: bool = True, step_s: float | None = None) -> Dataset:
     """A :class:`~twin.core.dataset.Dataset` of ``scenario`` on ``machine`` with ``active`` = [(effect, θ), …] on.
 
     ``step_s`` overrides the scenario's time step (it must divide the sampling interval).
+
+    Parameters
+    ----------
+    scenario : str, Path or Scenario
+        Scenario name, file or object: conditions, duration, sampling, scheme, initial state and noise.
+    machine : Machine
+        The built machine of the truth (the benchmark's is finer than the diagnosis's).
+    active : sequence of (Effect, ndarray)
+        Effects switched on and their parameters θ (in the effects' units); empty: the nominal machine.
+    seed : int, optional
+        Noise seed (default the scenario's).
+    noise : bool, default True
+        Add the scenario's sensor noise (offsets and quantisation).
+    step_s : float, optional
+        Time step of the full-FE run, s (default the scenario's).
+
+    Returns
+    -------
+    Dataset
+        At the scenario's sampling times: spindle speed (rpm), feeds (mm/min) and the machine's channels (°C,
+        µm, µε); the metadata holds the effects switched on (the truth), mesh, step (s) and scheme.
     """
     t0 = time.perf_counter()
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
@@ -119,12 +143,38 @@ class PhysicsChange:
     time_step_s: float | None = None
     output_step_s: float | None = None
 
-    def key(self):
+    def key(self) -> str:
+        """The change as sorted JSON (part of the truth cache key).
+
+        Returns
+        -------
+        str
+            JSON of every field, sorted keys (objects as ``str``).
+        """
         return json.dumps(asdict(self), sort_keys=True, default=str)
 
 
-def changed_definition(definition, change):
-    """A copy of a machine definition with ``change`` (a :class:`PhysicsChange`) applied; unknown names raise."""
+def changed_definition(definition: MachineDefinition, change: PhysicsChange) -> MachineDefinition:
+    """A copy of a machine definition with ``change`` (a :class:`PhysicsChange`) applied; unknown names raise.
+
+    Parameters
+    ----------
+    definition : MachineDefinition
+        The nominal definition (not modified).
+    change : PhysicsChange
+        Factors on convection h and joint conductances, sources added, scaled or with another speed exponent, air
+        lags of zones (h).
+
+    Returns
+    -------
+    MachineDefinition
+        The changed copy (zone lags in s).
+
+    Raises
+    ------
+    TwinInputError
+        When the change names a convection group, joint, source or lagged zone the definition does not have.
+    """
     groups = {r.name for r in definition.convection}
     bad = sorted(set(change.convection) - groups)
     if bad:
@@ -152,8 +202,21 @@ def changed_definition(definition, change):
     return replace(definition, convection=convection, joints=joints, sources=sources, zone_lags_s=lags)
 
 
-def changed_scenario(scenario, change):
-    """The scenario with the change's integrator, step and output sampling."""
+def changed_scenario(scenario: str | Path | Scenario, change: PhysicsChange) -> Scenario:
+    """The scenario with the change's integrator, step and output sampling.
+
+    Parameters
+    ----------
+    scenario : str, Path or Scenario
+        Scenario name, file or object.
+    change : PhysicsChange
+        Its ``scheme``, ``time_step_s`` (s) and ``output_step_s`` (s) are used, when set.
+
+    Returns
+    -------
+    Scenario
+        A changed copy, or the scenario itself when the change sets none of them.
+    """
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     updates = {}
     if change.scheme is not None:
@@ -180,12 +243,34 @@ def _machine_file(machine):
     return load_machine(machine).source
 
 
-def physics_truth(scenario, change=PhysicsChange(), machine="vmc_ram", seed=None, noise=True, cache=True):
+def physics_truth(scenario: str | Path | Scenario, change: PhysicsChange = PhysicsChange(), machine: str = "vmc_ram",
+                  seed: int | None = None, noise: bool = True, cache: bool = True) -> Dataset:
     """A "measured" record (rig channels only) of ``scenario`` on a machine whose physics ``change`` alters.
 
     The full FE of :func:`twin.core.simulate.simulate` on the changed definition copy (reassembled on the
     nominal or the change's mesh).  With ``cache`` the record is read from / written to the user cache
     folder under a content hash (see the module docstring).
+
+    Parameters
+    ----------
+    scenario : str, Path or Scenario
+        Scenario name, file or object.
+    change : PhysicsChange, default the nominal machine
+        What differs from the nominal machine and scenario.
+    machine : str, default "vmc_ram"
+        Machine name or TOML path.
+    seed : int, optional
+        Noise seed (default the scenario's).
+    noise : bool, default True
+        Add the scenario's sensor noise.
+    cache : bool, default True
+        Read from and write to the user cache folder.
+
+    Returns
+    -------
+    Dataset
+        The channels of :data:`RECORDED_KINDS` (rpm, mm/min, °C, µm, µε) at the (changed) output times; the
+        metadata holds the change and the run time (s).
     """
     path = user_cache_dir() / "gap-truth" / f"truth-{_content_key(scenario, change, machine, seed, noise)}.csv"
     if cache and path.exists():

@@ -4,8 +4,8 @@ Scales.  Every channel group g has a scale σ_g (:meth:`twin.gap.fit.Evaluator.s
 noise level and the model tolerance), and every sensor j its own σ_j = max(noise_j, tolerance_g).  Both are
 widened in quadrature by the *timing floor*: how far the nominal twin's held-out prediction moves when the
 piecewise-constant inputs (spindle, feeds) are reconstructed with their change times at the earliest and at the
-latest time the sampling allows (:func:`twin.gap.diagnose.reconstruct_inputs`).  A residual of that size is what the record's sampling cannot
-resolve, so it is no evidence of an effect.
+latest time the sampling allows (:func:`twin.gap.diagnose.reconstruct_inputs`).  A residual of that size is
+what the record's sampling cannot resolve, so it is no evidence of an effect.
 
 A *gap* is a held-out RMS above :data:`NOISE_FACTOR` × σ_g in some group, or above :data:`SENSOR_FACTOR` × σ_j
 at some single sensor.  The sensor test keeps one thermometer with a 7× residual from being averaged away in a
@@ -28,11 +28,16 @@ Evidence is ΔBIC and its log10 Bayes-factor equivalent ΔBIC / (2 ln 10): no ex
 """
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .fit import GROUP_FLOOR
+from .fit import GROUP_FLOOR, Evaluator, FitResult
+
+if TYPE_CHECKING:
+    from .diagnose import Diagnosis
 
 OUTCOMES = ("no_significant_gap", "explained", "partly_explained", "not_explained")
 MIN_DELTA_BIC = 10.0
@@ -52,8 +57,23 @@ class Scales:
     timing_sensor: dict = field(default_factory=dict)
 
 
-def scales(evaluator, names, timing=None):
-    """:class:`Scales` of an evaluator with weights set; ``timing`` (p,) is the per-sensor timing floor or None."""
+def scales(evaluator: Evaluator, names: Sequence[str], timing: np.ndarray | None = None) -> Scales:
+    """:class:`Scales` of an evaluator with weights set; ``timing`` (p,) is the per-sensor timing floor or None.
+
+    Parameters
+    ----------
+    evaluator : Evaluator
+        With weights set (its ``sigma`` per group and ``noise`` per channel, channel units).
+    names : sequence of str, length p
+        Names of the evaluator's channels.
+    timing : ndarray, shape (p,), optional
+        Per-sensor timing floor, channel units (K, µm, µε); NaN counts as 0, None as 0 everywhere.
+
+    Returns
+    -------
+    Scales
+        σ_g and σ_j widened in quadrature by the timing floor, and the floors themselves (group: their RMS).
+    """
     noise = np.nan_to_num(evaluator.noise)
     timing = np.zeros(len(names)) if timing is None else np.nan_to_num(np.asarray(timing, float))
     sensor, t_sensor, group, t_group = {}, {}, {}, {}
@@ -66,29 +86,116 @@ def scales(evaluator, names, timing=None):
     return Scales(group, sensor, t_group, t_sensor)
 
 
-def group_ratios(result, sc):
-    """Held-out RMS / σ_g per channel group."""
+def group_ratios(result: FitResult, sc: Scales) -> dict[str, float]:
+    """Held-out RMS / σ_g per channel group.
+
+    Parameters
+    ----------
+    result : FitResult
+        A fitted model (or the nominal twin).
+    sc : Scales
+        σ per group and per sensor, channel units.
+
+    Returns
+    -------
+    dict of str to float
+        Group → ratio (dimensionless).
+    """
     return {g: result.summary["groups"][g]["hold_rms"] / s for g, s in sc.group.items()}
 
 
-def sensor_ratios(result, sc):
-    """Held-out RMS / σ_j per sensor."""
+def sensor_ratios(result: FitResult, sc: Scales) -> dict[str, float]:
+    """Held-out RMS / σ_j per sensor.
+
+    Parameters
+    ----------
+    result : FitResult
+        A fitted model (or the nominal twin).
+    sc : Scales
+        σ per group and per sensor, channel units.
+
+    Returns
+    -------
+    dict of str to float
+        Sensor name → ratio (dimensionless; NaN without held-out samples).
+    """
     return {n: result.summary["channels"][n]["hold_rms"] / s for n, s in sc.sensor.items()}
 
 
-def flagged_sensors(result, sc):
-    """Sensors whose held-out RMS exceeds :data:`SENSOR_FACTOR` × σ_j, worst first: [(name, ratio)]."""
+def flagged_sensors(result: FitResult, sc: Scales) -> list[tuple[str, float]]:
+    """Sensors whose held-out RMS exceeds :data:`SENSOR_FACTOR` × σ_j, worst first: [(name, ratio)].
+
+    Parameters
+    ----------
+    result : FitResult
+        A fitted model (or the nominal twin).
+    sc : Scales
+        σ per group and per sensor, channel units.
+
+    Returns
+    -------
+    list of (str, float)
+        Sensor name and held-out RMS / σ_j, by decreasing ratio.
+    """
     r = sensor_ratios(result, sc)
     return sorted([(n, v) for n, v in r.items() if np.isfinite(v) and v > SENSOR_FACTOR], key=lambda p: -p[1])
 
 
-def leaves_a_gap(result, sc):
-    """True when some group exceeds :data:`NOISE_FACTOR` × σ_g or some sensor :data:`SENSOR_FACTOR` × σ_j."""
-    return max(group_ratios(result, sc).values()) > NOISE_FACTOR or bool(flagged_sensors(result, sc))
+def leaves_a_gap(result: FitResult, sc: Scales) -> bool:
+    """True when some group exceeds :data:`NOISE_FACTOR` × σ_g or some sensor :data:`SENSOR_FACTOR` × σ_j.
+
+    Parameters
+    ----------
+    result : FitResult
+        A fitted model (or the nominal twin).
+    sc : Scales
+        σ per group and per sensor, channel units.
+
+    Returns
+    -------
+    bool
+        Whether its held-out residual leaves a gap.
+    """
+    return worst(group_ratios(result, sc).values()) > NOISE_FACTOR or bool(flagged_sensors(result, sc))
 
 
-def worsened_groups(result, reference, sc):
-    """Groups whose held-out mean square grows by more than :data:`MAX_WORSENING` σ_g² against ``reference``."""
+def worst(ratios: Iterable[float]) -> float:
+    """The largest finite ratio, NaN if none is finite.
+
+    A group without a finite held-out residual (its channels missing there) says nothing; Python's ``max``
+    would let it hide the others or not depending on the order.
+
+    Parameters
+    ----------
+    ratios : iterable of float
+        Held-out RMS / σ per group or sensor.
+
+    Returns
+    -------
+    float
+        The largest finite one, or NaN.
+    """
+    finite = [float(v) for v in ratios if np.isfinite(v)]
+    return max(finite) if finite else float("nan")
+
+
+def worsened_groups(result: FitResult, reference: FitResult, sc: Scales) -> list[str]:
+    """Groups whose held-out mean square grows by more than :data:`MAX_WORSENING` σ_g² against ``reference``.
+
+    Parameters
+    ----------
+    result : FitResult
+        The model judged.
+    reference : FitResult
+        The model it is compared with (the nominal twin, or a single effect of a pair).
+    sc : Scales
+        σ per group and per sensor, channel units.
+
+    Returns
+    -------
+    list of str
+        The worsened groups (groups with a non-finite RMS are skipped).
+    """
     out = []
     for g, s in sc.group.items():
         a = reference.summary["groups"][g]["hold_rms"]
@@ -98,8 +205,23 @@ def worsened_groups(result, reference, sc):
     return out
 
 
-def materiality(result, reference, sc):
-    """max of (RMS_ref² − RMS²) / σ² over the groups and over the sensors with a gap in ``reference``."""
+def materiality(result: FitResult, reference: FitResult, sc: Scales) -> float:
+    """max of (RMS_ref² − RMS²) / σ² over the groups and over the sensors with a gap in ``reference``.
+
+    Parameters
+    ----------
+    result : FitResult
+        The model judged.
+    reference : FitResult
+        The model it is compared with.
+    sc : Scales
+        σ per group and per sensor, channel units.
+
+    Returns
+    -------
+    float
+        Held-out mean square removed, in units of σ² (dimensionless); −inf when nothing is comparable.
+    """
     out = -np.inf
     for g, s in sc.group.items():
         a, b = reference.summary["groups"][g]["hold_rms"], result.summary["groups"][g]["hold_rms"]
@@ -112,16 +234,46 @@ def materiality(result, reference, sc):
     return float(out)
 
 
-def admissible(result, reference, sc):
-    """True when ``result`` beats ``reference`` by ΔBIC, materially, and worsens no group (module docstring)."""
+def admissible(result: FitResult, reference: FitResult, sc: Scales) -> bool:
+    """True when ``result`` beats ``reference`` by ΔBIC, materially, and worsens no group (module docstring).
+
+    Parameters
+    ----------
+    result : FitResult
+        The model judged.
+    reference : FitResult
+        The model it must beat.
+    sc : Scales
+        σ per group and per sensor, channel units.
+
+    Returns
+    -------
+    bool
+        ΔBIC > :data:`MIN_DELTA_BIC`, materiality ≥ :data:`MIN_MATERIAL` and no worsened group.
+    """
     return (result.delta_bic - reference.delta_bic > MIN_DELTA_BIC
             and materiality(result, reference, sc) >= MIN_MATERIAL
             and not worsened_groups(result, reference, sc))
 
 
-def parsimonious(ranking, nominal, sc):
+def parsimonious(ranking: Sequence[FitResult], nominal: FitResult, sc: Scales) -> FitResult | None:
     """The best admissible model; a pair only when each of its single effects leaves a gap and the pair is
-    admissible against it (an effect is added only while a gap remains).  None when nothing is admissible."""
+    admissible against it (an effect is added only while a gap remains).  None when nothing is admissible.
+
+    Parameters
+    ----------
+    ranking : sequence of FitResult
+        Single-effect and pair fits, best first.
+    nominal : FitResult
+        The nominal twin.
+    sc : Scales
+        σ per group and per sensor, channel units.
+
+    Returns
+    -------
+    FitResult or None
+        The first admissible fit of ``ranking`` that passes the pair rule.
+    """
     by_name = {r.name: r for r in ranking}
     for r in ranking:
         if not admissible(r, nominal, sc):
@@ -132,13 +284,38 @@ def parsimonious(ranking, nominal, sc):
     return None
 
 
-def log10_evidence(delta_bic):
-    """log10 of the Bayes-factor equivalent exp(ΔBIC / 2) of a ΔBIC (no overflow)."""
+def log10_evidence(delta_bic: float) -> float:
+    """log10 of the Bayes-factor equivalent exp(ΔBIC / 2) of a ΔBIC (no overflow).
+
+    Parameters
+    ----------
+    delta_bic : float
+        ΔBIC.
+
+    Returns
+    -------
+    float
+        ΔBIC / (2 ln 10).
+    """
     return float(delta_bic) / (2.0 * np.log(10.0))
 
 
-def reductions(result, nominal):
-    """Held-out RMS before and after per group: {group: {nominal_rms, fitted_rms, reduction}}."""
+def reductions(result: FitResult | None, nominal: FitResult) -> dict[str, dict[str, float]]:
+    """Held-out RMS before and after per group: {group: {nominal_rms, fitted_rms, reduction}}.
+
+    Parameters
+    ----------
+    result : FitResult or None
+        The fitted model; None gives the nominal RMS as the fitted one (no reduction).
+    nominal : FitResult
+        The nominal twin.
+
+    Returns
+    -------
+    dict of str to dict of str to float
+        Group → ``nominal_rms`` and ``fitted_rms`` (channel units: K, µm, µε) and ``reduction``
+        1 − fitted / nominal (dimensionless; NaN when the nominal RMS is 0).
+    """
     out = {}
     for g, b in nominal.summary["groups"].items():
         a = result.summary["groups"][g]["hold_rms"] if result is not None else b["hold_rms"]
@@ -163,11 +340,19 @@ class Verdict:
     material: float
 
     @property
-    def significant(self):
+    def significant(self) -> bool:
+        """True when a model is named (the outcome is ``explained`` or ``partly_explained``)."""
         return self.winner is not None
 
-    def evidence(self):
-        """ΔBIC of the named (else best) model vs the nominal and vs the runner-up, with log10 equivalents."""
+    def evidence(self) -> dict[str, str | float | None]:
+        """ΔBIC of the named (else best) model vs the nominal and vs the runner-up, with log10 equivalents.
+
+        Returns
+        -------
+        dict
+            ``model`` (its name or None); with a model ``delta_bic_vs_nominal`` and ``log10_ratio_vs_nominal``;
+            with a runner-up also ``runner_up``, ``delta_bic_vs_runner_up`` and ``log10_ratio_vs_runner_up``.
+        """
         model = self.winner or self.best
         out = {"model": model.name if model is not None else None}
         if model is not None:
@@ -206,8 +391,23 @@ def _checks_after(model, nominal, sc):
             materiality(model, nominal, sc))
 
 
-def decide(nominal, ranking, sc):
-    """:class:`Verdict` from the nominal result and the ranked fits (see the module docstring)."""
+def decide(nominal: FitResult, ranking: Sequence[FitResult], sc: Scales) -> Verdict:
+    """:class:`Verdict` from the nominal result and the ranked fits (see the module docstring).
+
+    Parameters
+    ----------
+    nominal : FitResult
+        The nominal twin.
+    ranking : sequence of FitResult
+        Single-effect and pair fits, best first (may be empty).
+    sc : Scales
+        σ per group and per sensor, channel units.
+
+    Returns
+    -------
+    Verdict
+        The outcome, the named model, the best fit, the runner-up and the checks behind them.
+    """
     best = ranking[0] if ranking else None
     winner, outcome = _outcome(nominal, ranking, sc)
     return Verdict(outcome, winner, best, _runner_up(ranking, winner, best), group_ratios(nominal, sc),
@@ -218,8 +418,19 @@ def decide(nominal, ranking, sc):
 Z90 = 1.6448536269514722
 
 
-def parameters(result):
-    """Fitted parameters with 90 % intervals: [{name, value, interval90: [lo, hi], unit}]."""
+def parameters(result: FitResult | None) -> list[dict[str, str | float | list[float]]]:
+    """Fitted parameters with 90 % intervals: [{name, value, interval90: [lo, hi], unit}].
+
+    Parameters
+    ----------
+    result : FitResult or None
+        A fitted model; None gives an empty list.
+
+    Returns
+    -------
+    list of dict
+        One per parameter: value ± 1.645 sd as the interval, in the parameter's ``unit``.
+    """
     if result is None:
         return []
     return [{"name": p["name"], "value": p["value"], "interval90": [p["value"] - Z90 * p["sd"],
@@ -227,8 +438,20 @@ def parameters(result):
             for p in result.params()]
 
 
-def flagged_table(d):
-    """Sensors with a gap before or after the named (else best) model, worst first."""
+def flagged_table(d: Diagnosis) -> list[dict[str, str | float]]:
+    """Sensors with a gap before or after the named (else best) model, worst first.
+
+    Parameters
+    ----------
+    d : Diagnosis
+        The diagnosis (its scales, decision, nominal and winner fits, evaluator and channel names).
+
+    Returns
+    -------
+    list of dict
+        ``name``, ``kind``, ``unit``, ``scale`` (σ_j) and ``nominal_rms`` (held-out, in ``unit``), and
+        ``fitted_rms`` when a model is named.
+    """
     sc, model = d.scales, d.winner or d.decision.best
     before = dict(flagged_sensors(d.nominal, sc))
     after = dict(flagged_sensors(model, sc)) if model is not None else {}
@@ -250,7 +473,7 @@ def _remainder(d):
     """Where, when and in which band the named model's worst remaining group or sensor misses."""
     model = d.winner
     groups = group_ratios(model, d.scales)
-    g = max(groups, key=groups.get)
+    g = max(groups, key=lambda k: groups[k] if np.isfinite(groups[k]) else -np.inf)
     parts = [f"{g} {groups[g]:.1f} × σ_g"]
     flagged = flagged_sensors(model, d.scales)
     if flagged:
@@ -273,9 +496,9 @@ def _held_out_line(d, model):
 
 def _no_gap_text(d):
     """The verdict when the nominal twin leaves no significant gap."""
-    worst_sensor = max(sensor_ratios(d.nominal, d.scales).values())
+    worst_sensor = worst(sensor_ratios(d.nominal, d.scales).values())
     return ("no significant gap: the nominal twin's held-out residual is within noise, tolerance and timing "
-            f"floor in every channel group (at most {max(d.decision.nominal_gap.values()):.1f} × σ_g) and at every "
+            f"floor in every channel group (at most {worst(d.decision.nominal_gap.values()):.1f} × σ_g) and at every "
             f"sensor (at most {worst_sensor:.1f} × σ_j)")
 
 
@@ -293,7 +516,8 @@ def _rejection_reasons(v):
 
 def _not_explained_text(v):
     """The verdict when no library model is admissible."""
-    text = (f"gap not explained by the library: nominal held-out residual up to {max(v.nominal_gap.values()):.1f} × σ_g "
+    text = (f"gap not explained by the library: nominal held-out residual up to "
+            f"{worst(v.nominal_gap.values()):.1f} × σ_g "
             f"({', '.join(f'{g} {r:.1f}' for g, r in v.nominal_gap.items())})")
     if v.nominal_flagged:
         text += "; sensors " + ", ".join(f"{n} {r:.1f} × σ" for n, r in v.nominal_flagged[:4])
@@ -319,8 +543,19 @@ def _explained_text(d):
     return text
 
 
-def sentence(d):
-    """The one-paragraph verdict of a :class:`~twin.gap.diagnose.Diagnosis`."""
+def sentence(d: Diagnosis) -> str:
+    """The one-paragraph verdict of a :class:`~twin.gap.diagnose.Diagnosis`.
+
+    Parameters
+    ----------
+    d : Diagnosis
+        With its decision (and discovery, if any) made.
+
+    Returns
+    -------
+    str
+        The verdict text.
+    """
     outcome = d.decision.outcome
     if outcome == "no_significant_gap":
         return _no_gap_text(d)
@@ -330,8 +565,20 @@ def sentence(d):
     return text
 
 
-def to_json(d):
-    """The machine-readable verdict block of ``diagnosis.json``."""
+def to_json(d: Diagnosis) -> dict[str, object]:
+    """The machine-readable verdict block of ``diagnosis.json``.
+
+    Parameters
+    ----------
+    d : Diagnosis
+        With its decision and verdict text made.
+
+    Returns
+    -------
+    dict
+        JSON-able: ``outcome``, ``explanation``, ``model``, ``parameters``, ``discoveries``, ``held_out`` (per
+        group: RMS in ``unit``, σ_g ``scale`` and ``timing_floor``), ``flagged_sensors`` and ``evidence``.
+    """
     v = d.decision
     model = v.winner
     held = reductions(model, d.nominal)

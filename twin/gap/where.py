@@ -11,13 +11,28 @@ from __future__ import annotations
 
 import numpy as np
 
+from .drive import Drive
+from .fit import Evaluator, Residual
 from .signals import BANDS, band_split, lag
 
 PHASES = ("heating", "steady", "cooling", "ambient-driven", "idle")
 
 
-def phases(drive, times_s):
-    """Phase label of every measured time (array of str), from a drive on the twin grid."""
+def phases(drive: Drive, times_s: np.ndarray) -> np.ndarray:
+    """Phase label of every measured time (array of str), from a drive on the twin grid.
+
+    Parameters
+    ----------
+    drive : Drive
+        Operating conditions on the twin grid (spindle speed, rpm; room and zone ambients, °C).
+    times_s : ndarray, shape (n,)
+        Measured times, s; each takes the label of the first grid point at or after it.
+
+    Returns
+    -------
+    ndarray of str, shape (n,)
+        One of :data:`PHASES` per time.
+    """
     rpm = np.abs(drive.spindle_rpm)
     n_max = max(float(rpm.max()), 1.0)
     target = (rpm / n_max) ** 1.3
@@ -58,8 +73,28 @@ def _rms(r):
     return float(np.sqrt(np.mean(r ** 2))) if r.size else float("nan")
 
 
-def phase_table(residual, evaluator, labels, names):
-    """RMS residual per phase: per group, and per drift axis, over all rows (dict phase → {key: (rms, n)})."""
+def phase_table(residual: Residual, evaluator: Evaluator, labels: np.ndarray,
+                names: list[str]) -> dict[str, dict[str, float | int | None]]:
+    """RMS residual per phase: per group, and per drift axis, over all rows (dict phase → {key: (rms, n)}).
+
+    Parameters
+    ----------
+    residual : Residual
+        Residuals ``R``, shape (n, p), in channel units.
+    evaluator : Evaluator
+        Gives the channel groups and kinds.
+    labels : ndarray of str, shape (n,)
+        Phase of every row (:func:`phases`).
+    names : list of str
+        Channel names, length p.
+
+    Returns
+    -------
+    dict
+        Phase (those with rows only) → {``"rows"``: number of rows (int), ``"hours"``: None, group or
+        drift-axis name: RMS (float, K for temperature and air, µm for displacement, µε for strain; NaN
+        without finite residuals)}.
+    """
     out = {}
     groups = evaluator.groups()
     for ph in PHASES:
@@ -71,8 +106,27 @@ def phase_table(residual, evaluator, labels, names):
     return out
 
 
-def band_table(residual, evaluator, times_s, names):
-    """RMS residual per frequency band (:data:`~twin.gap.signals.BANDS`): per group and per drift axis."""
+def band_table(residual: Residual, evaluator: Evaluator, times_s: np.ndarray,
+               names: list[str]) -> dict[str, dict[str, float]]:
+    """RMS residual per frequency band (:data:`~twin.gap.signals.BANDS`): per group and per drift axis.
+
+    Parameters
+    ----------
+    residual : Residual
+        Residuals ``R``, shape (n, p), in channel units.
+    evaluator : Evaluator
+        Gives the channel groups and kinds.
+    times_s : ndarray, shape (n,)
+        Measured times of the rows, s.
+    names : list of str
+        Channel names, length p.
+
+    Returns
+    -------
+    dict
+        Band name → {group or drift-axis name: RMS (K for temperature and air, µm for displacement, µε for
+        strain; NaN without finite residuals)}, over the rows where the residual is finite.
+    """
     parts = band_split(times_s, residual.R)
     groups = evaluator.groups()
     return {band: _rms_entry(np.where(np.isfinite(residual.R), part, np.nan), evaluator, groups, names)

@@ -187,7 +187,13 @@ def _print_summary(stats, thermometers, dataset):
 
 
 def cmd_live(args: argparse.Namespace) -> None:
-    """``twin live``: replay (``--replay``) or observe a machine (``--endpoint``); print the summary."""
+    """``twin live``: replay (``--replay``) or observe a machine (``--endpoint``); print the summary.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed ``twin live`` options.
+    """
     if args.log:
         from ..infra.outdir import check_output_file
         check_output_file(args.log, args.overwrite)
@@ -198,7 +204,13 @@ def cmd_live(args: argparse.Namespace) -> None:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    """Add the ``live`` command to the ``twin`` subparsers ``sub``."""
+    """Add the ``live`` command to the ``twin`` subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The ``twin`` subparsers.
+    """
     p = sub.add_parser("live", help="run the drift observer on a machine's OPC UA sensors (or a replayed dataset)")
     p.add_argument("--endpoint", help="OPC UA server, opc.tcp://HOST:PORT/…")
     p.add_argument("--node-map", help="TOML file: [inputs] spindle_speed, room_air; [thermometers]; [outputs]")

@@ -86,13 +86,25 @@ class CsvLog:
         self.file.write(",".join(cols + ["thermometers_used"]) + "\n")
 
     def write(self, e: Estimate) -> None:
-        """Append one estimate: time (s), per axis the estimate, band and compensation (µm), readings used."""
+        """Append one estimate: time (s), per axis the estimate, band and compensation (µm), readings used.
+
+        Parameters
+        ----------
+        e : Estimate
+            One observer estimate.
+        """
         row = [f"{e.time_s:.10g}"] + [f"{v:.6g}" for a in range(3)
                                       for v in (e.drift_um[a], e.band_um[a], -e.drift_um[a])]
         self.file.write(",".join(row + [str(e.used)]) + "\n")
 
     def close(self, keep: bool = True) -> None:
-        """Rename the log into place, or remove it (``keep=False``: nothing was fused)."""
+        """Rename the log into place, or remove it (``keep=False``: nothing was fused).
+
+        Parameters
+        ----------
+        keep : bool, default True
+            Keep the log (rename it into place); False removes it.
+        """
         self.file.flush()
         os.fsync(self.file.fileno())
         self.file.close()
@@ -148,12 +160,28 @@ class LiveClient:
 
     # ------------------------------------------------------------------ subscription callbacks
     def datachange_notification(self, node: Node, value: float | None, data: DataChangeNotif) -> None:
-        """asyncua's callback for a monitored value: queue (key, machine time s, value)."""
+        """asyncua's callback for a monitored value: queue (key, machine time s, value).
+
+        Parameters
+        ----------
+        node : asyncua.Node
+            The monitored node.
+        value : float or None
+            Its new value in the channel's unit (rpm, °C); None if the server sent none.
+        data : DataChangeNotif
+            asyncua's notification (its source timestamp is the machine time).
+        """
         stamp = data.monitored_item.Value.SourceTimestamp
         self._queue.put_nowait((self._key_of[node.nodeid], machine_time(stamp), value))
 
     def status_change_notification(self, status: ua.StatusChangeNotification) -> None:
-        """asyncua's callback for a subscription status change (the session is gone): reconnect."""
+        """asyncua's callback for a subscription status change (the session is gone): reconnect.
+
+        Parameters
+        ----------
+        status : ua.StatusChangeNotification
+            The new status (not read: any change means the session is gone).
+        """
         self._lost.set()
 
     # ------------------------------------------------------------------ sample assembly
@@ -281,6 +309,13 @@ class LiveClient:
         """Run until a sample at machine time ≥ ``until_time_s`` (s) is fused or ``max_wall_s`` wall s have passed.
 
         Connection losses are retried with backoff; a wrong node map raises at once.
+
+        Parameters
+        ----------
+        until_time_s : float, default inf
+            Machine time that ends the run, s.
+        max_wall_s : float, default inf
+            Wall-clock limit, s.
 
         Returns
         -------

@@ -55,7 +55,18 @@ class ModalKalmanFilter(KalmanFilter):
         return out
 
     def predict(self, u: np.ndarray) -> ModalKalmanFilter:
-        """Advance one step with the input ``u`` held over it (uses :attr:`F`, :attr:`G`, :attr:`Q`)."""
+        """Advance one step with the input ``u`` held over it (uses :attr:`F`, :attr:`G`, :attr:`Q`).
+
+        Parameters
+        ----------
+        u : ndarray, shape (n_inputs,)
+            Plant inputs held over the step (°C, K/m, W) and a trailing 1.
+
+        Returns
+        -------
+        self : ModalKalmanFilter
+            The filter, advanced.
+        """
         r, F, P = self.order, self.F, self.P
         a, F12, F22 = np.diagonal(F)[:r], F[:r, r:], F[r:, r:]
         P12, P22 = P[:r, r:], P[r:, r:]
@@ -73,6 +84,13 @@ class ModalKalmanFilter(KalmanFilter):
 
     def update(self, y: np.ndarray, u: np.ndarray) -> float:
         """Fuse the readings ``y`` (NaN = missing) taken with the input ``u``.
+
+        Parameters
+        ----------
+        y : ndarray, shape (n_thermometers,)
+            Readings, °C; NaN = missing.
+        u : ndarray, shape (n_inputs,)
+            The plant inputs at the reading.
 
         Returns
         -------

@@ -161,6 +161,18 @@ class Disturbance:
 def checked_thermometers(rom: ReducedModel, thermometers: list[str]) -> list[str]:
     """The thermometer names as a list, each a surface thermometer output of ``rom``.
 
+    Parameters
+    ----------
+    rom : ReducedModel
+        The ROM.
+    thermometers : list of str
+        Thermometer output names.
+
+    Returns
+    -------
+    thermometers : list of str
+        The names, checked.
+
     Raises
     ------
     TwinInputError
@@ -184,6 +196,13 @@ def discrepancy_modes(rom: ReducedModel, share: float = DISCREPANCY_SHARE) -> np
     An isotropic modal heat input (see the module docstring) moves drift axis a in steady state by
     Σₖ Cₐₖ/λₖ · qₖ, so coordinate k carries (Cₐₖ/λₖ)² of its variance.  Coordinates are taken in order of
     their largest share over the axes until every axis has ``share``.
+
+    Parameters
+    ----------
+    rom : ReducedModel
+        The ROM.
+    share : float, default DISCREPANCY_SHARE
+        Share (0…1) of each axis's steady variance the kept coordinates carry.
 
     Returns
     -------
@@ -415,7 +434,22 @@ class ObserverModel:
         return self._steps[key]
 
     def output_rows(self, e: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(H, L, Lf)``: the thermometer, drift and field rows over the state for the excitations ``e``."""
+        """``(H, L, Lf)``: the thermometer, drift and field rows over the state for the excitations ``e``.
+
+        Parameters
+        ----------
+        e : ndarray, shape (q,)
+            The disturbances' excitations eⱼ (:meth:`excitations`).
+
+        Returns
+        -------
+        H : ndarray, shape (n_thermometers, N)
+            Thermometer rows, °C per state.
+        L : ndarray, shape (3, N)
+            Drift rows (X, Y, Z), µm per state.
+        Lf : ndarray, shape (n_field, N)
+            Field rows, °C per state.
+        """
         if not self.feeds:
             return self.H, self.L, self.Lf
         n, q = self.n, self.q
@@ -428,6 +462,11 @@ class ObserverModel:
 
     def prior(self, room_C: float) -> tuple[np.ndarray, np.ndarray]:
         """Start state and covariance: the idle steady state in ``room_C`` (°C), spread along the uniform field.
+
+        Parameters
+        ----------
+        room_C : float
+            Room air, °C.
 
         Returns
         -------
@@ -448,7 +487,22 @@ class ObserverModel:
         return x0, P0
 
     def plant_inputs(self, spindle_rpm: ArrayLike, room_C: ArrayLike, feed_mm_min: dict | None = None) -> np.ndarray:
-        """Plant inputs (k, m) for spindle speeds (rpm), room air (°C; every read zone at it) and feeds (mm/min)."""
+        """Plant inputs (k, m) for spindle speeds (rpm), room air (°C; every read zone at it) and feeds (mm/min).
+
+        Parameters
+        ----------
+        spindle_rpm : array-like, shape (k,)
+            Spindle speeds, rpm.
+        room_C : array-like
+            Room air, °C (broadcast to the speeds).
+        feed_mm_min : dict or None
+            Feed rate per axis, mm/min; None: no feed.
+
+        Returns
+        -------
+        inputs : ndarray, shape (k, m)
+            The ROM's plant inputs (source powers W, zone temperatures °C).
+        """
         rpm = np.atleast_1d(np.asarray(spindle_rpm, float))
         room = np.broadcast_to(np.asarray(room_C, float), rpm.shape)
         ambient = {z: room for z in self.rom.measured_zones}

@@ -56,7 +56,13 @@ class NodeMap:
     source: str = "<node map>"
 
     def sensors(self) -> list[tuple[str, str]]:
-        """(key, node id) of every node read: the inputs, then the thermometers."""
+        """(key, node id) of every node read: the inputs, then the thermometers.
+
+        Returns
+        -------
+        sensors : list of (str, str)
+            (key, node id) pairs.
+        """
         return [*self.inputs.items(), *self.thermometers.items()]
 
     def where(self, key: str) -> str:
@@ -79,7 +85,13 @@ class NodeMap:
         return f"{self.source}: {key}"
 
     def to_toml(self) -> str:
-        """The map as the TOML text :func:`load_node_map` reads."""
+        """The map as the TOML text :func:`load_node_map` reads.
+
+        Returns
+        -------
+        text : str
+            TOML text.
+        """
         lines = []
         for section in ("inputs", "thermometers", "outputs"):
             lines += [f"[{section}]"] + [f'{k} = "{v}"' for k, v in getattr(self, section).items()] + [""]
@@ -101,6 +113,16 @@ def _node_id(text, where):
 
 def load_node_map(path: str | Path) -> NodeMap:
     """Read and check a node map TOML file (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or Path
+        The node map file.
+
+    Returns
+    -------
+    node_map : NodeMap
+        The checked map.
 
     Raises
     ------

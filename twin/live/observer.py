@@ -109,7 +109,20 @@ class DriftObserver:
 
     # ------------------------------------------------------------------ filtering
     def start(self, time_s: float, room_C: float) -> DriftObserver:
-        """Start from the idle steady state in the room air ``room_C`` (°C) at ``time_s`` (s)."""
+        """Start from the idle steady state in the room air ``room_C`` (°C) at ``time_s`` (s).
+
+        Parameters
+        ----------
+        time_s : float
+            Machine time of the start, s.
+        room_C : float
+            Room air, °C.
+
+        Returns
+        -------
+        self : DriftObserver
+            The observer, started.
+        """
         model = self.model
         x0, P0 = model.prior(room_C)
         F, _, G, Q = model.matrices(1.0)
@@ -236,6 +249,11 @@ class DriftObserver:
 
     def field(self) -> np.ndarray:
         """The full FE temperature field (°C per thermal node) of the present state.
+
+        Returns
+        -------
+        field : ndarray, shape (n_thermal_nodes,)
+            Temperatures, °C.
 
         Raises
         ------

@@ -75,6 +75,11 @@ def read_placement(path: str | Path, axis: str = "Z") -> PlacedThermometers:
     axis : str
         The drift axis whose chosen set is read (``Z``, ``Y`` …).
 
+    Returns
+    -------
+    placed : PlacedThermometers
+        Names, points (m) and kinds of the chosen locations.
+
     Raises
     ------
     TwinInputError
@@ -111,6 +116,11 @@ def placement_rom(rom: ReducedModel, machine: Machine, placed: PlacedThermometer
         The machine (its mesh locates the points).
     placed : PlacedThermometers
         The locations (:func:`read_placement`).
+
+    Returns
+    -------
+    rom : ReducedModel
+        ``rom`` itself if every location is a ROM thermometer already, else a copy with the new outputs.
 
     Raises
     ------

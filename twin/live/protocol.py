@@ -184,6 +184,11 @@ def score(case: Case, observer_factory: Callable[[], DriftObserver], thermometer
         The thermometer channels of the record the observer reads, in its order.
     seeds : tuple of int
         Seeds of the DS18S20 draws (thermometers and room air).
+
+    Returns
+    -------
+    score : RecordScore
+        Band coverage, mean band (µm), Z error (µm) and wall time pooled over the seeds.
     """
     import time
 

@@ -131,7 +131,17 @@ class ReplayServer:
         await self.server.stop()
 
     async def publish(self, time_s: float, values: ArrayLike, names: list[str] | None = None) -> None:
-        """Publish one sample: ``values`` of ``names`` (default every channel) stamped with machine time ``time_s`` (s)."""
+        """Publish one sample: ``values`` of ``names`` (default every channel) stamped with machine time ``time_s`` (s).
+
+        Parameters
+        ----------
+        time_s : float
+            Machine time, s.
+        values : array-like
+            One value per name, in each channel's unit.
+        names : list of str or None
+            Channel names; None: every channel in order.
+        """
         from asyncua import ua
 
         stamp = timestamp(time_s)
@@ -142,7 +152,18 @@ class ReplayServer:
         self.published += 1
 
     async def read_output(self, key: str) -> float:
-        """The value (µm) a client wrote to an output node (``Z``, ``Z_band``, ``Z_compensation`` …)."""
+        """The value (µm) a client wrote to an output node (``Z``, ``Z_band``, ``Z_compensation`` …).
+
+        Parameters
+        ----------
+        key : str
+            Output key, e.g. ``Z``, ``Z_band``, ``Z_compensation``.
+
+        Returns
+        -------
+        value : float
+            The value written, µm.
+        """
         return await self.nodes[OUTPUT_NODES[key]].read_value()
 
     async def replay(self, time_s: ArrayLike, values: ArrayLike, speed: float = 1.0, start: int = 0) -> float:

@@ -36,6 +36,11 @@ def point_rows(rom: ReducedModel, machine: Machine, names: list[str], points: np
         How far off the mesh a point may lie and be snapped onto it, m (default: the machine's
         ``snap_distance_m``, the tolerance of its own sensors).
 
+    Returns
+    -------
+    numpy.ndarray
+        (k, r) rows over the modal state, °C per unit of state.
+
     Raises
     ------
     ROMError
