@@ -26,8 +26,9 @@ Every effect documents what it changes in ``how``; ``docs/gap.md`` lists them.
 from __future__ import annotations
 
 import copy
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
+from types import MappingProxyType
 
 import numpy as np
 import scipy.sparse as sp
@@ -60,7 +61,7 @@ class Effect:
     kind = "input"
     linear = True
     params: tuple = ()
-    defaults: dict = {}
+    defaults: Mapping[str, object] = MappingProxyType({})  # read-only: shared by every instance
     how = ""
 
     def __init__(self, **hidden: object):
@@ -309,7 +310,7 @@ class ConvectionScale(Effect):
     kind = "system"
     linear = False
     params = (Param("scale", "×", 1.0, 0.3, 3.0, log=True),)
-    defaults = {"groups": ()}
+    defaults = MappingProxyType({"groups": ()})
 
     def __init__(self, name: str, label: str, groups: Sequence[str], **hidden: object):
         self.name, self.label = name, label
@@ -345,7 +346,7 @@ class JointConductance(Effect):
     kind = "system"
     linear = False
     params = (Param("factor", "×", 1.0, 0.05, 10.0, log=True),)
-    defaults = {"joint": ("carrier", "ram")}
+    defaults = MappingProxyType({"joint": ("carrier", "ram")})
 
     def __init__(self, name: str = "joint_conductance", label: str | None = None, **hidden: object):
         self.name = name
@@ -379,7 +380,7 @@ class RadiationToWalls(Effect):
     linear = False
     # the walls' lag is as unknown as ε: a fixed one leaves a structured residual that a second effect soaks up
     params = (Param("emissivity", "–", 0.0, 0.0, 1.0), Param("wall_lag_h", "h", 6.0, 0.5, 24.0, log=True))
-    defaults = {"groups": ("outside", "front")}
+    defaults = MappingProxyType({"groups": ("outside", "front")})
     how = ("the radiative share ε·h_r (h_r = 4σT³ = 5.7 W/(m² K)) of the exchange of the outer groups sees the "
            "walls, which follow the room air through a first-order lag τ_w, instead of the air: extra inputs "
            "ε·(T_walls − T_zone) on lumped h_r facet loads; ε and τ_w fitted (bounded Gauss–Newton, inputs only)")
@@ -429,8 +430,8 @@ class AirPocket(Effect):
     name = "air_pocket"
     label = "warm air pocket around the spindle motor (builds up with speed)"
     params = (Param("rise_K", "K", 0.0, 0.0, 10.0),)
-    defaults = {"near_source": "spindle_motor", "radius_m": 0.3, "lag_min": 20.0, "reference_rpm": 9000.0,
-                "exponent": 1.0}
+    defaults = MappingProxyType({"near_source": "spindle_motor", "radius_m": 0.3, "lag_min": 20.0,
+                                 "reference_rpm": 9000.0, "exponent": 1.0})
     how = ("the ambient of the convection facets within 0.3 m of the spindle-motor source rises by "
            "rise_K·(n/9000)^1 through a 20 min lag: an extra input on the lumped h·area/3 load of those facets; "
            "linear in rise_K")
@@ -462,8 +463,8 @@ class UnmodelledSource(Effect):
     name = "belt_drive"
     label = "unmodelled heat source: belt drive on the carrier top"
     params = (Param("power_W", "W", 0.0, 0.0, 150.0),)
-    defaults = {"part": "carrier", "box": (0.08, 0.18, -0.1, 0.36, 1.50, 1.55), "reference_rpm": 9000.0,
-                "exponent": 1.0}
+    defaults = MappingProxyType({"part": "carrier", "box": (0.08, 0.18, -0.1, 0.36, 1.50, 1.55),
+                                 "reference_rpm": 9000.0, "exponent": 1.0})
     how = ("a volumetric source in the carrier's top plate (x 0.08–0.18 m), P = power_W·(n/9000)^1, added to "
            "the definition and assembled (one extra input column); linear in power_W")
 
@@ -533,7 +534,7 @@ class DoorDraft(Effect):
     name = "door_draft"
     label = "door-opening draft into the enclosure"
     params = (Param("share", "–", 0.0, 0.0, 1.5),)
-    defaults = {"door_zone": "front", "inner_zone": "enclosure", "lag_min": 0.0}
+    defaults = MappingProxyType({"door_zone": "front", "inner_zone": "enclosure", "lag_min": 0.0})
     how = ("enclosure ambient += share·(T_front − T_room): the door zone's departure from the room (the door "
            "events seen by the front air sensor) enters the enclosure; linear in share")
 
@@ -556,7 +557,7 @@ class EnclosureLag(Effect):
     name = "enclosure_lag"
     label = "enclosure air lag error"
     linear = False
-    defaults = {"zone": "enclosure"}
+    defaults = MappingProxyType({"zone": "enclosure"})
     how = ("the enclosure ambient follows the room through a lag τ instead of the machine's (3 h): input change "
            "lag(T_room, τ) − lag(T_room, τ₀); nonlinear in τ (bounded Gauss–Newton on log τ)")
 
@@ -583,7 +584,7 @@ class SensorLag(Effect):
     kind = "output"
     linear = False
     params = (Param("tau_s", "s", 0.0, 0.0, 3600.0),)
-    defaults = {"spread": 0.0, "seed": 0}
+    defaults = MappingProxyType({"spread": 0.0, "seed": 0})
     how = "every surface thermometer reads lag(T, τ); nonlinear in τ (bounded Gauss–Newton)"
 
     def thermometer_change(self, theta: np.ndarray | Sequence[float], T: np.ndarray, air: np.ndarray,
