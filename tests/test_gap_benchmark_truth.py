@@ -66,3 +66,34 @@ def test_resample_to_a_clock_offset(isolated_cache):
     np.testing.assert_array_equal(out.values[:, spindle], sc.operating(times)[0])
     t01 = [c.name for c in out.channels].index("T01")
     np.testing.assert_allclose(out.values[:, t01], np.interp(times, fine.time_s, fine.values[:, t01]))
+
+
+def test_expansion_change_gives_one_part_its_own_alpha_and_keeps_earlier_cache_keys():
+    from twin.core.machine_definition import load_machine
+    from twin.gap.truth import changed_definition
+
+    nominal = load_machine("vmc_ram")
+    changed = changed_definition(nominal, PhysicsChange(expansion={"ram": 1.1}))
+    alpha = {p.name: changed.part_material(p.name).expansion for p in changed.geometry.parts}
+    before = {p.name: nominal.part_material(p.name).expansion for p in nominal.geometry.parts}
+    assert alpha["ram"] == pytest.approx(1.1 * before["ram"])
+    assert {k: v for k, v in alpha.items() if k != "ram"} == {k: v for k, v in before.items() if k != "ram"}
+    assert nominal.part_material("ram").expansion == before["ram"]            # the nominal definition is untouched
+    assert changed.geometry.digest(0.045) == nominal.geometry.digest(0.045)   # same mesh from the cache
+    assert "expansion" not in PhysicsChange(joints={"carrier-ram": 0.2}).key()
+    assert "expansion" in PhysicsChange(expansion={"ram": 1.1}).key()
+    with pytest.raises(TwinInputError, match=r"unknown part\(s\) \['roof'\]"):
+        changed_definition(nominal, PhysicsChange(expansion={"roof": 1.1}))
+
+
+@pytest.mark.slow
+def test_expansion_truth_changes_drift_not_temperatures(isolated_cache):
+    """α enters only the displacement operator (built anew by adjoint solves): every thermometer reads the
+    same, the drift changes."""
+    nominal = physics_truth(SCENARIO, PhysicsChange(), noise=False)
+    hot_ram = physics_truth(SCENARIO, PhysicsChange(expansion={"ram": 1.1}), noise=False)
+    kinds = [c.kind for c in nominal.channels]
+    temps = [j for j, k in enumerate(kinds) if k == "temperature"]
+    np.testing.assert_allclose(hot_ram.values[:, temps], nominal.values[:, temps], rtol=0, atol=1e-9)
+    z = [c.name for c in nominal.channels].index("Z")
+    assert np.abs(hot_ram.values[:, z] - nominal.values[:, z]).max() > 0.1

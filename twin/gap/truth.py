@@ -12,8 +12,10 @@ feeds and the sensors — no true ambient and no source power.
 :func:`physics_truth` makes truths by a route that shares nothing with the
 library's effect code: it changes the machine's physics in a *copy of the
 definition* (:class:`PhysicsChange`: the h of convection groups, the
-conductance of joints, extra heat sources, another mesh, another integrator
-and step), assembles it and runs :func:`twin.core.simulate.simulate` (full
+conductance of joints, extra heat sources, the expansion coefficient of a
+part, another mesh, another integrator and step), assembles it (or, when the
+change enters the displacement operator, builds the machine anew: adjoint
+elastic solves, minutes, then cached) and runs :func:`twin.core.simulate.simulate` (full
 FE).  Records are cached under the user cache folder by a content hash of
 everything that makes them (machine file, scenario file, change, seed,
 project version).
@@ -126,7 +128,8 @@ class PhysicsChange:
     ``convection`` {group: factor on h}; ``joints`` {"partA-partB": factor on the contact conductance};
     ``sources`` tuple of :class:`~twin.core.machine_definition.HeatSource` added; ``source_scale``
     {source: factor on its power}; ``source_exponent`` {source: change of its speed exponent};
-    ``zone_lags_h`` {zone: lag of its air behind the room, h}; ``mesh_size_m`` another
+    ``zone_lags_h`` {zone: lag of its air behind the room, h}; ``expansion`` {part: factor on its
+    expansion coefficient α} (the part gets a material of its own); ``mesh_size_m`` another
     mesh (must be in the mesh cache to be quick); ``scheme`` ``backward_euler``/``crank_nicolson`` and
     ``time_step_s`` another integrator and step; ``output_step_s`` another output sampling (it must divide
     the duration).
@@ -138,6 +141,7 @@ class PhysicsChange:
     source_scale: dict = field(default_factory=dict)
     source_exponent: dict = field(default_factory=dict)
     zone_lags_h: dict = field(default_factory=dict)
+    expansion: dict = field(default_factory=dict)
     mesh_size_m: float | None = None
     scheme: str | None = None
     time_step_s: float | None = None
@@ -146,12 +150,17 @@ class PhysicsChange:
     def key(self) -> str:
         """The change as sorted JSON (part of the truth cache key).
 
+        ``expansion`` enters only when set, so the truths cached before it existed keep their keys.
+
         Returns
         -------
         str
             JSON of every field, sorted keys (objects as ``str``).
         """
-        return json.dumps(asdict(self), sort_keys=True, default=str)
+        fields = asdict(self)
+        if not fields["expansion"]:
+            del fields["expansion"]
+        return json.dumps(fields, sort_keys=True, default=str)
 
 
 def changed_definition(definition: MachineDefinition, change: PhysicsChange) -> MachineDefinition:
@@ -162,8 +171,8 @@ def changed_definition(definition: MachineDefinition, change: PhysicsChange) -> 
     definition : MachineDefinition
         The nominal definition (not modified).
     change : PhysicsChange
-        Factors on convection h and joint conductances, sources added, scaled or with another speed exponent, air
-        lags of zones (h).
+        Factors on convection h, joint conductances and parts' expansion coefficients, sources added, scaled or
+        with another speed exponent, air lags of zones (h).
 
     Returns
     -------
@@ -173,7 +182,7 @@ def changed_definition(definition: MachineDefinition, change: PhysicsChange) -> 
     Raises
     ------
     TwinInputError
-        When the change names a convection group, joint, source or lagged zone the definition does not have.
+        When the change names a convection group, joint, source, lagged zone or part the definition does not have.
     """
     groups = {r.name for r in definition.convection}
     bad = sorted(set(change.convection) - groups)
@@ -199,7 +208,29 @@ def changed_definition(definition: MachineDefinition, change: PhysicsChange) -> 
                for src in definition.sources]
     sources += [s if isinstance(s, HeatSource) else HeatSource(**s) for s in change.sources]
     lags = {**definition.zone_lags_s, **{z: h * 3600.0 for z, h in change.zone_lags_h.items()}}
-    return replace(definition, convection=convection, joints=joints, sources=sources, zone_lags_s=lags)
+    changed = replace(definition, convection=convection, joints=joints, sources=sources, zone_lags_s=lags)
+    return _with_expansion(changed, change.expansion) if change.expansion else changed
+
+
+def _with_expansion(definition, factors):
+    """``definition`` whose parts named in ``factors`` each get a copy of their material with α × factor.
+
+    The parts keep their shapes (the mesh is found in the cache); only the material name of each changed part
+    differs, so parts that shared the material keep the nominal α.
+    """
+    parts = {p.name: p for p in definition.geometry.parts}
+    bad = sorted(set(factors) - set(parts))
+    if bad:
+        raise TwinInputError(f"PhysicsChange.expansion: unknown part(s) {bad}; parts: {sorted(parts)}")
+    materials, new_parts = dict(definition.materials), []
+    for p in definition.geometry.parts:
+        if p.name in factors:
+            nominal = definition.materials[p.material]
+            own = f"{p.material}_{p.name}_expansion_x{factors[p.name]:g}"
+            materials[own] = replace(nominal, expansion=nominal.expansion * float(factors[p.name]))
+            p = replace(p, material=own)
+        new_parts.append(p)
+    return replace(definition, materials=materials, geometry=replace(definition.geometry, parts=new_parts))
 
 
 def changed_scenario(scenario: str | Path | Scenario, change: PhysicsChange) -> Scenario:
@@ -280,7 +311,12 @@ def physics_truth(scenario: str | Path | Scenario, change: PhysicsChange = Physi
             pass                                   # damaged entry: make it again
     base = cached(("machine", machine, change.mesh_size_m), lambda: build_machine(machine, change.mesh_size_m))
     definition = changed_definition(base.definition, change)
-    m = reassemble(base, definition) if definition != base.definition else base
+    if definition == base.definition:
+        m = base
+    elif change.expansion:          # α enters the displacement operator: its adjoint solves are made anew
+        m = build_machine(machine, change.mesh_size_m, definition=definition)
+    else:
+        m = reassemble(base, definition)
     sc = changed_scenario(scenario, change)
     t0 = time.perf_counter()
     data = simulate(sc, machine=m, noise=noise, seed=seed).dataset
