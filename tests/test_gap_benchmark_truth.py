@@ -87,9 +87,9 @@ def test_expansion_change_gives_one_part_its_own_alpha_and_keeps_earlier_cache_k
 
 
 @pytest.mark.slow
-def test_expansion_truth_changes_drift_not_temperatures(isolated_cache):
-    """α enters only the displacement operator (built anew by adjoint solves): every thermometer reads the
-    same, the drift changes."""
+def test_expansion_truth_changes_drift_not_temperatures():
+    """α enters only the displacement operator (built anew by adjoint solves, minutes, then in the user cache):
+    every thermometer reads the same, the drift changes."""
     nominal = physics_truth(SCENARIO, PhysicsChange(), noise=False)
     hot_ram = physics_truth(SCENARIO, PhysicsChange(expansion={"ram": 1.1}), noise=False)
     kinds = [c.kind for c in nominal.channels]
