@@ -1,15 +1,20 @@
 """The independent gap benchmark's cases, goal metrics and report (no FE run: the cases' records are tested in
 test_gap_benchmark_truth.py and the discovery in test_gap_discovery.py)."""
+import numpy as np
 import pytest
 
-from twin.core.machine_definition import load_machine
+from twin.core.dataset import ChannelInfo, Dataset
+from twin.core.machine_definition import load_machine, room_zone
+from twin.core.scenario import load_scenario
 from twin.errors import TwinInputError
 from twin.gap.benchmark import (
     format_benchmark,
     format_independent,
+    in_wrong_unit,
     independent_cases,
     independent_metrics,
 )
+from twin.gap.sensor_errors import apply_sensor_errors
 from twin.gap.truth import changed_definition
 
 
@@ -22,7 +27,8 @@ def test_case_set_meets_the_issue_and_every_change_applies():
     definition = load_machine("vmc_ram")
     for c in cases:
         changed = changed_definition(definition, c.change)     # unknown groups/joints/sources would raise
-        assert (changed != definition) or c.sensors or c.sampling or c.kind == "control", c.name
+        assert (changed != definition) or c.sensors or c.sampling or c.corrupt or c.kind == "control", c.name
+    assert kinds.count("sensor") >= 1 and {c.corrupt for c in cases} >= {"kelvin", "mm"}
     with pytest.raises(TwinInputError, match="unknown independent case"):
         independent_cases("column_source,teleport")
 
@@ -42,6 +48,10 @@ def test_metrics_and_report():
                 source={"distance_m": 0.05, "power_W": 41.0, "truth_W": 40.0, "ok": True}),
         _result("missing_joint", "outside", "not_explained", False, 0.1),
         _result("control: 45 s sampling", "control", "no_significant_gap", True),
+        {**_result("loose_thermometer", "sensor", "not_explained", False),
+         "sensor": {"broken": "T11", "flagged": ["T11", "T12"], "found": True, "located": True}},
+        {**_result("kelvin_in_degC", "units", "refused", False), "message": "record: column 'T01_degC' has value 293"},
+        {**_result("mm_in_um", "units", "no_significant_gap", False), "message": ""},
     ]
     m = independent_metrics(results)
     assert m["library_top1"] == (1, 2)
@@ -53,6 +63,9 @@ def test_metrics_and_report():
     md = format_independent(results, m, 60.0, {"scenario": "gap_independent_24h", "scheduler": "local"})
     assert "| library effects made independently: top-1 | ≥ 90 % | 1/2 (50%) |" in md
     assert "0.05 m, 41 W for 40 W" in md
+    assert m["single_sensor"] == (1, 1) and m["wrong_units_refused"] == (1, 2)
+    assert "| a gap at a single sensor: found, and that sensor flagged worst | all | 1/1 (100%) |" in md
+    assert "flagged T11, T12" in md and "column 'T01_degC' has value 293" in md and "not refused" in md
 
 
 def test_blind_benchmark_report_tables():
@@ -99,3 +112,21 @@ def test_cli_refuses_blind_benchmark_settings_the_independent_cases_fix_themselv
     assert main(["gap", "benchmark", "--independent", "column_source", flag, value, "--out", str(out)]) == 2
     assert f"{flag} do(es) not apply" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_wrong_unit_records_and_a_loose_thermometer_are_written_apart_from_the_diagnosis():
+    t = np.arange(0.0, 3600.0, 60.0)
+    channels = [ChannelInfo("T11", "degC", "temperature"), ChannelInfo("T12", "degC", "temperature"),
+                ChannelInfo("Z", "um", "displacement")]
+    data = Dataset(t, np.column_stack([25.0 + 0 * t, 26.0 + 0 * t, 10.0 + 0 * t]), channels, {})
+    kelvin, mm = in_wrong_unit(data, "kelvin"), in_wrong_unit(data, "mm")
+    np.testing.assert_allclose(kelvin.values[:, :2], data.values[:, :2] + 273.15)
+    np.testing.assert_allclose(mm.values[:, 2], data.values[:, 2] / 1e3)
+    sc = load_scenario("gap_independent_24h")
+    room = apply_sensor_errors(data, [("thermometer_in_air", "T11", 0.4)], sc)
+    room_air = room_zone(load_machine(sc.machine).zones)
+    air = sc.zone_ambient(t, [room_air])[room_air]
+    np.testing.assert_allclose(room.values[:, 0], 0.6 * 25.0 + 0.4 * air)
+    np.testing.assert_array_equal(room.values[:, 1:], data.values[:, 1:])
+    with pytest.raises(TwinInputError, match="'Z' is not a thermometer"):
+        apply_sensor_errors(data, [("thermometer_in_air", "Z", 0.4)], sc)

@@ -572,7 +572,10 @@ class IndependentCase:
     errors of :mod:`twin.gap.sensor_errors`, another sampling.
 
     ``kind``: ``library`` (the truth corresponds to library effects ``library``, values ``values``),
-    ``outside``, ``pair`` or ``control``; ``source``: (part, box, power W) of an added source to score discovery.
+    ``outside``, ``pair``, ``control``, ``sensor`` (one broken sensor, ``sensor``, to be found and located) or
+    ``units`` (a record written in a wrong unit under the right header, ``corrupt``: ``kelvin`` in ``_degC``,
+    ``mm`` in ``_um``; it must be refused with a clear error); ``source``: (part, box, power W) of an added source
+    to score discovery.
     """
 
     name: str
@@ -582,6 +585,8 @@ class IndependentCase:
     sampling: str | None = None
     library: tuple = ()
     source: tuple | None = None
+    sensor: str | None = None
+    corrupt: str | None = None
 
 
 def _src(name, part, box, driver, power, exponent=1.0, reference=9000.0):
@@ -657,10 +662,18 @@ _CONTROL_CASES = (
     IndependentCase("control: irregular 30-70 s sampling", "control", sampling="irregular"),
     IndependentCase("control: clock 15 s off the minute", "control", sampling="clock_offset"),
 )
+#: One broken sensor (T11 loose, reading 40 % room air: a gap there only), and records in a wrong unit under
+#: the right header.
+_CHECK_CASES = (
+    IndependentCase("loose_thermometer", "sensor",
+                    sensors=(("thermometer_in_air", "T11", 0.4),), sensor="T11"),
+    IndependentCase("kelvin_in_degC", "units", corrupt="kelvin"),
+    IndependentCase("mm_in_um", "units", corrupt="mm"),
+)
 
 
 def independent_cases(which: str | None = "all") -> list[IndependentCase]:
-    """The independent cases: ``library``, ``outside``, ``pairs``, ``controls``, ``all`` or a comma list of names.
+    """The independent cases: ``library``, ``outside``, ``pairs``, ``controls``, ``checks``, ``all`` or names.
 
     Parameters
     ----------
@@ -677,7 +690,8 @@ def independent_cases(which: str | None = "all") -> list[IndependentCase]:
     TwinInputError
         On a name that is neither a group nor a case.
     """
-    groups = {"library": _LIBRARY_CASES, "outside": _OUTSIDE_CASES, "pairs": _PAIR_CASES, "controls": _CONTROL_CASES}
+    groups = {"library": _LIBRARY_CASES, "outside": _OUTSIDE_CASES, "pairs": _PAIR_CASES, "controls": _CONTROL_CASES,
+              "checks": _CHECK_CASES}
     groups["all"] = sum(groups.values(), ())
     by_name = {c.name: c for c in groups["all"]}
     out = []
@@ -760,6 +774,8 @@ class IndependentTask:
         t0 = time.perf_counter()
         nominal = _machine(self.machine)
         data = independent_record(self.case, self.scenario)
+        if self.case.corrupt:
+            return _refusal(self.case, in_wrong_unit(data, self.case.corrupt), nominal, time.perf_counter() - t0)
         t1 = time.perf_counter()
         d = diagnose(data, nominal)
         t2 = time.perf_counter()
@@ -767,6 +783,43 @@ class IndependentTask:
         out.update(kind=self.case.kind, outcome=d.outcome, truth_seconds=t1 - t0, diagnosis_seconds=t2 - t1)
         out.update(score_independent(self.case, d, nominal))
         return out
+
+
+def in_wrong_unit(data: Dataset, how: str) -> Dataset:
+    """The record with its values written in a wrong unit under the right headers.
+
+    Parameters
+    ----------
+    data : Dataset
+        A record in the twin's units (°C, µm).
+    how : str
+        ``kelvin``: thermometers and air sensors in K under ``_degC``; ``mm``: displacements in mm under ``_um``.
+
+    Returns
+    -------
+    Dataset
+        The corrupted copy.
+    """
+    kinds = {"kelvin": (("temperature", "air"), lambda v: v + 273.15), "mm": (("displacement",), lambda v: v / 1e3)}
+    if how not in kinds:
+        raise TwinInputError(f"unknown wrong unit {how!r}; known: {', '.join(kinds)}")
+    which, convert = kinds[how]
+    values = data.values.copy()
+    cols = [j for j, c in enumerate(data.channels) if c.kind in which]
+    values[:, cols] = convert(values[:, cols])
+    return Dataset(data.time_s, values, list(data.channels), dict(data.metadata))
+
+
+def _refusal(case, data, machine, truth_seconds):
+    """Diagnose a record in a wrong unit: ``outcome`` is ``refused`` (a :class:`TwinInputError`, its message kept)
+    or, if it went through, the diagnosis's outcome."""
+    t0 = time.perf_counter()
+    try:
+        outcome, message = diagnose(data, machine).outcome, ""
+    except TwinInputError as exc:
+        outcome, message = "refused", str(exc)
+    return {"case": case.name, "kind": case.kind, "outcome": outcome, "message": message, "top": "–",
+            "truth_seconds": truth_seconds, "diagnosis_seconds": time.perf_counter() - t0}
 
 
 def score_independent(case: IndependentCase, d: Diagnosis, machine: Machine) -> dict[str, object]:
@@ -794,6 +847,10 @@ def score_independent(case: IndependentCase, d: Diagnosis, machine: Machine) -> 
            "drift_reduction": drift}
     disc = d.discovery
     out["discovery"] = disc.as_dict() if disc is not None else None
+    if case.sensor is not None:
+        flagged = [name for name, _ in d.decision.nominal_flagged]
+        out["sensor"] = {"broken": case.sensor, "flagged": flagged[:4], "found": d.outcome != "no_significant_gap",
+                         "located": bool(flagged) and flagged[0] == case.sensor}
     if case.source is not None:
         part, box, power = case.source
         centre = source_centre(machine, part, box)
@@ -841,6 +898,8 @@ def independent_metrics(results: list[dict]) -> dict[str, object]:
         "interval_coverage": _count(params, _covered),
         "median_drift_reduction": _median_and_min(explained)[0],
         "pairs_both": _count(pairs, lambda r: r["correct"]),
+        "single_sensor": _count(_of_kind(results, "sensor"), lambda r: r["sensor"]["found"] and r["sensor"]["located"]),
+        "wrong_units_refused": _count(_of_kind(results, "units"), lambda r: r["outcome"] == "refused"),
     }
 
 
@@ -860,18 +919,29 @@ def _goal_rows(m):
         ("90 % interval coverage of the true parameters", "≥ 80 %", _ratio(m["interval_coverage"])),
         ("held-out drift reduction when \"explained\" (median)", "≥ 80 %", "–" if med is None else f"{med:.0%}"),
         ("pairs: both effects named", "–", _ratio(m["pairs_both"])),
+        ("a gap at a single sensor: found, and that sensor flagged worst", "all", _ratio(m["single_sensor"])),
+        ("wrong values under a right header (kelvin in `_degC`, mm in `_um`): a clear error", "all",
+         _ratio(m["wrong_units_refused"])),
     ]
 
 
 def _case_rows(results):
     rows = []
     for r in results:
-        src = r.get("source") or {}
-        where = ("–" if not src else "not found" if src.get("distance_m") is None
-                 else f"{src['distance_m']:.2f} m, {src['power_W']:.0f} W for {src['truth_W']:.0f} W")
-        rows.append((r["case"], r["kind"], r["outcome"], r["top"], _fmt(r.get("drift_reduction"), ".0%"), where,
+        rows.append((r["case"], r["kind"], r["outcome"], r["top"], _fmt(r.get("drift_reduction"), ".0%"), _where(r),
                      f"{r.get('truth_seconds', 0):.0f} + {r.get('diagnosis_seconds', 0):.0f}"))
     return rows
+
+
+def _where(r):
+    """The case table's finding: the discovered source, the sensors flagged worst, or the refusal's message."""
+    if r.get("sensor"):
+        return "flagged " + (", ".join(r["sensor"]["flagged"]) or "none")
+    if r["kind"] == "units":
+        return r["message"].replace("|", "/") or "not refused"
+    src = r.get("source") or {}
+    return ("–" if not src else "not found" if src.get("distance_m") is None
+            else f"{src['distance_m']:.2f} m, {src['power_W']:.0f} W for {src['truth_W']:.0f} W")
 
 
 def format_independent(results: list[dict], metrics: dict, wall: float, settings: dict) -> str:
@@ -900,7 +970,8 @@ def format_independent(results: list[dict], metrics: dict, wall: float, settings
             "## Goals", ""]
     goals = markdown_table(_goal_rows(metrics), ["check", "goal", "result"])
     cases_md = markdown_table(_case_rows(results), ["case", "kind", "outcome", "named", "held-out drift reduction",
-                                                    "discovered source", "truth + diagnosis (s)"])
+                                                    "discovered source / flagged sensors / error",
+                                                    "truth + diagnosis (s)"])
     return "\n".join(head) + "\n" + goals + "\n\n## Cases\n\n" + cases_md + "\n"
 
 

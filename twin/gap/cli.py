@@ -154,7 +154,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--independent", metavar="CASES",
                    help="run the independent benchmark instead (truth: changed physics in the full FE, sensor "
                         "errors and sampling written apart from the library): library | outside | pairs | controls "
-                        "| all | comma list of case names")
+                        "| checks | all | comma list of case names")
     b.add_argument("--scenario", help=f"truth scenario (default {SCENARIO}; with --independent "
                                       f"{INDEPENDENT_SCENARIO})")
     b.add_argument("--truth-mesh-size", type=float,

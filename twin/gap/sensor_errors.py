@@ -176,7 +176,8 @@ def apply_sensor_errors(dataset: Dataset, errors: Sequence[tuple], scenario: Sce
     ``errors``: tuples ``("thermometer_lag2", τ₁ s, τ₂ s)`` (every surface thermometer through
     :func:`second_order_lag`), ``("thermometer_dead_time", s)``, ``("fixture", k_x, k_y, k_z µm/K, τ₁ min,
     τ₂ min)`` (each displacement probe += k·(room air through a second-order lag − its start value); the
-    room air is the scenario's, which the record does not contain).
+    room air is the scenario's, which the record does not contain), ``("thermometer_in_air", name, share)``
+    (one loose thermometer: it reads ``share`` (0…1) of the room air and the rest of its surface).
 
     Parameters
     ----------
@@ -185,34 +186,59 @@ def apply_sensor_errors(dataset: Dataset, errors: Sequence[tuple], scenario: Sce
     errors : sequence of tuple
         The errors, applied in order (see above); an unknown name raises :class:`~twin.errors.TwinInputError`.
     scenario : Scenario
-        The record's scenario (machine and room air, °C; used by ``fixture``).
+        The record's scenario (machine and room air, °C; used by ``fixture`` and ``thermometer_in_air``).
 
     Returns
     -------
     Dataset
         The record with the errors applied, listed in its metadata's ``sensor_errors``.
     """
-    t = dataset.time_s
     V = dataset.values.copy()
-    kinds = [c.kind for c in dataset.channels]
-    thermo = [j for j, k in enumerate(kinds) if k == "temperature"]
     for err in errors:
         name, args = err[0], err[1:]
-        if name == "thermometer_lag2":
-            V[:, thermo] = second_order_lag(t, V[:, thermo], *args)
-        elif name == "thermometer_dead_time":
-            V[:, thermo] = dead_time(t, V[:, thermo], *args)
-        elif name == "fixture":
-            kx, ky, kz, tau1, tau2 = args
-            room = room_zone(load_machine(scenario.machine).zones)
-            air = second_order_lag(t, scenario.zone_ambient(t, [room])[room], tau1 * 60.0, tau2 * 60.0)
-            k = {"x": kx, "y": ky, "z": kz}
-            for j, c in enumerate(dataset.channels):
-                if c.kind == "displacement":
-                    V[:, j] += k[c.name[0].lower()] * (air - air[0])
-        else:
-            raise TwinInputError(f"unknown sensor error {name!r}; errors: thermometer_lag2, thermometer_dead_time, "
-                                 "fixture")
+        if name not in _ERRORS:
+            raise TwinInputError(f"unknown sensor error {name!r}; errors: {', '.join(_ERRORS)}")
+        _ERRORS[name](dataset, V, scenario, *args)
     meta = dict(dataset.metadata)
     meta["sensor_errors"] = [list(e) for e in errors]
-    return Dataset(t, V, list(dataset.channels), meta)
+    return Dataset(dataset.time_s, V, list(dataset.channels), meta)
+
+
+def _thermometers(dataset):
+    return [j for j, c in enumerate(dataset.channels) if c.kind == "temperature"]
+
+
+def _room_air(scenario, t):
+    room = room_zone(load_machine(scenario.machine).zones)
+    return scenario.zone_ambient(t, [room])[room]
+
+
+def _thermometer_lag2(dataset, V, scenario, tau1_s, tau2_s):
+    cols = _thermometers(dataset)
+    V[:, cols] = second_order_lag(dataset.time_s, V[:, cols], tau1_s, tau2_s)
+
+
+def _thermometer_dead_time(dataset, V, scenario, delay_s):
+    cols = _thermometers(dataset)
+    V[:, cols] = dead_time(dataset.time_s, V[:, cols], delay_s)
+
+
+def _fixture(dataset, V, scenario, kx, ky, kz, tau1_min, tau2_min):
+    t = dataset.time_s
+    air = second_order_lag(t, _room_air(scenario, t), tau1_min * 60.0, tau2_min * 60.0)
+    k = {"x": kx, "y": ky, "z": kz}
+    for j, c in enumerate(dataset.channels):
+        if c.kind == "displacement":
+            V[:, j] += k[c.name[0].lower()] * (air - air[0])
+
+
+def _thermometer_in_air(dataset, V, scenario, name, share):
+    names = [c.name for c in dataset.channels]
+    if name not in names or dataset.channels[names.index(name)].kind != "temperature":
+        raise TwinInputError(f"thermometer_in_air: {name!r} is not a thermometer of the record")
+    j = names.index(name)
+    V[:, j] = (1.0 - share) * V[:, j] + share * _room_air(scenario, dataset.time_s)
+
+
+_ERRORS = {"thermometer_lag2": _thermometer_lag2, "thermometer_dead_time": _thermometer_dead_time,
+           "fixture": _fixture, "thermometer_in_air": _thermometer_in_air}
