@@ -255,3 +255,14 @@ def test_a_group_without_held_out_readings_hides_no_gap_elsewhere():
         assert verdict.leaves_a_gap(nominal, SCALES)
     assert verdict.worst([np.nan, 5.0]) == verdict.worst([5.0, np.nan]) == 5.0
     assert np.isnan(verdict.worst([np.nan]))
+
+
+def test_a_model_that_removes_a_sliver_at_a_far_off_sensor_is_no_explanation():
+    """One σ² removed at a sensor 14.5 σ off is < 1 % of its gap: not material (MIN_MATERIAL_SHARE)."""
+    nominal = _result("nominal", {"temperature": 0.06, "displacement": 0.05}, _channels(0.03, 0.05, 0.725), 0, [])
+    sliver = _result("a", {"temperature": 0.06, "displacement": 0.05}, _channels(0.03, 0.05, 0.72), 80.0)
+    assert verdict.materiality(sliver, nominal, SCALES) == -np.inf       # 1.4 σ² removed, but 1.4 % of 210 σ²
+    assert verdict.decide(nominal, [sliver], SCALES).outcome == "not_explained"
+    third = _result("b", {"temperature": 0.06, "displacement": 0.05}, _channels(0.03, 0.05, 0.6), 80.0)
+    assert verdict.materiality(third, nominal, SCALES) == pytest.approx((0.725 ** 2 - 0.6 ** 2) / 0.05 ** 2)
+    assert verdict.decide(nominal, [third], SCALES).outcome == "partly_explained"

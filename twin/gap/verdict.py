@@ -12,8 +12,9 @@ at some single sensor.  The sensor test keeps one thermometer with a 7× residua
 group of 25.
 
 A model (an effect or a pair) is *admissible* when it beats the nominal twin on held-out data by ΔBIC >
-:data:`MIN_DELTA_BIC`, removes a material share (at least one σ² of held-out mean square in some group, or at
-some sensor that has a gap) and makes no group worse (its held-out mean square may not grow by more than
+:data:`MIN_DELTA_BIC`, removes a material share (in some group, or at some sensor that has a gap, at least one
+σ² of held-out mean square *and* at least :data:`MIN_MATERIAL_SHARE` of what is there: one σ² is nothing at a
+sensor 15 σ off) and makes no group worse (its held-out mean square may not grow by more than
 :data:`MAX_WORSENING` σ_g²): a model that degrades a group cannot be the explanation, however much it helps
 another.
 
@@ -42,6 +43,7 @@ if TYPE_CHECKING:
 OUTCOMES = ("no_significant_gap", "explained", "partly_explained", "not_explained")
 MIN_DELTA_BIC = 10.0
 MIN_MATERIAL = 1.0
+MIN_MATERIAL_SHARE = 0.1
 NOISE_FACTOR = 2.0
 SENSOR_FACTOR = 4.0
 MAX_WORSENING = 0.1
@@ -208,6 +210,9 @@ def worsened_groups(result: FitResult, reference: FitResult, sc: Scales) -> list
 def materiality(result: FitResult, reference: FitResult, sc: Scales) -> float:
     """max of (RMS_ref² − RMS²) / σ² over the groups and over the sensors with a gap in ``reference``.
 
+    A group or sensor counts only where the model removes at least :data:`MIN_MATERIAL_SHARE` of the reference's
+    held-out mean square there.
+
     Parameters
     ----------
     result : FitResult
@@ -222,16 +227,13 @@ def materiality(result: FitResult, reference: FitResult, sc: Scales) -> float:
     float
         Held-out mean square removed, in units of σ² (dimensionless); −inf when nothing is comparable.
     """
-    out = -np.inf
-    for g, s in sc.group.items():
-        a, b = reference.summary["groups"][g]["hold_rms"], result.summary["groups"][g]["hold_rms"]
-        if np.isfinite(a) and np.isfinite(b):
-            out = max(out, (a * a - b * b) / s ** 2)
-    for n, _ in flagged_sensors(reference, sc):
-        a, b = reference.summary["channels"][n]["hold_rms"], result.summary["channels"][n]["hold_rms"]
-        if np.isfinite(b):
-            out = max(out, (a * a - b * b) / sc.sensor[n] ** 2)
-    return float(out)
+    pairs = [(reference.summary["groups"][g]["hold_rms"], result.summary["groups"][g]["hold_rms"], s)
+             for g, s in sc.group.items()]
+    pairs += [(reference.summary["channels"][n]["hold_rms"], result.summary["channels"][n]["hold_rms"],
+               sc.sensor[n]) for n, _ in flagged_sensors(reference, sc)]
+    removed = [(a * a - b * b) / s ** 2 for a, b, s in pairs
+               if np.isfinite(a) and np.isfinite(b) and a > 0 and a * a - b * b >= MIN_MATERIAL_SHARE * a * a]
+    return float(max(removed, default=-np.inf))
 
 
 def admissible(result: FitResult, reference: FitResult, sc: Scales) -> bool:
