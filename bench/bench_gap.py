@@ -7,7 +7,7 @@ Run from the repository root:
     python bench/bench_gap.py --repeat 2        # a second diagnosis in the same process (engine cached)
     python bench/bench_gap.py --independent column_source --out runs/gap_independent
                                                 # cases of the independent benchmark (comma list or
-                                                # library/outside/pairs/controls/all), report printed
+                                                # library/outside/pairs/controls/checks/all), report printed
     python bench/bench_gap.py --merge runs/gap_independent/*/
                                                 # the goal table of cases run apart (each folder written
                                                 # by `twin gap benchmark --independent CASE --out DIR`)
