@@ -4,7 +4,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from twin.core.machine import reassemble
+from twin.core.machine import operator_reusable, reassemble
 from twin.core.scenario import load_scenario
 from twin.gap.drive import ScenarioDrive
 from twin.gap.effects import default_library, library_by_name
@@ -196,6 +196,8 @@ def test_reassemble_refuses_a_change_of_what_the_output_operator_is_made_of(mach
     material = d.part_material("ram")
     name = next(k for k, v in d.materials.items() if v is material)
     hotter = replace(d, materials={**d.materials, name: replace(material, expansion=material.expansion * 1.1)})
+    assert not operator_reusable(machine, hotter)
+    assert operator_reusable(machine, replace(d, joints=[(a, b, 2 * h) for a, b, h in d.joints]))
     with pytest.raises(DefinitionError, match="elastic properties"):
         reassemble(machine, hotter)
     moved = replace(d, support_points=[tuple(np.add(p, 0.01)) for p in d.support_points])

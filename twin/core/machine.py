@@ -323,20 +323,45 @@ def operator_cache_key(definition: MachineDefinition, mesh: fea.TetMesh, specs: 
     str
         First 16 hex digits of a SHA-256.
     """
+    payload = {**_operator_inputs(definition, mesh, specs), "mesh": mesh_content_digest(mesh)}
+    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=float).encode()).hexdigest()[:16]
+
+
+def _operator_inputs(definition, mesh, specs):
+    """What the output operator is computed from, but the mesh content (see the module docstring)."""
     d = definition
     elastic = [[name, *_elastic_properties(d.part_material(name))] for _, name in sorted(mesh.region_names.items())]
-    payload = {
-        "version": OUTPUT_CACHE_VERSION, "mesh": mesh_content_digest(mesh), "elastic": elastic,
+    return {
+        "version": OUTPUT_CACHE_VERSION, "elastic": elastic,
         "degree": d.elastic_degree, "supports": d.support_points, "reference_temperature": d.reference_temperature_C,
         "joint_pairs": sorted({tuple(sorted((a, b))) for a, b, _ in d.joints}), "snap": d.snap_distance_m,
         "outputs": [[type(s).__name__, dataclasses.astuple(s)] for s in specs],
     }
-    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=float).encode()).hexdigest()[:16]
 
 
-def _operator_key(definition, mesh):
-    """:func:`operator_cache_key` of ``definition``'s own output specifications."""
-    return operator_cache_key(definition, mesh, _output_specs(definition)[0])
+def operator_reusable(machine: Machine, definition: MachineDefinition) -> bool:
+    """Whether ``machine``'s output operator is also that of ``definition`` on the same mesh.
+
+    True when nothing the operator is computed from changes (elastic properties such as a part's expansion
+    coefficient, supports, reference temperature, joint pairs, sensors); convection, heat sources and joint
+    conductances may.  Compares the inputs of :func:`operator_cache_key` without hashing the mesh.
+
+    Parameters
+    ----------
+    machine : Machine
+        The built machine.
+    definition : MachineDefinition
+        A changed definition of it.
+
+    Returns
+    -------
+    bool
+        True: :func:`reassemble` may reuse the operator; False: build the machine anew (:func:`build_machine`).
+    """
+    def inputs(d):
+        return json.dumps(_operator_inputs(d, machine.mesh, _output_specs(d)[0]), sort_keys=True, default=float)
+
+    return inputs(definition) == inputs(machine.definition)
 
 
 def _elastic_properties(material):
@@ -515,7 +540,7 @@ def reassemble(machine: Machine, definition: MachineDefinition) -> Machine:
     if pairs != [(a, b) for a, b, _ in machine.definition.joints]:
         raise DefinitionError(f"{definition.source}: reassemble keeps the joint pairs of the machine "
                               f"({[(a, b) for a, b, _ in machine.definition.joints]}); got {pairs}")
-    if _operator_key(definition, machine.mesh) != _operator_key(machine.definition, machine.mesh):
+    if not operator_reusable(machine, definition):
         raise DefinitionError(f"{definition.source}: reassemble reuses the output operator, but the definition "
                               "changes what it is computed from (elastic properties, supports, reference "
                               "temperature, sensors); build the machine anew with build_machine")

@@ -938,7 +938,7 @@ def _where(r):
     if r.get("sensor"):
         return "flagged " + (", ".join(r["sensor"]["flagged"]) or "none")
     if r["kind"] == "units":
-        return r["message"].replace("|", "/") or "not refused"
+        return r["message"] or "not refused"
     src = r.get("source") or {}
     return ("–" if not src else "not found" if src.get("distance_m") is None
             else f"{src['distance_m']:.2f} m, {src['power_W']:.0f} W for {src['truth_W']:.0f} W")

@@ -233,10 +233,9 @@ def _fixture(dataset, V, scenario, kx, ky, kz, tau1_min, tau2_min):
 
 
 def _thermometer_in_air(dataset, V, scenario, name, share):
-    names = [c.name for c in dataset.channels]
-    if name not in names or dataset.channels[names.index(name)].kind != "temperature":
+    j = next((j for j, c in enumerate(dataset.channels) if c.name == name and c.kind == "temperature"), None)
+    if j is None:
         raise TwinInputError(f"thermometer_in_air: {name!r} is not a thermometer of the record")
-    j = names.index(name)
     V[:, j] = (1.0 - share) * V[:, j] + share * _room_air(scenario, dataset.time_s)
 
 

@@ -34,7 +34,7 @@ import numpy as np
 from meshes.cachefiles import user_cache_dir
 
 from ..core.dataset import ChannelInfo, Dataset, project_version
-from ..core.machine import Machine, build_machine, reassemble
+from ..core.machine import Machine, build_machine, operator_reusable, reassemble
 from ..core.machine_definition import HeatSource, MachineDefinition, load_machine
 from ..core.noise import apply_noise
 from ..core.scenario import Scenario, load_scenario
@@ -313,10 +313,10 @@ def physics_truth(scenario: str | Path | Scenario, change: PhysicsChange = Physi
     definition = changed_definition(base.definition, change)
     if definition == base.definition:
         m = base
-    elif change.expansion:          # α enters the displacement operator: its adjoint solves are made anew
-        m = build_machine(machine, change.mesh_size_m, definition=definition)
-    else:
+    elif operator_reusable(base, definition):
         m = reassemble(base, definition)
+    else:                           # e.g. a part's α: the displacement operator's adjoint solves are made anew
+        m = build_machine(machine, change.mesh_size_m, definition=definition)
     sc = changed_scenario(scenario, change)
     t0 = time.perf_counter()
     data = simulate(sc, machine=m, noise=noise, seed=seed).dataset
