@@ -15,6 +15,7 @@ from twin.core.machine import reassemble
 from twin.core.machine_definition import HeatSource
 from twin.core.simulate import simulate
 from twin.errors import TwinInputError
+from twin.gap import discovery
 from twin.gap.diagnose import _machine, engine
 from twin.gap.discovery import (
     ResponseModel,
@@ -111,7 +112,8 @@ def test_discovers_the_column_source_within_0_2_m_and_30_percent(nominal, setup,
     assert np.linalg.norm(np.array(best.position_m) - centre) < 0.2
     assert abs(best.value - POWER_W) < 0.3 * POWER_W
     lo, hi = best.interval
-    assert lo < best.value < hi
+    assert lo < best.value < hi and lo <= POWER_W <= hi
+    assert best.position_radius_m is not None and 0.0 <= best.position_radius_m <= 0.35
     assert found.held_out["displacement"]["reduction"] > 0.7
     assert "column" in best.sentence() and "W" in best.sentence()
     assert found.as_dict()["items"][0]["value"] == found.items[0].value
@@ -125,3 +127,38 @@ def test_unknown_kind_is_a_clear_error(setup):
     model, ev, nom = setup
     with pytest.raises(TwinInputError, match="unknown discovery kind"):
         discover(model, ev, nom, kinds=("source", "magic"))
+
+
+def _atom(fit, position, kind="source"):
+    return discovery._Atom(kind, f"{kind}@{position}", kind, "W", np.asarray(fit, float), np.zeros(1), "column",
+                           position, "spindle")
+
+
+def test_position_profile_spans_the_values_of_every_plausible_position(monkeypatch):
+    """A neighbour that fits as well with twice the power widens the range; one that fits badly does not."""
+    rng = np.random.default_rng(0)
+    f = rng.normal(size=400)
+    r_fit = 2.0 * f + 0.01 * rng.normal(size=400)
+    chosen = [_atom(f, (0.0, 0.0, 0.0)), _atom(rng.normal(size=400), (9.0, 9.0, 9.0), kind="convection")]
+    coef = discovery._solve([a.fit for a in chosen], r_fit)
+    neighbours = [_atom(f / 2.0, (0.05, 0.0, 0.0)),              # the same shape, half the response: 4 W fits
+                  _atom(rng.normal(size=400), (0.1, 0.1, 0.0))]   # another shape: no fit
+    monkeypatch.setattr(discovery, "_neighbours", lambda dic, atom, reach: neighbours)
+    (lo, hi, radius), (c_lo, c_hi, none) = discovery._position_profile(None, chosen, coef, r_fit, n_eff=50.0)
+    assert lo == pytest.approx(2.0, abs=0.01) and hi == pytest.approx(4.0, abs=0.02)
+    assert radius == pytest.approx(0.05)
+    assert c_lo == c_hi == coef[1] and none is None
+
+
+def test_split_half_sd_shows_a_value_that_drifts_through_the_record():
+    """A source whose power is 1 W in the first half of the fit rows and 3 W in the second: sd = |3 − 1| / 2."""
+    n_times, p = 100, 3
+    fit_rows = np.arange(n_times) < 80
+    ev = SimpleNamespace(fit_mask=np.repeat(fit_rows[:, None], p, axis=1), fit_rows=fit_rows)
+    rng = np.random.default_rng(1)
+    f = rng.normal(size=int(ev.fit_mask.sum()))
+    power = np.where(np.nonzero(ev.fit_mask)[0] < 40, 1.0, 3.0)
+    (sd,) = discovery._split_half_sd(ev, [_atom(f, (0.0, 0.0, 0.0))], power * f)
+    assert sd == pytest.approx(1.0)
+    (steady,) = discovery._split_half_sd(ev, [_atom(f, (0.0, 0.0, 0.0))], 2.0 * f)
+    assert steady == pytest.approx(0.0, abs=1e-12)

@@ -9,7 +9,13 @@ the nodes of each region (part) attributes a drift change to the parts:
   ridge-regularised least squares from the thermometer residuals (each
   thermometer sees its part's c_r) and the drift residuals (Σ_r g_{a,r} c_r,
   g_{a,r} = G_a · 1_r, the drift of axis a per kelvin of part r); part r then
-  explains g_{a,r} c_r(t) of axis a.
+  explains g_{a,r} c_r(t) of axis a.  A few drift lines spread over many parts
+  without thermometers do not determine every part's c_r: the **resolution** of
+  a part, the diagonal of the model-resolution matrix
+  (AᵀA + ridge·I/prior²)⁻¹ AᵀA of this linear inverse problem, says how much
+  of the part's estimate the data decide (1) rather than the prior (0).  Only
+  parts resolved at :data:`RESOLVED` are a location; the unresolved parts'
+  shares are given as one combined share per line.
 - :func:`effect_attribution` (through the fitted winner): the winner's
   temperature change δT(t) = V δz(t) from the reduced basis is split exactly,
   G_a δT = Σ_r G_{a,r} δT; what is left of the winner's drift change is the
@@ -28,6 +34,12 @@ import scipy.sparse as sp
 from .fit import Coordinates, Evaluator, FitResult, Residual
 from .model import GapModel, output_effects
 from .structure import Structure, facet_table, point_info
+
+#: Smallest resolution (diagonal of the model-resolution matrix, dimensionless) of a part whose estimated
+#: temperature error is read as a location.  At 0.5 the data weigh as much as the prior in the part's estimate
+#: (one isolated part: data precision = prior precision); k parts the sensors see only in one fixed combination
+#: share a resolution of at most 1/k each, so a pair the data cannot tell apart is never resolved.
+RESOLVED = 0.5
 
 
 def _drift_rows(structure, names):
@@ -95,9 +107,24 @@ def _drift_shares(c, g, R, names, d_cols, regions):
     return shares
 
 
+def _resolution(A, lhs, regions):
+    """``(resolution, sd_K)`` per region: the diagonal of the model-resolution matrix lhs⁻¹ AᵀA (dimensionless,
+    in [0, 1]) and the posterior sd sqrt(diag lhs⁻¹), K (the rows of ``A`` are divided by σ, so lhs is in 1/K²)."""
+    cov = np.linalg.inv(lhs)
+    res = np.clip(np.diag(cov @ (A.T @ A)), 0.0, 1.0)
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    return dict(zip(regions, res.tolist())), dict(zip(regions, sd.tolist()))
+
+
+def _unresolved_share(shares, resolved):
+    """Per drift or strain line: the summed share of the regions not in ``resolved`` (dimensionless)."""
+    return {line: float(sum(v["share"] for reg, v in per.items() if reg not in resolved))
+            for line, per in shares.items()}
+
+
 def region_estimate(structure: Structure, evaluator: Evaluator, residual: Residual, names: Sequence[str],
                     ridge: float = 1.0) -> dict[str, object] | None:
-    """Model-free attribution (see the module docstring) → dict with c_r(t), per-axis shares and the influence table.
+    """Model-free attribution (see the module docstring) → dict with c_r(t), per-axis shares, resolution and influence.
 
     Parameters
     ----------
@@ -119,8 +146,12 @@ def region_estimate(structure: Structure, evaluator: Evaluator, residual: Residu
         ``regions`` (list of str); ``c`` ndarray, shape (n_times, n_regions), the uniform temperature error
         per region, K; ``rms_K`` per region, K; ``shares`` per drift/strain line and region: ``share`` of the
         line's residual (dimensionless) and ``rms`` (channel units); ``observed_regions`` (regions with a
-        thermometer); ``influence`` per line and region (channel units per K); ``units`` per line.  None when
-        there is neither a thermometer nor a drift or strain line.
+        thermometer); ``resolution`` per region (dimensionless, 0–1: the diagonal of the model-resolution matrix,
+        1 = the data decide the region's error, 0 = only the prior); ``sd_K`` per region, the posterior sd of
+        c_r, K (the prior sd where nothing sees the region); ``resolved`` (sorted regions with resolution ≥
+        :data:`RESOLVED`); ``unresolved_share`` per line, the summed share of the other regions
+        (dimensionless); ``influence`` per line and region (channel units per K); ``units`` per line.  None
+        when there is neither a thermometer nor a drift or strain line.
     """
     regions = structure.region_names
     info = structure.thermometer_info()
@@ -135,10 +166,14 @@ def region_estimate(structure: Structure, evaluator: Evaluator, residual: Residu
     prior = max(float(np.sqrt(np.mean(R[:, t_cols] ** 2))) if t_cols else 0.0, 0.05)
     lhs = A.T @ A + ridge * np.eye(len(regions)) / prior ** 2
     c = np.linalg.solve(lhs, A.T @ np.array(rhs)).T            # (n_times, n_regions)
+    resolution, sd = _resolution(A, lhs, regions)
+    resolved = sorted(r for r in regions if resolution[r] >= RESOLVED)
+    shares = _drift_shares(c, g, R, names, d_cols, regions)
     return {"regions": regions, "c": c, "rms_K": {reg: float(np.sqrt(np.mean(c[:, i] ** 2)))
                                                   for i, reg in enumerate(regions)},
-            "shares": _drift_shares(c, g, R, names, d_cols, regions),
-            "observed_regions": sorted({part_of[names[j]] for j in t_cols}),
+            "shares": shares, "observed_regions": sorted({part_of[names[j]] for j in t_cols}),
+            "resolution": resolution, "sd_K": sd, "resolved": resolved,
+            "unresolved_share": _unresolved_share(shares, set(resolved)),
             "influence": {names[j]: dict(zip(regions, g[k].tolist())) for k, j in enumerate(d_cols)},
             "units": {names[j]: "µm" if evaluator.kinds[j] == "displacement" else "µε" for j in d_cols}}
 

@@ -70,7 +70,17 @@ set, not a fresh test set).
 90 % intervals: moving-block bootstrap of the fit-part residual rows (blocks
 of :data:`BLOCK_H` hours keep the autocorrelation and the cross-channel
 correlation), the half-widths inflated by √(MS_hold / MS_fit) of the final
-residual when the held-out misfit is larger (model discrepancy).
+residual when the held-out misfit is larger (model discrepancy), and widened
+to ± 1.645 split-half sds where a value drifts between the two halves of the
+fit rows (as the library's parameters are, :func:`twin.gap.diagnose.split_half_sd`).  A source's
+value also depends on where the dictionary puts it: a cube of fixed shape on
+a grid stands for a source of unknown shape, and a cell nearer the sensors
+fits the same record with less power.  So the value is profiled over position:
+every cell of the 0.05 m sub-grid within ± :data:`PROFILE_REACH_M` is refitted
+with the other atoms, the cells whose fit-part SSE is within χ²₃(0.90)/n_eff
+(relative) of the best are plausible, and the interval is the bootstrap's
+spread around the lowest and the highest plausible value.  The farthest
+plausible cell gives the position's own claim, "plausible within r m".
 """
 from __future__ import annotations
 
@@ -116,6 +126,12 @@ RANGES = {"convection": (-0.95, 10.0), "joint": (-0.95, 10.0), "expansion": (-0.
           "timing": (-900.0, 900.0), "source": (-np.inf, np.inf)}
 #: Kinds of candidates (see the module docstring).
 KINDS = ("source", "convection", "joint", "expansion", "sensor_lag", "timing")
+#: Standard normal 95 % quantile: a 90 % two-sided interval of ± Z_90 sd.
+Z_90 = 1.645
+#: Reach of the position profile of a source's value, m (± around the reported position).
+PROFILE_REACH_M = GRID_M
+#: 90 % quantile of χ² with 3 degrees of freedom (the position), for the profile's plausible positions.
+CHI2_3_90 = 6.251
 #: Order of the output-side (adjoint) Krylov basis.
 ADJOINT_ORDER = 120
 
@@ -135,6 +151,7 @@ class Discovery:
     driver: str | None = None
     delta_bic: float = 0.0
     held_out: dict = field(default_factory=dict)
+    position_radius_m: float | None = None  # farthest plausible position of a source from position_m, m
 
     def sentence(self) -> str:
         """One line in words: a source's power, driver, position and part; else the label and the value.
@@ -149,7 +166,8 @@ class Discovery:
             what = "source" if self.value >= 0 else "sink"
             x, y, z = self.position_m
             return (f"an unmodelled heat {what} of about {abs(self.value):.3g} {self.unit} (90 %: {lo:.3g} … "
-                    f"{hi:.3g}), {DRIVERS[self.driver][0]}, near ({x:.2f}, {y:.2f}, {z:.2f}) m on the {self.part}")
+                    f"{hi:.3g}), {DRIVERS[self.driver][0]}, near ({x:.2f}, {y:.2f}, {z:.2f}) m on the {self.part}"
+                    + (f" (plausible within {self.position_radius_m:.2f} m)" if self.position_radius_m else ""))
         return f"{self.label}: {self.value:+.3g} {self.unit} (90 %: {lo:+.3g} … {hi:+.3g})"
 
 
@@ -673,20 +691,23 @@ def _solve(cols, target):
     return coef
 
 
-def _refine(dictionary, atom, fit_residual, chosen):
-    """A source atom moved on a :data:`REFINE_M` sub-grid around its cell (best fit-part reduction)."""
-    machine = dictionary.structure.machine
-    mesh = machine.mesh
+def _neighbours(dictionary, atom, reach_m):
+    """Source atoms of ``atom``'s part and driver on a :data:`REFINE_M` sub-grid within ± ``reach_m`` of it."""
+    mesh = dictionary.structure.machine.mesh
     cents = mesh.points[mesh.tets].mean(axis=1)
     tets = np.flatnonzero(mesh.regions == mesh.region_id(atom.part))
     centre = np.array(atom.position)
-    offsets = np.arange(-GRID_M / 2, GRID_M / 2 + 1e-9, REFINE_M)
+    offsets = np.arange(-reach_m, reach_m + 1e-9, REFINE_M)
     vol = np.abs(mesh.volumes)
     cells = [_cell(atom.part, tets, cents, vol, centre + d, GRID_M)
              for d in np.stack(np.meshgrid(offsets, offsets, offsets, indexing="ij"), -1).reshape(-1, 3)]
-    cells = [c for c in cells if c is not None]
+    return dictionary.source_atoms([c for c in cells if c is not None], atom.driver)
+
+
+def _refine(dictionary, atom, fit_residual, chosen):
+    """A source atom moved on a :data:`REFINE_M` sub-grid around its cell (best fit-part reduction)."""
     best, best_score = atom, _score(atom.fit, fit_residual, chosen)
-    for cand in dictionary.source_atoms(cells, atom.driver):
+    for cand in _neighbours(dictionary, atom, GRID_M / 2):
         sc = _score(cand.fit, fit_residual, chosen)
         if sc > best_score:
             best, best_score = cand, sc
@@ -777,19 +798,69 @@ def _prune(ev, proj, chosen, current, r_fit, r_hold, rejected):
     return current
 
 
-def _discoveries(ev, proj, model, chosen, current, r_fit, r_hold, seed):
-    """The accepted atoms as :class:`Discovery`, each with its bootstrap interval and its own held-out change."""
+def _position_profile(dic, chosen, coef, r_fit, n_eff):
+    """Per chosen atom ``(low, high, radius_m)``: its coefficient's range over the plausible positions.
+
+    For a source atom, every position on the :data:`REFINE_M` sub-grid within ± :data:`PROFILE_REACH_M` is
+    refitted together with the other atoms; a position is plausible when its fit-part SSE is within
+    ``χ²₃(0.90) / n_eff`` (relative) of the best position's (a profile likelihood over the position with the
+    effective sample count).  ``radius_m`` is the farthest plausible position from the reported one.  Other
+    kinds have no position: ``(coefficient, coefficient, None)``.
+    """
+    sse = float(np.sum((r_fit - np.column_stack([a.fit for a in chosen]) @ coef) ** 2))
+    out = []
+    for i, a in enumerate(chosen):
+        if a.kind != "source":
+            out.append((coef[i], coef[i], None))
+            continue
+        others = chosen[:i] + chosen[i + 1:]
+        trials = [(sse, coef[i], a.position)]
+        for cand in _neighbours(dic, a, PROFILE_REACH_M):
+            F = np.column_stack([b.fit for b in others + [cand]])
+            c = _solve(list(F.T), r_fit)
+            trials.append((float(np.sum((r_fit - F @ c) ** 2)), c[-1], cand.position))
+        bound = min(t[0] for t in trials) * (1.0 + CHI2_3_90 / n_eff)
+        ok = [(c, pos) for s_, c, pos in trials if s_ <= bound] or [(coef[i], a.position)]
+        values = [c for c, _ in ok] + [coef[i]]
+        radius = max(float(np.linalg.norm(np.subtract(pos, a.position))) for _, pos in ok)
+        out.append((min(values), max(values), radius))
+    return out
+
+
+def _split_half_sd(ev, chosen, r_fit):
+    """Delete-a-half jackknife sd of the coefficients, |c(first half) − c(second half)| / 2, each half of the fit
+    rows fitted alone (as :func:`twin.gap.diagnose.split_half_sd` does for the library's parameters): a value
+    that drifts through the record shows a discrepancy that no residual resampling sees."""
+    time_of_entry = np.nonzero(ev.fit_mask)[0]
+    rows = np.flatnonzero(ev.fit_rows)
+    first = time_of_entry < rows[len(rows) // 2]
+    F = np.column_stack([a.fit for a in chosen])
+    halves = [np.linalg.lstsq(F[half], r_fit[half], rcond=None)[0] for half in (first, ~first)]
+    return np.abs(halves[1] - halves[0]) / 2.0
+
+
+def _discoveries(dic, ev, proj, chosen, current, r_fit, r_hold, seed, n_eff):
+    """The accepted atoms as :class:`Discovery`, each with its 90 % interval and its own held-out change.
+
+    The interval is the bootstrap's (:func:`_bootstrap`), widened to ± :data:`Z_90` split-half sds
+    (:func:`_split_half_sd`), around every plausible position's value (:func:`_position_profile`), so it
+    carries the dictionary's own discrepancy of where a source sits.
+    """
     if not chosen:
         return []
     coef = _solve([a.fit for a in chosen], r_fit)
-    intervals = _bootstrap(ev, chosen, coef, current, model.times_s, seed)
+    intervals = _bootstrap(ev, chosen, coef, current, dic.model.times_s, seed)
+    jack = _split_half_sd(ev, chosen, r_fit)
+    profile = _position_profile(dic, chosen, coef, r_fit, n_eff)
     items = []
-    for a, c, iv in zip(chosen, coef, intervals):
+    for a, c, (lo, hi), sd, (p_lo, p_hi, radius) in zip(chosen, coef, intervals, jack, profile):
+        lo, hi = min(lo, c - Z_90 * sd), max(hi, c + Z_90 * sd)
+        low, high = sorted((a.scale * (p_lo - (c - lo)), a.scale * (p_hi + (hi - c))))
         # held-out change of each atom: the model without it against the model with all
         _, without, _ = _residuals([b for b in chosen if b is not a], r_fit, r_hold)
-        items.append(Discovery(a.kind, a.name, a.label, float(c * a.scale), a.unit,
-                               (float(iv[0] * a.scale), float(iv[1] * a.scale)), a.part, a.position, a.driver,
-                               a.delta_bic, _held_change(ev, proj, without, current[1])))
+        items.append(Discovery(a.kind, a.name, a.label, float(c * a.scale), a.unit, (float(low), float(high)),
+                               a.part, a.position, a.driver, a.delta_bic, _held_change(ev, proj, without, current[1]),
+                               radius))
     return items
 
 
@@ -841,7 +912,8 @@ def discover(model: GapModel, evaluator: Evaluator, base: FitResult | None = Non
     rejected = []
     chosen, current = _forward(dic, ev, proj, r_fit, r_hold, max_atoms, rejected)
     current = _prune(ev, proj, chosen, current, r_fit, r_hold, rejected)
-    items = _discoveries(ev, proj, model, chosen, current, r_fit, r_hold, seed)
+    n_eff = effective_samples(_residual_matrix(ev, proj, *current), ev, ev.fit_rows)
+    items = _discoveries(dic, ev, proj, chosen, current, r_fit, r_hold, seed, n_eff)
     return DiscoveryResult(items, _held_change(ev, proj, r_hold, current[1]), base.name, len(dic.atoms),
                            time.perf_counter() - t0, rejected)
 

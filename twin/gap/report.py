@@ -22,6 +22,7 @@ from ..core.dataset import json_default
 from ..infra.outdir import atomic_directory
 from ..infra.plots import save_figure
 from ..infra.tables import markdown_table
+from .attribution import RESOLVED
 from .diagnose import Diagnosis
 from .discovery import render_discoveries
 from .fit import GROUP_UNIT
@@ -116,8 +117,9 @@ def to_json(d: Diagnosis) -> dict[str, object]:
                     "initial_state": d.nominal.residual.nuisance},
         "ranking": [res(r) for r in d.ranking], "shrinkage": d.shrinkage(),
         "where": d.where, "separation": d.separation,
-        "attribution": {"regions": None if attr is None else {k: attr[k] for k in ("rms_K", "shares", "influence",
-                                                                                      "observed_regions")},
+        "attribution": {"regions": None if attr is None else {k: attr[k] for k in (
+                            "rms_K", "shares", "influence", "observed_regions", "resolution", "sd_K", "resolved",
+                            "unresolved_share")},
                         "winner": None if win is None else {"shares": win["shares"],
                                                             "field_time_s": win["field_time_s"]}},
         "data": d.record.report, "notes": d.notes, "skipped_effects": d.skipped, "timings": d.timings,
@@ -279,6 +281,19 @@ def plot_attribution(d: Diagnosis, path: str | Path) -> str | None:
     return _save(fig, path)
 
 
+def _resolved_part_values(mesh, est):
+    """``(node_values, clim)`` of the residual render: each mesh node gets its part's estimated error RMS (K) where
+    the sensors resolve the part, else NaN (drawn in the render's NaN colour, grey: not a location); ``clim`` is
+    (0, 1) K when no part is resolved, else None."""
+    region = np.empty(mesh.n_nodes, dtype=int)
+    region[mesh.tets.ravel()] = np.repeat(mesh.regions, 4)
+    ids = sorted(mesh.region_names)
+    rms = np.array([est["rms_K"][mesh.region_names[r]] if mesh.region_names[r] in est["resolved"] else np.nan
+                    for r in ids])
+    index = {r: i for i, r in enumerate(ids)}
+    return rms[[index[r] for r in region]], None if np.isfinite(rms).any() else (0.0, 1.0)
+
+
 def render_figures(d: Diagnosis, tmp: Path) -> dict[str, str]:
     """Off-screen renders: sensors and parts coloured by residual; the winner's temperature change.
 
@@ -292,7 +307,8 @@ def render_figures(d: Diagnosis, tmp: Path) -> dict[str, str]:
     Returns
     -------
     dict of str to str
-        ``render_residuals`` (parts by estimated error RMS, K; sensors by held-out residual RMS, K), and when there
+        ``render_residuals`` (parts resolved by the sensors by estimated error RMS, K, the others grey; sensors by
+        held-out residual RMS, K), and when there
         is a winner ``render_effect`` (its temperature change, K) and with a discovery ``render_discoveries`` →
         file name.
     """
@@ -307,19 +323,14 @@ def render_figures(d: Diagnosis, tmp: Path) -> dict[str, str]:
     therm = [j for j, k in enumerate(d.evaluator.kinds) if k == "temperature"]
     pts = np.array([s.channels[s.index[d.names[j]]].position for j in therm])
     vals = [d.nominal.summary["channels"][d.names[j]]["hold_rms"] for j in therm]
-    node_values = None
-    if est is not None:
-        mesh = machine.mesh
-        region = np.empty(mesh.n_nodes, dtype=int)
-        region[mesh.tets.ravel()] = np.repeat(mesh.regions, 4)
-        rms = np.array([est["rms_K"][mesh.region_names[r]] for r in sorted(mesh.region_names)])
-        ids = {r: i for i, r in enumerate(sorted(mesh.region_names))}
-        node_values = rms[[ids[r] for r in region]]
+    node_values, clim = _resolved_part_values(machine.mesh, est) if est is not None else (None, None)
     out["render_residuals"] = render_machine(
-        machine, tmp / "render_residuals.png", node_values=node_values,
-        scalar_label="part temperature error, RMS (K)", cmap="Oranges", points=pts,
-        point_labels=[d.names[j] for j in therm], point_values=vals, point_label="sensor residual, held-out RMS (K)",
-        title="Where the twin misses: parts by estimated error, sensors by residual").name
+        machine, tmp / "render_residuals.png", node_values=node_values, clim=clim,
+        scalar_label="part temperature error, RMS (K); grey = not resolved by the sensors", cmap="Oranges",
+        points=pts, point_labels=[d.names[j] for j in therm], point_values=vals,
+        point_label="sensor residual, held-out RMS (K)",
+        title="Where the twin misses: resolved parts by estimated error (grey: not resolved), sensors by residual"
+        ).name
     win = d.attribution.get("winner")
     if win is not None:
         field = machine.thermal.nodal_field(win["field"])
@@ -460,19 +471,34 @@ def _where_section(d, figures):
     return L
 
 
+def _region_lines(est):
+    """Markdown lines of the model-free part attribution: what it is, which parts it resolves, the table."""
+    L = [("Which part's temperature error explains the drift error (model-free: a uniform temperature error "
+          "per part, ridge-estimated from the thermometer and drift residuals through the displacement "
+          "influence operators; share = part's contribution · residual / |residual|²; resolution = diagonal of "
+          "the model-resolution matrix, 1 where the data decide the part's error, 0 where only the prior does; "
+          "sd = its posterior sd)."), "",
+         (f"Parts with resolution below {RESOLVED:g} are not told apart by these sensors, so their individual "
+          "errors and shares are not a location; only their combined share (last row) is read."), ""]
+    lines = list(est["shares"])
+    rows = [[r, "yes" if r in est["observed_regions"] else "no", est["rms_K"][r], est["resolution"][r],
+             est["sd_K"][r]] + [est["shares"][a][r]["share"] for a in lines]
+            + [est["influence"][a][r] for a in est["influence"]] for r in est["regions"]]
+    rows.append(["unresolved parts together", "", None, None, None]
+                + [est["unresolved_share"][a] for a in lines] + [None] * len(est["influence"]))
+    L += _table(rows, ["part", "sensors on it", "est. error RMS (K)", "resolution", "sd (K)"]
+                + [f"{a} share" for a in lines] + [f"{a} ({est['units'][a]}/K)" for a in est["influence"]],
+                [None, None, ".2f", ".2f", ".2g"] + ["+.2f"] * (len(lines) + len(est["influence"])))
+    return L + [""]
+
+
 def _parts_section(d, figures):
     L = []
+    if d.discovery is not None and d.discovery.items:
+        L += ["Where, from the discovery: " + "; ".join(d.discovery.summary()), ""]
     est = d.attribution.get("regions")
     if est is not None and est["shares"]:
-        L += ["Which part's temperature error explains the drift error (model-free: a uniform temperature error "
-              "per part, ridge-estimated from the thermometer and drift residuals through the displacement "
-              "influence operators; share = part's contribution · residual / |residual|²):", ""]
-        rows = [[r, "yes" if r in est["observed_regions"] else "no", est["rms_K"][r]]
-                + [est["shares"][a][r]["share"] for a in est["shares"]]
-                + [est["influence"][a][r] for a in est["influence"]] for r in est["regions"]]
-        L += _table(rows, ["part", "sensors on it", "est. error RMS (K)"] + [f"{a} share" for a in est["shares"]]
-                    + [f"{a} ({est['units'][a]}/K)" for a in est["influence"]], "+.2f")
-        L.append("")
+        L += _region_lines(est)
     win = d.attribution.get("winner")
     if win is not None:
         axes = list(win["shares"])

@@ -38,7 +38,17 @@ thermometers; each acts as strongly as the physics it multiplies, and not at all
   capacity.  Such a source excites the ROM's M-orthonormal modal coordinates isotropically, with variance
   P²/C per coordinate (C the machine's heat capacity, J/K = |z₁|²), so each disturbance is one modal
   coordinate; the coordinates kept are the fewest that carry :data:`DISCREPANCY_SHARE` of each drift
-  axis's steady response to such a source (:func:`discrepancy_modes`).
+  axis's steady response to such a source (:func:`discrepancy_modes`);
+* ``concentrated:<k>`` — one heat source the model lacks, of σ_P = :attr:`NoiseModel.concentrated_W` W,
+  concentrated somewhere on the machine (a hydraulic unit, a coolant line, a drive the model does not know):
+  equally likely in each candidate cell of a 0.2 m grid over every part (:data:`CONCENTRATED_GRID_M`, the
+  cells of :func:`twin.gap.discovery.source_cells`, 1 W spread uniformly by volume over the part's tets in
+  the cell, as a HeatSource box).  With bᵢ the ROM's input column of that 1 W (rate of the modal
+  coordinates per W; z₁ᵀbᵢ = 1, so a watt raises the machine's mean temperature by 1/C K/s), its second
+  moment is S = σ_P² · meanᵢ bᵢbᵢᵀ (:func:`concentrated_moment`).  S = Σₖ μₖuₖuₖᵀ is factored by its
+  eigen-decomposition; the components √μₖ uₖ kept are the fewest that carry :data:`CONCENTRATED_SHARE` of
+  each drift axis's steady response (:func:`concentrated_components`), each a disturbance of σ_P with a
+  dense column, eⱼ = 1.
 
 The lagged air w follows its lag with σ :attr:`NoiseModel.ambient_K`; the offsets b are constant with the
 sensor's accuracy as prior (DS18S20 ±0.5 °C uniform, one each; the S65 camera's spots share one, ±2 °C).
@@ -53,7 +63,9 @@ seconds to minutes against correlation times of hours).
 """
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -63,6 +75,9 @@ from models.kalman import discretize
 from ..core.noise import MODELS
 from ..errors import TwinInputError
 from ..rom.reduction import ReducedModel
+
+if TYPE_CHECKING:
+    from ..core.machine import Machine
 
 AXES = ("X", "Y", "Z")
 #: DS18S20 accuracy (°C, ± uniform) and resolution (°C) of the twin's thermometer model.
@@ -77,6 +92,10 @@ ROM_ERROR_K = 2.43e-3
 READ_DRIVERS = ("spindle", "constant")
 #: Share of each drift axis's steady response to misplaced heat that the kept discrepancy coordinates carry.
 DISCREPANCY_SHARE = 0.95
+#: Share of each drift axis's steady response to one concentrated source that the kept components carry.
+CONCENTRATED_SHARE = 0.95
+#: Grid spacing and cube edge of the candidate cells of the concentrated source, m.
+CONCENTRATED_GRID_M = 0.2
 
 
 @dataclass(frozen=True)
@@ -100,6 +119,9 @@ class NoiseModel:
         Considered: standard deviation of the relative error of each read source's power model, 1 (0: none).
     discrepancy : float
         Considered: standard deviation of the misplaced heat, fraction of the heat the model moves, 1 (0: none).
+    concentrated_W : float
+        Considered: standard deviation σ_P of one heat source the model lacks, concentrated in an unknown
+        0.2 m cell of the machine, W (0: none).
     correlation_time_s : float
         Correlation time of every disturbance but the air offset (a constant), s.
     model_error_K : float
@@ -114,6 +136,7 @@ class NoiseModel:
     convection: float = 0.4
     power_model: float = 0.4
     discrepancy: float = 0.05
+    concentrated_W: float = 0.0
     correlation_time_s: float = 4 * 3600.0
     model_error_K: float = 0.05
     start_spread_K: float = 0.3
@@ -126,7 +149,8 @@ class Disturbance:
     Attributes
     ----------
     name : str
-        ``convection:<zone>``, ``power:<source>``, ``air:offset``, ``ambient:<zone>`` or ``discrepancy:<k>``.
+        ``convection:<zone>``, ``power:<source>``, ``air:offset``, ``ambient:<zone>``, ``discrepancy:<k>`` or
+        ``concentrated:<k>``.
     excitation : str
         ``one``, ``power`` (the modelled power of plant input ``index``, W), ``convection`` (zone air − mean
         surface temperature, K) or ``heat`` (the heat the model moves, W).
@@ -209,13 +233,151 @@ def discrepancy_modes(rom: ReducedModel, share: float = DISCREPANCY_SHARE) -> np
     numpy.ndarray
         Indices of the kept modal coordinates (in order of importance).
     """
-    rows = np.array([rom.output_matrix[rom.output_index(a)] for a in AXES]) / rom.eigenvalues
-    parts = np.square(rows)
-    parts /= parts.sum(axis=1, keepdims=True)
+    return _fewest_carrying(np.square(_steady_drift_rows(rom)), share)
+
+
+def _steady_drift_rows(rom):
+    """(3, r) the steady X, Y, Z drift per unit constant rate of each modal coordinate, µm: C/λ."""
+    return np.array([rom.output_matrix[rom.output_index(a)] for a in AXES]) / rom.eigenvalues
+
+
+def _fewest_carrying(parts, share):
+    """Indices of the fewest columns of ``parts`` (axes × candidates, variances) that carry ``share`` of each
+    row's sum, taken in order of their largest share over the rows."""
+    parts = parts / parts.sum(axis=1, keepdims=True)
     order = np.argsort(-parts.max(axis=0))
     carried = np.cumsum(parts[:, order], axis=1)
     count = int(np.argmax(np.all(carried >= share, axis=0))) + 1
     return order[:count]
+
+
+def concentrated_columns(machine: Machine, rom: ReducedModel, grid_m: float = CONCENTRATED_GRID_M) -> np.ndarray:
+    """The ROM's input columns bᵢ of 1 W spread over each candidate cell of the machine (see the module docstring).
+
+    The cells are :func:`twin.gap.discovery.source_cells` (a grid of ``grid_m`` over every part; the part's
+    tetrahedra whose centroid lies in the cube), the loads :func:`twin.gap.discovery.source_loads` (uniform by
+    volume, as a HeatSource box); bᵢ = Vᵀfᵢ with V the ROM's M-orthonormal modal basis, as the ROM maps a
+    source's power.
+
+    Parameters
+    ----------
+    machine : Machine
+        The built machine the ROM was reduced from (its mesh and thermal nodes).
+    rom : ReducedModel
+        The ROM; its basis is used when kept, else the cached ROM of ``machine`` with its basis (same
+        eigenvalues, or an error).
+    grid_m : float, default CONCENTRATED_GRID_M
+        Grid spacing and cube edge of the cells, m.
+
+    Returns
+    -------
+    numpy.ndarray
+        (r, k) rate of the modal coordinates per W of a source in each of the k cells (the unit of the ROM's
+        input matrix for a power input; z₁ᵀbᵢ = 1).
+
+    Raises
+    ------
+    TwinInputError
+        If ``machine`` is not the one of ``rom``, or no kept basis matches ``rom``.
+    """
+    from ..gap.discovery import source_cells, source_loads
+    from ..rom.reduction import cached_rom, machine_digest
+
+    if machine_digest(machine) != rom.digest:
+        raise TwinInputError(f"the machine {machine.name!r} is not the one the ROM of {rom.machine!r} was built from")
+    basis = rom.basis
+    if basis is None:
+        kept = cached_rom(machine, rom.order, rom.method, keep_basis=True)
+        if not np.array_equal(kept.eigenvalues, rom.eigenvalues):
+            raise TwinInputError(f"the ROM of {rom.machine!r} (r = {rom.order}) has no basis and the cached ROM "
+                                 "with a basis is another reduction; build it with keep_basis=True")
+        basis = kept.basis
+    loads = source_loads(machine, source_cells(machine, grid_m))
+    return np.asarray((loads.T @ basis).T)
+
+
+def concentrated_moment(rom: ReducedModel, machine: Machine | None = None,
+                        grid_m: float = CONCENTRATED_GRID_M) -> np.ndarray:
+    """meanᵢ bᵢbᵢᵀ over the candidate cells (:func:`concentrated_columns`): the second moment of a 1 W source.
+
+    Kept in memory and in the user cache, keyed by the ROM (machine digest, method, order, eigenvalues and
+    input matrix) and ``grid_m``, so only the first observer of a ROM builds the cells.
+
+    Parameters
+    ----------
+    rom : ReducedModel
+        The ROM.
+    machine : Machine, optional
+        The machine it was reduced from (default: built from ``rom.machine``, the first time only).
+    grid_m : float, default CONCENTRATED_GRID_M
+        Grid spacing of the cells, m.
+
+    Returns
+    -------
+    numpy.ndarray
+        (r, r) second moment of the modal rates of a 1 W source at an unknown cell, per W².
+
+    Raises
+    ------
+    TwinInputError
+        If it is not cached and the machine cannot be built from ``rom.machine`` (pass ``machine``).
+    """
+    from meshes.cachefiles import checked, user_cache_dir, write_checked
+
+    digest = hashlib.sha256(rom.eigenvalues.tobytes() + rom.input_matrix.tobytes() + repr(grid_m).encode())
+    key = f"live-concentrated-{rom.method}-r{rom.order}-{rom.digest}-{digest.hexdigest()[:16]}.npy"
+    if key in _MOMENTS:
+        return _MOMENTS[key]
+    path = user_cache_dir() / key
+    if path.exists() and checked(path) is not None:
+        moment = np.load(path)
+    else:
+        columns = concentrated_columns(machine if machine is not None else _machine_of(rom), rom, grid_m)
+        moment = columns @ columns.T / columns.shape[1]
+        write_checked(path, lambda target: np.save(target, moment))
+    _MOMENTS[key] = moment
+    return moment
+
+
+_MOMENTS: dict = {}
+
+
+def _machine_of(rom):
+    """The machine ``rom`` was reduced from, built from its name (a shipped machine's, or a path)."""
+    from ..core.machine import build_machine
+
+    try:
+        return build_machine(rom.machine)
+    except (OSError, TwinInputError) as exc:
+        raise TwinInputError(f"the concentrated-heat prior needs the machine of the ROM ({rom.machine!r}), which "
+                             f"could not be built ({exc}); pass its second moment (concentrated_moment(rom, "
+                             "machine)) or set NoiseModel.concentrated_W = 0") from None
+
+
+def concentrated_components(rom: ReducedModel, moment: np.ndarray, share: float = CONCENTRATED_SHARE) -> np.ndarray:
+    """The leading components √μₖ uₖ of ``moment`` = Σ μₖuₖuₖᵀ that carry ``share`` of each axis's steady drift.
+
+    Component k moves drift axis a in steady state with variance (Cₐ Λ⁻¹ √μₖ uₖ)² per W²; components are taken
+    in order of their largest share over the axes until every axis has ``share`` (as :func:`discrepancy_modes`).
+
+    Parameters
+    ----------
+    rom : ReducedModel
+        The ROM.
+    moment : numpy.ndarray
+        (r, r) second moment of a 1 W source (:func:`concentrated_moment`).
+    share : float, default CONCENTRATED_SHARE
+        Share (0…1) of each axis's steady variance the kept components carry.
+
+    Returns
+    -------
+    numpy.ndarray
+        (r, c) the kept components, modal rate per W, most important first.
+    """
+    mu, vectors = np.linalg.eigh(0.5 * (moment + moment.T))
+    components = vectors * np.sqrt(np.clip(mu, 0.0, None))
+    kept = _fewest_carrying(np.square(_steady_drift_rows(rom) @ components), share)
+    return components[:, kept]
 
 
 class ObserverModel:
@@ -232,11 +394,14 @@ class ObserverModel:
     sensors : dict, optional
         Thermometer name → sensor model (:data:`SENSOR_MODELS`); default DS18S20.  DS18S20 thermometers have
         one offset state each, the S65 camera spots one offset state together.
+    concentrated : numpy.ndarray, optional
+        (r, r) second moment of a 1 W source at an unknown cell (:func:`concentrated_moment`), used when
+        ``noise.concentrated_W`` > 0; default: :func:`concentrated_moment` of ``rom`` (cached).
     """
 
     def __init__(self, rom: ReducedModel, thermometers: list[str], noise: NoiseModel = NoiseModel(),
-                 sensors: dict | None = None) -> None:
-        self.rom, self.noise = rom, noise
+                 sensors: dict | None = None, concentrated: np.ndarray | None = None) -> None:
+        self.rom, self.noise, self._moment = rom, noise, concentrated
         self.thermometers = checked_thermometers(rom, thermometers)
         self.sensors = [(sensors or {}).get(t, "DS18S20") for t in self.thermometers]
         bad = sorted(set(self.sensors) - set(SENSOR_MODELS))
@@ -297,17 +462,28 @@ class ObserverModel:
                 column = np.zeros(self.n)
                 column[k] = unit
                 out.append(Disturbance(f"discrepancy:{k}", "heat", nm.discrepancy, column, zero_y, consider=True))
-        return out
+        return out + self._concentrated()
+
+    def _concentrated(self):
+        """The concentrated-heat disturbances: one per kept component of the source's second moment (σ_P, W)."""
+        rom, sigma = self.rom, self.noise.concentrated_W
+        if sigma <= 0:
+            return []
+        moment = concentrated_moment(rom) if self._moment is None else np.asarray(self._moment, float)
+        zero_z, zero_y = np.zeros(self.n - rom.order), np.zeros(rom.n_outputs)
+        return [Disturbance(f"concentrated:{k}", "one", sigma, np.r_[component, zero_z], zero_y, consider=True)
+                for k, component in enumerate(concentrated_components(rom, moment).T)]
 
     def _coupling_layout(self):
         """``(dense, single columns, their modal rows)`` of the block F₁₂ (see :class:`~twin.live.filtering.ModalKalmanFilter`).
 
-        The lagged air and every disturbance but the misplaced heat couple densely; a misplaced-heat
-        disturbance drives its one modal coordinate; the offsets drive nothing.
+        A disturbance whose column has one nonzero, in a modal coordinate (a misplaced-heat disturbance),
+        drives that coordinate alone; the lagged air and every other disturbance (the concentrated heat's
+        dense columns among them) couple densely; the offsets drive nothing.
         """
-        lagged = self.n - self.rom.order
-        single = [(lagged + j, int(np.flatnonzero(d.column)[0])) for j, d in enumerate(self.disturbances)
-                  if d.excitation == "heat"]
+        r, lagged = self.rom.order, self.n - self.rom.order
+        nonzero = [np.flatnonzero(d.column) for d in self.disturbances]
+        single = [(lagged + j, int(nz[0])) for j, nz in enumerate(nonzero) if len(nz) == 1 and nz[0] < r]
         dense = [c for c in range(lagged + self.q) if c not in {col for col, _ in single}]
         return np.array(dense, int), np.array([c for c, _ in single], int), np.array([k for _, k in single], int)
 
