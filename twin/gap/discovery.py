@@ -816,9 +816,9 @@ def _position_profile(dic, chosen, coef, r_fit, n_eff):
         others = chosen[:i] + chosen[i + 1:]
         trials = [(sse, coef[i], a.position)]
         for cand in _neighbours(dic, a, PROFILE_REACH_M):
-            F = np.column_stack([b.fit for b in others + [cand]])
-            c = _solve(list(F.T), r_fit)
-            trials.append((float(np.sum((r_fit - F @ c) ** 2)), c[-1], cand.position))
+            cols = [b.fit for b in others + [cand]]
+            c = _solve(cols, r_fit)
+            trials.append((float(np.sum((r_fit - np.column_stack(cols) @ c) ** 2)), c[-1], cand.position))
         bound = min(t[0] for t in trials) * (1.0 + CHI2_3_90 / n_eff)
         ok = [(c, pos) for s_, c, pos in trials if s_ <= bound] or [(coef[i], a.position)]
         values = [c for c, _ in ok] + [coef[i]]
