@@ -280,6 +280,7 @@ def concentrated_columns(machine: Machine, rom: ReducedModel, grid_m: float = CO
     TwinInputError
         If ``machine`` is not the one of ``rom``, or no kept basis matches ``rom``.
     """
+    # on use: only an observer with the concentrated prior on needs the gap package and a machine
     from ..gap.discovery import source_cells, source_loads
     from ..rom.reduction import cached_rom, machine_digest
 
@@ -344,7 +345,7 @@ _MOMENTS: dict = {}
 
 def _machine_of(rom):
     """The machine ``rom`` was reduced from, built from its name (a shipped machine's, or a path)."""
-    from ..core.machine import build_machine
+    from ..core.machine import build_machine  # on use: a live observer otherwise never builds a machine
 
     try:
         return build_machine(rom.machine)
