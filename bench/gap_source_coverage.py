@@ -26,7 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from twin.gap.benchmark import IndependentCase, IndependentTask, _src, source_centre
+from twin.gap.benchmark import IndependentCase, IndependentTask, _src
 from twin.gap.diagnose import _machine
 from twin.gap.discovery import REFINE_M
 from twin.gap.truth import PhysicsChange
@@ -61,23 +61,20 @@ def random_cases(n: int, seed: int) -> list[IndependentCase]:
     return cases
 
 
-def _row(case, result, machine):
-    part, box, power = case.source
-    centre = source_centre(machine, part, box)
-    disc = (result.get("discovery") or {}).get("items") or []
-    found = [x for x in disc if x["kind"] == "source"]
-    if not found:
-        return [case.name, part, case.change.sources[0].driver, power, result["outcome"], "–", "–", "–", "–",
-                "–"], (False, False, False)
-    best = min(found, key=lambda x: np.linalg.norm(np.array(x["position_m"]) - centre))
-    dist = float(np.linalg.norm(np.array(best["position_m"]) - centre))
-    lo, hi = best["interval"]
-    radius = best.get("position_radius_m") or 0.0
-    ok = dist <= 0.2 and abs(best["value"] - power) <= 0.3 * power
-    covers, placed = lo <= power <= hi, dist <= radius + REFINE_M
-    return ([case.name, part, case.change.sources[0].driver, power, result["outcome"], f"{dist:.2f}",
-             f"{best['value']:.1f} ({lo:.1f} … {hi:.1f})", f"{radius:.2f}", best["driver"],
-             "yes" if covers else "no"], (ok, covers, placed))
+def _row(case, result):
+    """The table row of a case and its flags (found, power covered, position covered), from its scores
+    (:func:`twin.gap.benchmark.score_independent`)."""
+    part, _, power = case.source
+    driver = case.change.sources[0].driver
+    src = result["source"]
+    if src["distance_m"] is None:
+        return [case.name, part, driver, power, result["outcome"], "–", "–", "–", "–", "–"], (False, False, False)
+    lo, hi = src["interval"]
+    radius = src["radius_m"] or 0.0
+    placed = src["distance_m"] <= radius + REFINE_M
+    return ([case.name, part, driver, power, result["outcome"], f"{src['distance_m']:.2f}",
+             f"{src['power_W']:.1f} ({lo:.1f} … {hi:.1f})", f"{radius:.2f}", src["driver"],
+             "yes" if src["covers"] else "no"], (src["ok"], src["covers"], placed))
 
 
 def main():
@@ -88,8 +85,7 @@ def main():
     args = parser.parse_args()
     cases = random_cases(args.cases, args.seed)
     results = run_tasks([IndependentTask(c) for c in cases], scheduler="local", n_workers=args.workers)
-    machine = _machine("vmc_ram")
-    rows, flags = zip(*(_row(c, r, machine) for c, r in zip(cases, results)))
+    rows, flags = zip(*(_row(c, r) for c, r in zip(cases, results)))
     print(markdown_table(list(rows), ["case", "part", "true driver", "true power (W)", "outcome", "distance (m)",
                                       "discovered power (90 %), W", "plausible radius (m)", "found driver",
                                       "power covered"]))

@@ -839,7 +839,8 @@ def score_independent(case: IndependentCase, d: Diagnosis, machine: Machine) -> 
     dict
         ``explained_with_gap`` ("explained" while more than :data:`REMAINING_DRIFT` of the held-out drift RMS
         remains), ``drift_reduction`` (fraction), ``discovery`` (as a dict, or None) and, for a case with a source,
-        ``source``: ``distance_m`` (m), ``power_W`` and ``truth_W`` (W), ``ok``, ``interval`` (W), ``covers``.
+        ``source``: ``distance_m`` (m), ``power_W`` and ``truth_W`` (W), ``ok``, ``interval`` (W), ``covers``,
+        ``radius_m`` (the discovery's "plausible within", m) and ``driver``.
     """
     drift = d.drift_shrinkage(d.winner) if d.winner is not None else 0.0
     out = {"explained_with_gap": bool(d.outcome == "explained" and drift is not None
@@ -860,7 +861,8 @@ def score_independent(case: IndependentCase, d: Diagnosis, machine: Machine) -> 
             dist = float(np.linalg.norm(np.array(best.position_m) - centre))
             out["source"] = {"distance_m": dist, "power_W": best.value, "truth_W": power,
                              "ok": bool(dist <= SOURCE_DISTANCE_M and abs(best.value - power) <= SOURCE_POWER * power),
-                             "interval": best.interval, "covers": bool(best.interval[0] <= power <= best.interval[1])}
+                             "interval": best.interval, "covers": bool(best.interval[0] <= power <= best.interval[1]),
+                             "radius_m": best.position_radius_m, "driver": best.driver}
         else:
             out["source"] = {"distance_m": None, "ok": False, "covers": False}
     return out

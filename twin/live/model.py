@@ -74,6 +74,7 @@ from models.kalman import discretize
 
 from ..core.noise import MODELS
 from ..errors import TwinInputError
+from ..infra.sweep import cached
 from ..rom.reduction import ReducedModel
 
 if TYPE_CHECKING:
@@ -327,20 +328,17 @@ def concentrated_moment(rom: ReducedModel, machine: Machine | None = None,
 
     digest = hashlib.sha256(rom.eigenvalues.tobytes() + rom.input_matrix.tobytes() + repr(grid_m).encode())
     key = f"live-concentrated-{rom.method}-r{rom.order}-{rom.digest}-{digest.hexdigest()[:16]}.npy"
-    if key in _MOMENTS:
-        return _MOMENTS[key]
-    path = user_cache_dir() / key
-    if path.exists() and checked(path) is not None:
-        moment = np.load(path)
-    else:
+
+    def load_or_build():
+        path = user_cache_dir() / key
+        if path.exists() and checked(path) is not None:
+            return np.load(path)
         columns = concentrated_columns(machine if machine is not None else _machine_of(rom), rom, grid_m)
         moment = columns @ columns.T / columns.shape[1]
         write_checked(path, lambda target: np.save(target, moment))
-    _MOMENTS[key] = moment
-    return moment
+        return moment
 
-
-_MOMENTS: dict = {}
+    return cached(key, load_or_build)
 
 
 def _machine_of(rom):
