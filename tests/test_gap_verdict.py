@@ -266,3 +266,34 @@ def test_a_model_that_removes_a_sliver_at_a_far_off_sensor_is_no_explanation():
     third = _result("b", {"temperature": 0.06, "displacement": 0.05}, _channels(0.03, 0.05, 0.6), 80.0)
     assert verdict.materiality(third, nominal, SCALES) == pytest.approx((0.725 ** 2 - 0.6 ** 2) / 0.05 ** 2)
     assert verdict.decide(nominal, [third], SCALES).outcome == "partly_explained"
+
+
+def test_a_named_model_that_the_discovery_fits_better_without_is_displaced():
+    """Partly explained by a library model, but the discovery on the nominal residual alone fits the held-out record
+    better by more than MIN_DELTA_BIC with every parameter counted: not explained, the model named as displaced."""
+    from types import SimpleNamespace
+
+    from twin.gap.diagnose import _better_start
+
+    nominal = _result("nominal", {"temperature": 0.06, "displacement": 1.0}, _channels(0.06, 1.0), 0, [])
+    stand_in = _result("spindle_power_scale", {"temperature": 0.05, "displacement": 0.5}, _channels(0.05, 0.5), 300.0)
+    n_eff = 100.0
+    after_winner = SimpleNamespace(items=["a sink"], held_out_sse_ratio=0.5, n_atoms=2)
+    # BIC with the named model: −300 + 100 ln 0.5 + 2 ln 100 = −360.1; the nominal start must beat −370.1
+    for ratio, displaced in ((0.03, False), (0.01, True)):
+        v = verdict.decide(nominal, [stand_in], SCALES)
+        assert v.outcome == "partly_explained"
+        d = SimpleNamespace(winner=v.winner, decision=v, n_eff_hold=n_eff)
+        after_nominal = SimpleNamespace(items=["a source"], held_out_sse_ratio=ratio, n_atoms=1)
+        chosen = _better_start(d, after_winner, after_nominal)
+        assert (chosen is after_nominal) is displaced
+        assert (v.outcome, v.winner is None, v.best is stand_in) == (
+            ("not_explained", True, True) if displaced else ("partly_explained", False, True))
+    assert v.displaced["model"] == "spindle_power_scale"
+    assert v.displaced["delta_bic"] == pytest.approx(-360.1 - (100 * np.log(0.01) + np.log(100)), abs=0.1)
+    assert "displaced by the effects discovered" in verdict._not_explained_text(v)
+    # a nominal start that finds nothing displaces nothing, however the numbers fall
+    v = verdict.decide(nominal, [stand_in], SCALES)
+    d = SimpleNamespace(winner=v.winner, decision=v, n_eff_hold=n_eff)
+    assert _better_start(d, after_winner, SimpleNamespace(items=[], held_out_sse_ratio=1e-9, n_atoms=0)) \
+        is after_winner and v.outcome == "partly_explained"

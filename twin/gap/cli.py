@@ -29,6 +29,7 @@ def cmd_diagnose(args: argparse.Namespace) -> None:
     from ..core.dataset import sidecar_path
     from .diagnose import diagnose
     from .report import write_report
+    from .verdict import role
 
     given = (args.measured, sidecar_path(args.measured), args.column_map, args.scenario, args.machine)
     check_output_folder(args.out, args.overwrite, inputs=given)
@@ -39,7 +40,7 @@ def cmd_diagnose(args: argparse.Namespace) -> None:
     out = write_report(d, args.out, render=not args.no_render, overwrite=args.overwrite)
     print(d.verdict)
     for r in d.ranking[:5]:
-        named = "  ← named" if r is d.winner else ""
+        named = f"  ← {role(d, r)}" if role(d, r) else ""
         print(f"  {r.name:42s} ΔBIC {r.delta_bic:9.1f}{named}")
     if d.winner is not None and d.ranking[0] is not d.winner:
         print("  (a model ranked above the named one adds an effect to it that the decision rules do not accept: "

@@ -392,14 +392,15 @@ def _read_inputs(measured, machine, scenario, column_map, holdout_fraction, init
 
 
 def _explain(d, drive, discovery, timings):
-    """Fill where the gap lies, the discovery beyond the library (when a gap remains) and the verdict sentence."""
-    t2 = time.perf_counter()
-    _where(d, drive)
-    timings["where_s"] = time.perf_counter() - t2
+    """Fill the discovery beyond the library (when a gap remains; it may displace the named model), where the gap
+    lies, and the verdict sentence."""
     if discovery and d.outcome in ("partly_explained", "not_explained"):
         t3 = time.perf_counter()
         d.discovery = _discover(d)
         timings["discovery_s"] = time.perf_counter() - t3
+    t2 = time.perf_counter()
+    _where(d, drive)
+    timings["where_s"] = time.perf_counter() - t2
     d.verdict = verdict.sentence(d)
 
 
@@ -434,15 +435,38 @@ def _where(d, drive):
 
 
 def _discover(d):
-    """Run :func:`twin.gap.discovery.discover` on what the named model (else the nominal) leaves; the result, or
-    None with a note when the discovery fails (reported, never silent)."""
+    """Run :func:`twin.gap.discovery.discover` on the nominal twin's residual and, with a named model, on what that
+    model leaves (:func:`_better_start`); the result, or None with a note when the discovery fails (reported,
+    never silent)."""
     from .discovery import discover
 
     try:
-        return discover(d.model, d.evaluator, base=d.winner or d.nominal)
+        found = discover(d.model, d.evaluator, base=d.nominal)
+        if d.winner is None:
+            return found
+        return _better_start(d, discover(d.model, d.evaluator, base=d.winner), found)
     except Exception as exc:  # the verdict stands without it; the report says why it is missing
         d.notes.append(f"effect discovery failed: {type(exc).__name__}: {exc}")
         return None
+
+
+def _better_start(d, after_winner, after_nominal):
+    """The discovery to report: on what the named model leaves, unless the one on the nominal residual fits the
+    held-out record better by ΔBIC > :data:`twin.gap.verdict.MIN_DELTA_BIC` with every parameter counted (the
+    named model's and each accepted atom); then the named model is displaced (:func:`twin.gap.verdict.displace`).
+
+    A library model that stands in for an unlisted effect takes part of its signature, and the search on what
+    it leaves then finds the rest in the wrong place or of the wrong kind; so both starts are searched and held-out
+    evidence decides between them, as it decides everything else in the diagnosis.
+    """
+    n = d.n_eff_hold
+    bic_winner = d.winner.bic + n * np.log(max(after_winner.held_out_sse_ratio, 1e-300)) \
+        + after_winner.n_atoms * np.log(n)
+    bic_nominal = n * np.log(max(after_nominal.held_out_sse_ratio, 1e-300)) + after_nominal.n_atoms * np.log(n)
+    if after_nominal.items and bic_nominal < bic_winner - verdict.MIN_DELTA_BIC:
+        verdict.displace(d.decision, "the effects discovered on the nominal twin's residual", bic_winner - bic_nominal)
+        return after_nominal
+    return after_winner
 
 
 def diagnose(measured: Dataset | str | Path, machine: str | Path | Machine = "vmc_ram",

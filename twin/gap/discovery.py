@@ -67,20 +67,35 @@ first step without an accepted atom or after :data:`MAX_ATOMS`.  The held-out
 reductions reported are on the part that accepted the atoms (a validation
 set, not a fresh test set).
 
+Source atoms of one driver whose cells overlap (centroids within :data:`GRID_M`, any part and sign) are
+reported as one **extended source** with their summed power (:func:`_extended_sources`): a source larger
+than a cell, or of another shape, is fitted as neighbouring cells whose single powers are ill-determined
+while their sum is not.
+
 90 % intervals: moving-block bootstrap of the fit-part residual rows (blocks
 of :data:`BLOCK_H` hours keep the autocorrelation and the cross-channel
 correlation), the half-widths inflated by √(MS_hold / MS_fit) of the final
 residual when the held-out misfit is larger (model discrepancy), and widened
-to ± 1.645 split-half sds where a value drifts between the two halves of the
-fit rows (as the library's parameters are, :func:`twin.gap.diagnose.split_half_sd`).  A source's
+to ± 1.645 sds of the larger of two discrepancies no residual resampling sees:
+the split-half sd, where a value drifts between the two halves of the fit rows
+(as the library's parameters are, :func:`twin.gap.diagnose.split_half_sd`), and the
+shape-discrepancy sd (:func:`_discrepancy_sd`): an idealised signature fitted
+to a real one puts part of the mismatch into the value, and the remainder shows
+how large the mismatch is.  A source's
 value also depends on where the dictionary puts it: a cube of fixed shape on
 a grid stands for a source of unknown shape, and a cell nearer the sensors
 fits the same record with less power.  So the value is profiled over position:
 every cell of the 0.05 m sub-grid within ± :data:`PROFILE_REACH_M` is refitted
 with the other atoms, the cells whose fit-part SSE is within χ²₃(0.90)/n_eff
 (relative) of the best are plausible, and the interval is the bootstrap's
-spread around the lowest and the highest plausible value.  The farthest
+spread around the lowest and the highest plausible value (for an extended source,
+that of any member's plausible positions).  The farthest
 plausible cell gives the position's own claim, "plausible within r m".
+
+Where to start.  The diagnosis (:func:`twin.gap.diagnose._better_start`) runs the search on the nominal twin's
+residual and, when a library model is named, on what that model leaves; held-out BIC with every parameter
+counted decides.  A library model standing in for an unlisted effect takes part of its signature, and the
+search on what it leaves then finds the rest in the wrong place or of the wrong kind.
 """
 from __future__ import annotations
 
@@ -181,6 +196,8 @@ class DiscoveryResult:
     candidates: int
     seconds: float
     rejected: list = field(default_factory=list)
+    held_out_sse_ratio: float = 1.0   # weighted held-out SSE after all accepted atoms / before (the base's)
+    n_atoms: int = 0                  # atoms accepted (fitted coefficients; an extended source counts its cells)
 
     def summary(self) -> list[str]:
         """One line per discovery (:meth:`Discovery.sentence`), or one line saying none was accepted.
@@ -200,12 +217,12 @@ class DiscoveryResult:
         Returns
         -------
         dict
-            ``base``, ``candidates``, ``seconds`` (s), ``held_out``, ``items`` (each :class:`Discovery` as a
-            dict), ``rejected`` and ``summary``.
+            ``base``, ``candidates``, ``seconds`` (s), ``held_out``, ``held_out_sse_ratio``, ``n_atoms``,
+            ``items`` (each :class:`Discovery` as a dict), ``rejected`` and ``summary``.
         """
         return {"base": self.base, "candidates": self.candidates, "seconds": self.seconds,
-                "held_out": self.held_out, "items": [asdict(d) for d in self.items],
-                "rejected": self.rejected, "summary": self.summary()}
+                "held_out": self.held_out, "held_out_sse_ratio": self.held_out_sse_ratio, "n_atoms": self.n_atoms,
+                "items": [asdict(d) for d in self.items], "rejected": self.rejected, "summary": self.summary()}
 
 
 # ============================================================================= the response model
@@ -799,68 +816,119 @@ def _prune(ev, proj, chosen, current, r_fit, r_hold, rejected):
 
 
 def _position_profile(dic, chosen, coef, r_fit, n_eff):
-    """Per chosen atom ``(low, high, radius_m)``: its coefficient's range over the plausible positions.
+    """Per chosen atom ``(values, radius_m)``: the coefficient vectors (k, len(chosen)) of its plausible positions.
 
     For a source atom, every position on the :data:`REFINE_M` sub-grid within ± :data:`PROFILE_REACH_M` is
     refitted together with the other atoms; a position is plausible when its fit-part SSE is within
     ``χ²₃(0.90) / n_eff`` (relative) of the best position's (a profile likelihood over the position with the
-    effective sample count).  ``radius_m`` is the farthest plausible position from the reported one.  Other
-    kinds have no position: ``(coefficient, coefficient, None)``.
+    effective sample count).  Each plausible position gives the whole refitted vector (the other atoms follow
+    the moved one), so the range of any combination of the values is read from them.  ``radius_m`` is the
+    farthest plausible position from the reported one.  Other kinds have no position: ``(coef[None], None)``.
     """
     sse = float(np.sum((r_fit - np.column_stack([a.fit for a in chosen]) @ coef) ** 2))
     out = []
     for i, a in enumerate(chosen):
         if a.kind != "source":
-            out.append((coef[i], coef[i], None))
+            out.append((coef[None], None))
             continue
         others = chosen[:i] + chosen[i + 1:]
-        trials = [(sse, coef[i], a.position)]
+        trials = [(sse, coef, a.position)]
         for cand in _neighbours(dic, a, PROFILE_REACH_M):
             cols = [b.fit for b in others + [cand]]
             c = _solve(cols, r_fit)
-            trials.append((float(np.sum((r_fit - np.column_stack(cols) @ c) ** 2)), c[-1], cand.position))
+            trials.append((float(np.sum((r_fit - np.column_stack(cols) @ c) ** 2)), np.insert(c[:-1], i, c[-1]),
+                           cand.position))
         bound = min(t[0] for t in trials) * (1.0 + CHI2_3_90 / n_eff)
-        ok = [(c, pos) for s_, c, pos in trials if s_ <= bound] or [(coef[i], a.position)]
-        values = [c for c, _ in ok] + [coef[i]]
+        ok = [(c, pos) for s_, c, pos in trials if s_ <= bound] or [(coef, a.position)]
         radius = max(float(np.linalg.norm(np.subtract(pos, a.position))) for _, pos in ok)
-        out.append((min(values), max(values), radius))
+        out.append((np.array([coef] + [c for c, _ in ok]), radius))
     return out
 
 
-def _split_half_sd(ev, chosen, r_fit):
-    """Delete-a-half jackknife sd of the coefficients, |c(first half) − c(second half)| / 2, each half of the fit
-    rows fitted alone (as :func:`twin.gap.diagnose.split_half_sd` does for the library's parameters): a value
-    that drifts through the record shows a discrepancy that no residual resampling sees."""
+def _split_half_sd(ev, chosen, r_fit, combine):
+    """Delete-a-half jackknife sd of the reported values ``combine @ coef``, |c(first half) − c(second half)| / 2,
+    each half of the fit rows fitted alone (as :func:`twin.gap.diagnose.split_half_sd` does for the library's
+    parameters): a value that drifts through the record shows a discrepancy that no residual resampling sees."""
     time_of_entry = np.nonzero(ev.fit_mask)[0]
     rows = np.flatnonzero(ev.fit_rows)
     first = time_of_entry < rows[len(rows) // 2]
     F = np.column_stack([a.fit for a in chosen])
-    halves = [np.linalg.lstsq(F[half], r_fit[half], rcond=None)[0] for half in (first, ~first)]
+    halves = [combine @ np.linalg.lstsq(F[half], r_fit[half], rcond=None)[0] for half in (first, ~first)]
     return np.abs(halves[1] - halves[0]) / 2.0
 
 
-def _discoveries(dic, ev, proj, chosen, current, r_fit, r_hold, seed, n_eff):
-    """The accepted atoms as :class:`Discovery`, each with its 90 % interval and its own held-out change.
+def _discrepancy_sd(chosen, coef, combine, remainder):
+    """Per reported value ``combine @ coef``: the sd of its bias from the dictionary's own discrepancy of shape.
 
-    The interval is the bootstrap's (:func:`_bootstrap`), widened to ± :data:`Z_90` split-half sds
-    (:func:`_split_half_sd`), around every plausible position's value (:func:`_position_profile`), so it
-    carries the dictionary's own discrepancy of where a source sits.
+    A candidate's response is an idealisation (a cube of fixed size for a source of any shape, a uniform change
+    of h over a whole group): the true signature is ``c · (a + Δ)``.  Least squares puts the part of Δ along
+    the fitted signature into the value (a bias the resampling cannot see) and leaves the part across it in the
+    remainder.  With no preferred direction for Δ the part along is, at most, as large as the part across
+    (one direction across: the worst case), so the value's relative sd is ``‖remainder‖ / ‖signature‖`` on the
+    fit rows — noise and other unexplained effects included, so it errs wide.
+    """
+    F = np.column_stack([a.fit for a in chosen])
+    rest = float(np.linalg.norm(remainder))
+    out = np.empty(len(combine))
+    for g, row in enumerate(combine):
+        signal = float(np.linalg.norm(F @ (row * coef)))
+        out[g] = rest / signal * abs(row @ coef) if signal > 0 else np.inf
+    return out
+
+
+def _extended_sources(chosen):
+    """Groups of indices of ``chosen`` reported as one effect: source atoms of one driver whose cells overlap
+    (centroids within :data:`GRID_M`, any part and sign) are one extended source, whose power is their sum —
+    a source larger than a cell, or of another shape, is fitted as neighbouring cells (a pair of opposite sign
+    is a shape correction); every other atom is a group of its own."""
+    groups = []
+    for i, a in enumerate(chosen):
+        near = [g for g in groups if a.kind == "source" and all(
+            chosen[j].kind == "source" and chosen[j].driver == a.driver
+            and np.linalg.norm(np.subtract(chosen[j].position, a.position)) <= GRID_M + 1e-9 for j in g)]
+        if near:
+            near[0].append(i)
+        else:
+            groups.append([i])
+    return groups
+
+
+def _discoveries(dic, ev, proj, chosen, current, r_fit, r_hold, seed, n_eff):
+    """The accepted atoms as :class:`Discovery` (an extended source, :func:`_extended_sources`, as one), each
+    with its 90 % interval and its own held-out change.
+
+    The interval is the bootstrap's (:func:`_bootstrap`), widened to ± :data:`Z_90` sds of the larger of the
+    split-half sd (:func:`_split_half_sd`) and the shape-discrepancy sd (:func:`_discrepancy_sd`), around every
+    plausible position's value (:func:`_position_profile`: of any member,
+    for an extended source), so it carries the dictionary's own discrepancy of where a source sits.
+    An extended source is reported at its strongest cell; its radius reaches every member's plausible positions.
     """
     if not chosen:
         return []
     coef = _solve([a.fit for a in chosen], r_fit)
-    intervals = _bootstrap(ev, chosen, coef, current, dic.model.times_s, seed)
-    jack = _split_half_sd(ev, chosen, r_fit)
+    groups = _extended_sources(chosen)
+    combine = np.zeros((len(groups), len(chosen)))
+    for g, members in enumerate(groups):
+        combine[g, members] = 1.0
+    intervals = _bootstrap(ev, chosen, coef, current, dic.model.times_s, seed, combine)
+    sds = np.maximum(_split_half_sd(ev, chosen, r_fit, combine), _discrepancy_sd(chosen, coef, combine, current[0]))
     profile = _position_profile(dic, chosen, coef, r_fit, n_eff)
     items = []
-    for a, c, (lo, hi), sd, (p_lo, p_hi, radius) in zip(chosen, coef, intervals, jack, profile):
+    for g, (members, c, (lo, hi), sd) in enumerate(zip(groups, combine @ coef, intervals, sds)):
+        a = chosen[max(members, key=lambda j: abs(coef[j]))]
         lo, hi = min(lo, c - Z_90 * sd), max(hi, c + Z_90 * sd)
+        plausible = np.concatenate([profile[j][0] @ combine[g] for j in members])
+        p_lo, p_hi = plausible.min(), plausible.max()
         low, high = sorted((a.scale * (p_lo - (c - lo)), a.scale * (p_hi + (hi - c))))
-        # held-out change of each atom: the model without it against the model with all
-        _, without, _ = _residuals([b for b in chosen if b is not a], r_fit, r_hold)
-        items.append(Discovery(a.kind, a.name, a.label, float(c * a.scale), a.unit, (float(low), float(high)),
-                               a.part, a.position, a.driver, a.delta_bic, _held_change(ev, proj, without, current[1]),
-                               radius))
+        radius = None if a.kind != "source" else max(
+            profile[j][1] + float(np.linalg.norm(np.subtract(chosen[j].position, a.position)))
+            for j in members)
+        # held-out change of each effect: the model without it against the model with all
+        _, without, _ = _residuals([b for j, b in enumerate(chosen) if j not in members], r_fit, r_hold)
+        name = a.name if len(members) == 1 else " + ".join(chosen[j].name for j in members)
+        items.append(Discovery(a.kind, name, a.label, float(c * a.scale), a.unit, (float(low), float(high)),
+                               a.part, a.position, a.driver, max(chosen[j].delta_bic for j in members),
+                               _held_change(ev, proj, without, current[1]), radius))
     return items
 
 
@@ -915,11 +983,12 @@ def discover(model: GapModel, evaluator: Evaluator, base: FitResult | None = Non
     n_eff = effective_samples(_residual_matrix(ev, proj, *current), ev, ev.fit_rows)
     items = _discoveries(dic, ev, proj, chosen, current, r_fit, r_hold, seed, n_eff)
     return DiscoveryResult(items, _held_change(ev, proj, r_hold, current[1]), base.name, len(dic.atoms),
-                           time.perf_counter() - t0, rejected)
+                           time.perf_counter() - t0, rejected,
+                           float(current[1] @ current[1]) / max(float(r_hold @ r_hold), 1e-300), len(chosen))
 
 
-def _bootstrap(ev, chosen, coef, current, times_s, seed):
-    """90 % intervals of the coefficients (see the module docstring)."""
+def _bootstrap(ev, chosen, coef, current, times_s, seed, combine):
+    """90 % intervals of the reported values ``combine @ coef`` (see the module docstring)."""
     P = np.linalg.pinv(np.column_stack([a.fit for a in chosen]))
     rows = np.flatnonzero(ev.fit_mask.any(axis=1))
     dt = float(np.median(np.diff(times_s[rows]))) if len(rows) > 1 else 1.0
@@ -935,11 +1004,12 @@ def _bootstrap(ev, chosen, coef, current, times_s, seed):
         E_star = np.zeros_like(E)
         E_star[rows] = E[rows[src]]          # whole rows move: all channels at one time stay together
         draws[b] = coef + P @ E_star[ev.fit_mask]
-    lo, hi = np.percentile(draws, [5, 95], axis=0)
+    values = combine @ coef
+    lo, hi = np.percentile(draws @ combine.T, [5, 95], axis=0)
     ms_fit = float(current[0] @ current[0]) / max(len(current[0]), 1)
     ms_hold = float(current[1] @ current[1]) / max(len(current[1]), 1)
     inflate = np.sqrt(max(1.0, ms_hold / ms_fit)) if ms_fit > 0 else 1.0
-    return [(c - inflate * (c - low), c + inflate * (high - c)) for c, low, high in zip(coef, lo, hi)]
+    return [(c - inflate * (c - low), c + inflate * (high - c)) for c, low, high in zip(values, lo, hi)]
 
 
 def render_discoveries(result: DiscoveryResult, machine: Machine, path: str | Path) -> Path | None:

@@ -26,7 +26,7 @@ from .attribution import RESOLVED
 from .diagnose import Diagnosis
 from .discovery import render_discoveries
 from .fit import GROUP_UNIT
-from .verdict import parameters
+from .verdict import parameters, role
 from .verdict import to_json as verdict_json
 
 GROUP_LABEL = {"temperature": "surface temperatures", "air": "air sensors", "displacement": "TCP drift",
@@ -525,7 +525,7 @@ def _which_section(d, figures):
     for i, r in enumerate(d.ranking[:20]):
         params = "; ".join(f"{p['name'].split('.', 1)[1]} = {p['value']:.3g} ({p['interval90'][0]:.3g} … "
                            f"{p['interval90'][1]:.3g}) {p['unit']}" for p in parameters(r))
-        mark = " **(named)**" if d.winner is not None and r is d.winner else ""
+        mark = f" **({role(d, r)})**" if role(d, r) else ""
         rows.append([i + 1, r.name + mark, params, r.delta_bic,
                      r.residual.sse_hold / max(d.nominal.residual.sse_hold, 1e-300)]
                     + [r.summary["groups"][g]["hold_rms"] for g in groups] + ["; ".join(r.notes)])

@@ -340,6 +340,7 @@ class Verdict:
     remaining_flagged: list
     worsened: list
     material: float
+    displaced: dict | None = None    # the library model the discovery displaced (:func:`displace`)
 
     @property
     def significant(self) -> bool:
@@ -418,6 +419,48 @@ def decide(nominal: FitResult, ranking: Sequence[FitResult], sc: Scales) -> Verd
 
 # ============================================================================= written forms
 Z90 = 1.6448536269514722
+
+
+def displace(v: Verdict, by: str, delta_bic: float) -> None:
+    """The named model gives way to effects found beyond the library (in place): the outcome becomes
+    ``not_explained`` and the model stays the best candidate, with the reason.
+
+    Called when the discovery on the *nominal* twin's residual fits the held-out record better (by ``delta_bic``,
+    with every parameter counted) than the named model with the discovery on what it leaves: the library model
+    then stands in for an effect it does not have (e.g. a spindle-power scale for a source on the ram), and
+    "partly explained by it" would be a confident wrong answer.
+
+    Parameters
+    ----------
+    v : Verdict
+        A decision with a named model.
+    by : str
+        What displaced it, in words.
+    delta_bic : float
+        Held-out BIC of the named model with its discovery minus that of the nominal twin with its own.
+    """
+    v.displaced = {"model": v.winner.name, "by": by, "delta_bic": float(delta_bic)}
+    v.best, v.winner, v.outcome = v.winner, None, "not_explained"
+
+
+def role(d: Diagnosis, result: FitResult) -> str:
+    """What the verdict makes of a ranked model: ``named``, ``displaced by the discovery`` or ``""``.
+
+    Parameters
+    ----------
+    d : Diagnosis
+        With its decision made.
+    result : FitResult
+        One of its ranked models.
+
+    Returns
+    -------
+    str
+        The role in words (empty for any other model).
+    """
+    if result is d.winner:
+        return "named"
+    return "displaced by the discovery" if d.decision.displaced and result is d.decision.best else ""
 
 
 def parameters(result: FitResult | None) -> list[dict[str, str | float | list[float]]]:
@@ -513,6 +556,9 @@ def _rejection_reasons(v):
         why.append(f"materiality {v.material:.2f} < {MIN_MATERIAL:g}")
     if v.worsened:
         why.append(f"worsens {', '.join(v.worsened)}")
+    if v.displaced:
+        why.append(f"displaced by {v.displaced['by']}, which fits the held-out record better without it "
+                   f"(ΔBIC {v.displaced['delta_bic']:.1f})")
     return "; ".join(why) or "its pair rule"
 
 
@@ -592,5 +638,5 @@ def to_json(d: Diagnosis) -> dict[str, object]:
             "parameters": parameters(model),
             "discoveries": d.discovery.as_dict()["items"] if d.discovery is not None else [],
             "held_out": held, "flagged_sensors": flagged_table(d),
-            "evidence": {**v.evidence(), "worsened_groups": v.worsened, "materiality": v.material,
+            "evidence": {**v.evidence(), "worsened_groups": v.worsened, "displaced": v.displaced, "materiality": v.material,
                          "nominal_gap_over_scale": v.nominal_gap, "remaining_gap_over_scale": v.remaining_gap}}
