@@ -557,7 +557,7 @@ def _rejection_reasons(v):
     if v.worsened:
         why.append(f"worsens {', '.join(v.worsened)}")
     if v.displaced:
-        why.append(f"displaced by {v.displaced['by']}, which fits the held-out record better without it "
+        why.append(f"displaced by {v.displaced['by']}: they fit the held-out record better without it "
                    f"(ΔBIC {v.displaced['delta_bic']:.1f})")
     return "; ".join(why) or "its pair rule"
 
@@ -638,5 +638,6 @@ def to_json(d: Diagnosis) -> dict[str, object]:
             "parameters": parameters(model),
             "discoveries": d.discovery.as_dict()["items"] if d.discovery is not None else [],
             "held_out": held, "flagged_sensors": flagged_table(d),
-            "evidence": {**v.evidence(), "worsened_groups": v.worsened, "displaced": v.displaced, "materiality": v.material,
-                         "nominal_gap_over_scale": v.nominal_gap, "remaining_gap_over_scale": v.remaining_gap}}
+            "evidence": {**v.evidence(), "worsened_groups": v.worsened, "displaced": v.displaced,
+                         "materiality": v.material, "nominal_gap_over_scale": v.nominal_gap,
+                         "remaining_gap_over_scale": v.remaining_gap}}
