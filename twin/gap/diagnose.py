@@ -38,6 +38,7 @@ from .fit import (
     fit_effects,
     model_names,
     nominal_result,
+    relative_bic,
     score,
 )
 from .measured import Record, check_scale, match_record, read_measured
@@ -460,9 +461,8 @@ def _better_start(d, after_winner, after_nominal):
     evidence decides between them, as it decides everything else in the diagnosis.
     """
     n = d.n_eff_hold
-    bic_winner = d.winner.bic + n * np.log(max(after_winner.held_out_sse_ratio, 1e-300)) \
-        + after_winner.n_atoms * np.log(n)
-    bic_nominal = n * np.log(max(after_nominal.held_out_sse_ratio, 1e-300)) + after_nominal.n_atoms * np.log(n)
+    bic_winner = d.winner.bic + relative_bic(after_winner.held_out_sse_ratio, after_winner.n_atoms, n)
+    bic_nominal = relative_bic(after_nominal.held_out_sse_ratio, after_nominal.n_atoms, n)
     if after_nominal.items and bic_nominal < bic_winner - verdict.MIN_DELTA_BIC:
         verdict.displace(d.decision, "the effects discovered on the nominal twin's residual", bic_winner - bic_nominal)
         return after_nominal

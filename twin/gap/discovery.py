@@ -115,7 +115,7 @@ from ..rom.reduction import krylov_basis, slowest_rate
 from .drive import Drive
 from .effects import scaled_definition, system_difference
 from .engine import FullBackend, ReducedBackend, m_orthonormal_union
-from .fit import GROUP_UNIT, Evaluator, FitResult, effective_samples, nominal_result
+from .fit import GROUP_UNIT, Evaluator, FitResult, effective_samples, nominal_result, relative_bic
 from .model import GapModel, Prediction
 from .structure import Structure
 
@@ -673,7 +673,7 @@ def _judge(ev, proj, old, new, k_added):
     """(accepted, ΔBIC, reasons) of a step from residual vectors ``old`` to ``new`` = (fit, hold)."""
     n_eff = effective_samples(_residual_matrix(ev, proj, *old), ev, ev.hold_rows)
     sse_old, sse_new = float(old[1] @ old[1]), float(new[1] @ new[1])
-    dbic = -(n_eff * np.log(max(sse_new, 1e-300) / max(sse_old, 1e-300)) + k_added * np.log(n_eff))
+    dbic = -relative_bic(max(sse_new, 1e-300) / max(sse_old, 1e-300), k_added, n_eff)
     change = _group_change(ev, proj, old[1], new[1])
     reasons = []
     if dbic <= MIN_DELTA_BIC:

@@ -684,6 +684,26 @@ def nominal_result(model: GapModel, evaluator: Evaluator) -> FitResult:
                      n_eff_fit=n_eff, prediction=pred)
 
 
+def relative_bic(sse_ratio: float, k: float, n_eff: float) -> float:
+    """Held-out BIC of a model against a reference: n_eff·ln(SSE/SSE_ref) + k·ln n_eff (lower is better).
+
+    Parameters
+    ----------
+    sse_ratio : float
+        Held-out sum of squares of the model over the reference's, 1 (floored at 1e-300).
+    k : float
+        Parameters the model has beyond the reference.
+    n_eff : float
+        Effectively independent held-out samples (:func:`effective_samples`).
+
+    Returns
+    -------
+    float
+        The BIC difference; −10 or less is strong evidence for the model.
+    """
+    return float(n_eff * np.log(max(sse_ratio, 1e-300)) + k * np.log(n_eff))
+
+
 def score(results: list[FitResult], nominal: FitResult, n_eff_hold: float) -> list[FitResult]:
     """Set BIC (relative to the nominal) and ΔBIC vs the nominal on every result; return them ranked.
 
@@ -704,7 +724,6 @@ def score(results: list[FitResult], nominal: FitResult, n_eff_hold: float) -> li
     ref = max(nominal.residual.sse_hold, 1e-300)
     nominal.bic, nominal.delta_bic = 0.0, 0.0
     for r in results:
-        ratio = max(r.residual.sse_hold, 1e-300) / ref
-        r.bic = float(n_eff_hold * np.log(ratio) + r.k * np.log(n_eff_hold))
+        r.bic = relative_bic(max(r.residual.sse_hold, 1e-300) / ref, r.k, n_eff_hold)
         r.delta_bic = -r.bic
     return sorted(results, key=lambda r: r.bic)
