@@ -22,43 +22,19 @@ import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from twin.gap.benchmark import IndependentCase, IndependentTask, _src
-from twin.gap.diagnose import _machine
+from twin.gap.benchmark import IndependentCase, IndependentTask, random_sources
 from twin.gap.discovery import REFINE_M
 from twin.gap.truth import PhysicsChange
 from twin.infra.sweep import run_tasks
 from twin.infra.tables import markdown_table
 
-PARTS = ("column", "carrier", "ram", "base")
-DRIVERS = {"spindle": ("spindle", 9000.0), "feed": ("feed_xyz", 10000.0)}
-
 
 def random_cases(n: int, seed: int) -> list[IndependentCase]:
-    """``n`` source cases drawn from ``seed`` (see the module docstring)."""
-    machine = _machine("vmc_ram")
-    mesh = machine.mesh
-    cents = mesh.points[mesh.tets].mean(axis=1)
-    rng = np.random.default_rng(seed)
-    cases = []
-    while len(cases) < n:
-        part = PARTS[rng.integers(len(PARTS))]
-        tets = np.flatnonzero(mesh.regions == mesh.region_id(part))
-        centre = cents[rng.choice(tets)]
-        half = rng.uniform(0.025, 0.15, 3)
-        box = tuple(float(v) for lo_hi in zip(centre - half, centre + half) for v in lo_hi)
-        inside = np.all((cents[tets] >= np.array(box[::2])) & (cents[tets] <= np.array(box[1::2])), axis=1)
-        if inside.sum() < 10:
-            continue
-        driver = list(DRIVERS)[rng.integers(len(DRIVERS))]
-        power = round(float(rng.uniform(25.0, 80.0)), 1)
-        name = f"random_{seed}_{len(cases)}"
-        source = _src(name, part, box, DRIVERS[driver][0], power, 1.0, DRIVERS[driver][1])
-        cases.append(IndependentCase(name, "outside", PhysicsChange(sources=(source,)), source=(part, box, power)))
-    return cases
+    """``n`` source cases drawn from ``seed`` (:func:`twin.gap.benchmark.random_sources`)."""
+    return [IndependentCase(s.name, "outside", PhysicsChange(sources=(s,)), source=(s.part, s.box, s.coefficient_W))
+            for s in random_sources(n, seed)]
 
 
 def _row(case, result):

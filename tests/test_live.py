@@ -60,15 +60,16 @@ def _fe_truth(scenario_name, change):
 
 
 def test_observer_tracks_fe_truth_with_an_unmodelled_effect(rom):
-    """heat_cool_9000 with the enclosure convection × 0.6 (the observer's ROM is nominal): Z within 1 µm RMS,
-    better than the open-loop ROM."""
+    """heat_cool_9000 with the enclosure convection × 0.6 (the observer's ROM is nominal): the observer ``twin live``
+    runs gets Z within 1 µm RMS, better than the open-loop ROM."""
     from twin.gap.truth import PhysicsChange
+    from twin.live.multiple_model import live_observer
     from twin.live.protocol import readings
     from twin.rom.reduction import simulate_rom
 
     truth = _fe_truth("heat_cool_9000", PhysicsChange(convection={"enclosure": 0.6}))
     T, air = readings(truth, THERMOMETERS, 3)
-    drift, _ = DriftObserver(rom, THERMOMETERS).run(truth.time_s, truth["spindle"], air, T)
+    drift, _ = live_observer(rom, THERMOMETERS).run(truth.time_s, truth["spindle"], air, T)
     z = truth["Z"]
     err = drift[:, 2] - z
     open_loop = simulate_rom(rom, "heat_cool_9000", sample_times=truth.time_s)["Z"] - z
@@ -81,22 +82,24 @@ def test_observer_tracks_fe_truth_with_an_unmodelled_effect(rom):
 def test_band_is_not_overconfident_on_an_effect_kind_outside_the_calibration(rom):
     """A joint conductance is no effect kind of the training records the band was calibrated on
     (twin.live.protocol.TRAINING).  On the full-FE record of six_part_cycle (9000 rpm, the feeds the observer
-    does not read) with the carrier–ram joint × 0.3, 60 s, the 95 % band covers ≥ 90 % of the samples over 4
-    thermometer noise draws (Z error ~0.9 µm RMS; the band passes down to ~0.4 of its width of 2026-11-25, so a
-    band that shrank to the size of the errors fails), and is not so wide as to say nothing (mean half-width
-    ≤ 5 µm on a drift of ~35 µm)."""
+    does not read) with the carrier–ram joint × 0.3, 60 s, the 95 % band of the observer ``twin live`` runs
+    covers ≥ 90 % of the samples over 4 thermometer noise draws (Z error ~0.9 µm RMS; the band passes down to
+    0.3–0.4 of its width of 2026-11-27, so a band that shrank to the size of the errors fails), and is not so wide
+    as to say nothing (mean half-width ≤ 7 µm on a drift of ~35 µm; 5.1 µm on 2026-11-27, against 3.5 µm for
+    the σ_P = 0 filter alone: the σ_P = 40 W hypothesis takes some weight while the machine heats)."""
     from twin.gap.truth import PhysicsChange
+    from twin.live.multiple_model import live_observer
     from twin.live.protocol import readings
 
     truth = _fe_truth("six_part_cycle", PhysicsChange(joints={"carrier-ram": 0.3}))
     inside, bands = [], []
     for seed in range(1, 5):
         T, air = readings(truth, THERMOMETERS, seed)
-        drift, band = DriftObserver(rom, THERMOMETERS).run(truth.time_s, truth["spindle"], air, T)
+        drift, band = live_observer(rom, THERMOMETERS).run(truth.time_s, truth["spindle"], air, T)
         inside.append(np.abs(drift[:, 2] - truth["Z"]) <= band[:, 2])
         bands.append(band[:, 2])
     assert np.mean(inside) >= 0.90, np.mean(inside)
-    assert np.mean(bands) <= 5.0, np.mean(bands)
+    assert np.mean(bands) <= 7.0, np.mean(bands)
 
 
 def test_observer_refuses_unknown_thermometer_and_time_going_back(rom):
@@ -135,7 +138,10 @@ def test_readings_off_the_model_widen_the_band(rom):
 
 def test_structured_filter_equals_the_generic_one(rom):
     """The observer's block-structured covariance step gives the generic Kalman filter's numbers; with consider
-    states, the Schmidt–Kalman form P − KHP − (KHP)ᵀ + KSKᵀ with the consider rows of K zeroed."""
+    states, the Schmidt–Kalman form P − KHP − (KHP)ᵀ + KSKᵀ with the consider rows of K zeroed; its
+    log-likelihood of the readings is that of N(ν; 0, S) (scipy)."""
+    from scipy.stats import multivariate_normal
+
     from models.kalman import KalmanFilter
     from twin.live.filtering import ModalKalmanFilter
 
@@ -143,6 +149,8 @@ def test_structured_filter_equals_the_generic_one(rom):
     obs.start(0.0, 20.0)
     model = obs.model
     F, G, Q = obs._transition(10.0, obs._u)
+    F22 = F[rom.order:, rom.order:]
+    assert np.count_nonzero(F22 - np.diag(np.diagonal(F22)))          # the lagged air's row: F₂₂ is not diagonal
     args = (F, G, model.H, model.J, Q, model.R)
     fast = ModalKalmanFilter(rom.order, *args, None, model.couplings)
     consider = ModalKalmanFilter(rom.order, *args, model.consider, model.couplings)
@@ -161,9 +169,11 @@ def test_structured_filter_equals_the_generic_one(rom):
         K = P_before @ H.T @ np.linalg.inv(S)
         K[model.consider] = 0.0
         consider.update(y, u)
+        innovation = y[seen] - H @ x_before - model.J[seen] @ u
+        assert np.isclose(consider.log_likelihood, multivariate_normal.logpdf(innovation, cov=S), rtol=1e-9)
         expected = P_before - K @ H @ P_before - (K @ H @ P_before).T + K @ S @ K.T
         assert np.allclose(consider.P, expected, atol=1e-10 * np.abs(expected).max())
-        assert np.allclose(consider.x, x_before + K @ (y[seen] - H @ x_before - model.J[seen] @ u))
+        assert np.allclose(consider.x, x_before + K @ innovation)
         for kf in (fast, generic):
             kf.predict(u).update(y, u)
     assert np.allclose(fast.x, generic.x, rtol=1e-9, atol=1e-9 * np.abs(generic.x).max())

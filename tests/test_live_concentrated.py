@@ -70,20 +70,20 @@ def test_kept_components_carry_the_share_of_each_axis(rom, columns, moment):
 
 
 def test_observer_model_carries_sigma_P_squared_times_the_prior(rom, moment):
-    """The model's concentrated disturbances: σ_P each, consider states, dense columns into the modes only, and their
-    steady Z variance is σ_P² of the kept components' (so W, not kW nor W²)."""
+    """The model's concentrated disturbances: σ_P each, estimated (before the consider states), dense columns into the
+    modes only, and their steady Z variance is σ_P² of the kept components' (so W, not kW nor W²)."""
     sigma = 20.0
     model = ObserverModel(rom, THERMOMETERS, _noise(sigma), concentrated=moment)
     picked = [(j, d) for j, d in enumerate(model.disturbances) if d.name.startswith("concentrated:")]
     kept = concentrated_components(rom, moment)
     assert len(picked) == kept.shape[1]
-    assert all(d.consider and d.sigma == sigma and d.excitation == "one" for _, d in picked)
+    assert all(not d.consider and d.sigma == sigma and d.excitation == "one" for _, d in picked)
     columns = np.column_stack([d.column for _, d in picked])
     assert np.array_equal(columns[:rom.order], kept) and not columns[rom.order:].any()
     dense = set(model.couplings[0])
     lagged = model.n - rom.order
     assert all(lagged + j in dense for j, _ in picked)                  # a dense column couples densely
-    assert model.consider.start <= model.n + picked[0][0] and model.consider.stop == model.n + model.q
+    assert model.consider.start > model.n + picked[-1][0] and model.consider.stop == model.n + model.q
     zrow = _drift_rows(rom)[2]
     assert np.isclose(np.sum(np.square(zrow @ (sigma * columns[:rom.order]))),
                       sigma ** 2 * np.sum(np.square(zrow @ kept)), rtol=1e-12)
@@ -161,3 +161,67 @@ def test_band_covers_an_unknown_concentrated_source_no_thermometer_sees(machine,
         coverage[sigma] = float(np.mean(inside))
     assert coverage[30.0] >= 0.8, coverage
     assert coverage[0.0] <= 0.4, coverage
+
+
+# ----------------------------------------------------------------------------- hypotheses weighed by the readings
+def test_multiple_model_weighs_the_unread_source_hypothesis_by_the_readings(machine, rom, columns, moment):
+    """Two filters, σ_P = 0 and 40 W, weighed by their predictions of the readings (ROM records, DS18S20-like).
+
+    - Nominal: the σ_P = 0 filter wins, and the band is within 1.6 × that filter's, under a third of the
+      σ_P = 40 W filter's alone.
+    - 40 W in the base under the table (the cell nearest (0, 0.5, 0.05) m; T22 and T26 see the base warm, and
+      the σ_P = 0 filter gives it to the front zone's air): the σ_P = 40 W filter wins, the Z error is less than
+      half the σ_P = 0 filter's, and the band covers ≥ 90 % where that filter's covers ≤ 30 %.
+    - 40 W in every 4th cell of the machine: the pooled coverage goes from ≤ 70 % (σ_P = 0) to ≥ 85 %.  (Cells
+      no thermometer sees stay uncovered: the readings cannot tell that source from none.)
+
+    Weights that ignore the readings fail the first and second points."""
+    from twin.gap.discovery import source_cells
+    from twin.live.multiple_model import MultipleModelObserver
+
+    def run(cell, power_W):
+        t, rpm, air, T, z = _record(rom, columns[:, cell], power_W, seed=1)
+        mixture = MultipleModelObserver(rom, THERMOMETERS, (0.0, 40.0), concentrated=moment)
+        drift, band = mixture.run(t, rpm, air, T)
+        single = DriftObserver(rom, THERMOMETERS, _noise(0.0), concentrated=moment).run(t, rpm, air, T)
+        return z, (drift[:, 2], band[:, 2]), (single[0][:, 2], single[1][:, 2]), mixture.weights
+
+    def covered(z, estimate):
+        return np.abs(estimate[0] - z) <= estimate[1]
+
+    def rms(z, estimate):
+        return np.sqrt(np.mean((estimate[0] - z) ** 2))
+
+    cells = source_cells(machine)
+    base = [i for i, c in enumerate(cells) if c[0] == "base"]
+    under_table = base[int(np.argmin(np.linalg.norm(np.array([cells[i][2] for i in base]) - [0.0, 0.5, 0.05], axis=1)))]
+
+    z, mixture, single, weights = run(under_table, 0.0)
+    t, rpm, air, T, _ = _record(rom)
+    wide = DriftObserver(rom, THERMOMETERS, _noise(40.0), concentrated=moment).run(t, rpm, air, T)[1][:, 2]
+    assert weights[0] > 0.8, weights
+    assert np.mean(mixture[1]) <= 1.6 * np.mean(single[1]) and np.mean(mixture[1]) < np.mean(wide) / 3
+    assert np.mean(covered(z, mixture)) >= 0.95
+
+    z, mixture, single, weights = run(under_table, 40.0)
+    assert weights[1] > 0.5, weights
+    assert rms(z, mixture) < 0.5 * rms(z, single)
+    assert np.mean(covered(z, mixture)) >= 0.9 and np.mean(covered(z, single)) <= 0.3
+
+    inside = {"mixture": [], "single": []}
+    for cell in range(0, columns.shape[1], 4):
+        z, mixture, single, _ = run(cell, 40.0)
+        inside["mixture"].append(covered(z, mixture))
+        inside["single"].append(covered(z, single))
+    assert np.mean(inside["single"]) <= 0.7 and np.mean(inside["mixture"]) >= 0.85, \
+        {k: np.mean(v) for k, v in inside.items()}
+
+
+def test_multiple_model_refuses_fewer_than_two_distinct_hypotheses(rom, moment):
+    from twin.errors import TwinInputError
+    from twin.live.multiple_model import MultipleModelObserver, live_observer
+
+    for sizes in ((40.0,), (0.0, 0.0), (0.0, -5.0)):
+        with pytest.raises(TwinInputError, match="two or more distinct sizes"):
+            MultipleModelObserver(rom, THERMOMETERS, sizes, concentrated=moment)
+    assert isinstance(live_observer(rom, THERMOMETERS, hypotheses_W=(0.0,)), DriftObserver)

@@ -593,6 +593,52 @@ def _src(name, part, box, driver, power, exponent=1.0, reference=9000.0):
     return HeatSource(name, name.replace("_", " "), part, box, driver, power, reference, exponent)
 
 
+#: Parts a random source is put in (the large castings) and the drivers it may follow (channel, reference).
+RANDOM_PARTS = ("column", "carrier", "ram", "base")
+RANDOM_DRIVERS = {"spindle": ("spindle", 9000.0), "feed": ("feed_xyz", 10000.0)}
+
+
+def random_sources(n: int, seed: int, machine: str = "vmc_ram") -> list[HeatSource]:
+    """``n`` heat sources the twin does not have, drawn from ``seed``: one per record of a coverage study.
+
+    Each is a part drawn among :data:`RANDOM_PARTS`, a box of random size (0.05–0.30 m a side) around the
+    centroid of a random tetrahedron of it (at least 10 tetrahedra inside), and a power of 25–80 W at the
+    reference of its driver, drawn among :data:`RANDOM_DRIVERS` (9000 rpm, or 10 m/min of the largest axis
+    feed).  The same seed gives the same sources.
+
+    Parameters
+    ----------
+    n : int
+        How many sources.
+    seed : int
+        Seed of the draws.
+    machine : str
+        The machine whose mesh the boxes are placed on.
+
+    Returns
+    -------
+    list of HeatSource
+        Named ``random_<seed>_<k>``.
+    """
+    mesh = _machine(machine).mesh
+    cents = mesh.points[mesh.tets].mean(axis=1)
+    rng = np.random.default_rng(seed)
+    sources = []
+    while len(sources) < n:
+        part = RANDOM_PARTS[rng.integers(len(RANDOM_PARTS))]
+        tets = np.flatnonzero(mesh.regions == mesh.region_id(part))
+        centre = cents[rng.choice(tets)]
+        half = rng.uniform(0.025, 0.15, 3)
+        box = tuple(float(v) for lo_hi in zip(centre - half, centre + half) for v in lo_hi)
+        inside = np.all((cents[tets] >= np.array(box[::2])) & (cents[tets] <= np.array(box[1::2])), axis=1)
+        if inside.sum() < 10:
+            continue
+        driver, reference = RANDOM_DRIVERS[list(RANDOM_DRIVERS)[rng.integers(len(RANDOM_DRIVERS))]]
+        power = round(float(rng.uniform(25.0, 80.0)), 1)
+        sources.append(_src(f"random_{seed}_{len(sources)}", part, box, driver, power, 1.0, reference))
+    return sources
+
+
 _SPINDLE = ("front_bearings", "rear_bearings", "spindle_motor")
 _BELT_BOX = (0.08, 0.18, -0.1, 0.36, 1.50, 1.55)
 _COLUMN_BACK = (-0.1, 0.1, -0.5, -0.44, 0.9, 1.1)

@@ -16,7 +16,7 @@ if TYPE_CHECKING:
 
     from ..core.dataset import Dataset
     from .client import LiveStats
-    from .observer import DriftObserver
+    from .observer import RecordRunner
 
 #: The observer's thermometers unless told: :func:`twin.live.observer.choose_thermometers` for vmc_ram
 #: (order 80, Z axis, k = 6; model-based, no record used).
@@ -49,7 +49,7 @@ def _observer(args, default):
     set (``--thermometers-from``), else ``default``."""
     from ..core.machine import build_machine
     from ..rom.reduction import cached_rom
-    from .observer import DriftObserver
+    from .multiple_model import live_observer
     from .placement import placement_rom, read_placement
 
     machine = build_machine(args.machine)
@@ -57,9 +57,9 @@ def _observer(args, default):
         placed = read_placement(args.thermometers_from, args.placement_axis)
         rom = placement_rom(cached_rom(machine, args.order, keep_basis=True), machine, placed)
         thermometers = split_names(args.thermometers) or placed.names
-        return DriftObserver(rom, thermometers, sensors=placed.sensors), thermometers
+        return live_observer(rom, thermometers, placed.sensors), thermometers
     thermometers = split_names(args.thermometers) or list(default)
-    return DriftObserver(cached_rom(machine, args.order), thermometers), thermometers
+    return live_observer(cached_rom(machine, args.order), thermometers), thermometers
 
 
 def _replay_columns(dataset, path, names):
@@ -70,7 +70,7 @@ def _replay_columns(dataset, path, names):
     return dataset.matrix(names)
 
 
-async def replay_session(dataset: Dataset, thermometers: list[str], observer: DriftObserver, speed: float,
+async def replay_session(dataset: Dataset, thermometers: list[str], observer: RecordRunner, speed: float,
                          room_air: str = "T15", spindle: str = "spindle", port: int | None = None,
                          log_path: str | None = None, host: str = "127.0.0.1",
                          source: str = "dataset") -> tuple[LiveStats, float]:
@@ -82,7 +82,7 @@ async def replay_session(dataset: Dataset, thermometers: list[str], observer: Dr
         The record replayed (its channels ``spindle`` (rpm), ``room_air`` (°C) and the thermometers (°C)).
     thermometers : list of str
         The observer's thermometers, channels of ``dataset``.
-    observer : DriftObserver
+    observer : DriftObserver or MultipleModelObserver
         The observer the client runs.
     speed : float
         Replay speed, machine s per wall s.

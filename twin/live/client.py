@@ -33,7 +33,7 @@ if TYPE_CHECKING:
     from asyncua import Node, ua
     from asyncua.common.subscription import DataChangeNotif
 
-    from .observer import DriftObserver, Estimate
+    from .observer import Estimate, RecordRunner
 
 log = logging.getLogger("thermal_twin")
 
@@ -123,7 +123,7 @@ class LiveClient:
         ``opc.tcp://host:port/…``.
     node_map : NodeMap
         The sensor, thermometer and output nodes.
-    observer : DriftObserver
+    observer : DriftObserver or MultipleModelObserver
         The observer; its thermometers must all be in ``node_map``.
     log_path : str or Path, optional
         CSV log of every fused sample.
@@ -142,7 +142,7 @@ class LiveClient:
         If the node map lacks a node for one of the observer's thermometers.
     """
 
-    def __init__(self, endpoint: str, node_map: NodeMap, observer: DriftObserver, log_path: str | Path | None = None,
+    def __init__(self, endpoint: str, node_map: NodeMap, observer: RecordRunner, log_path: str | Path | None = None,
                  late_after_s: float = 1.0, backoff_s: float = 0.2, max_backoff_s: float = 5.0, timeout_s: float = 10.0,
                  publish_ms: int = 20) -> None:
         self.endpoint, self.map, self.observer = endpoint, node_map, observer

@@ -13,13 +13,22 @@ X = P Hᵀ S⁻¹ H P the update of the optimal gain — so the consider filter 
 
 **Sparse couplings.**  Columns of F₁₂ that are zero (states that do not drive the modes: offsets) are skipped,
 and columns with a single nonzero (a disturbance that drives one modal coordinate) are applied as scaled rows
-instead of through the matrix products; only the remaining columns take part in them.
+instead of through the matrix products; only the remaining columns take part in them.  F₂₂ (the disturbances'
+own dynamics) is diagonal but for a few rows (a lagged air driven by the zone airs): it is applied as a scaling
+plus those rows, found at each step.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from models.kalman import KalmanFilter
+
+
+def _contiguous(index):
+    """``index`` as a slice when it is a run of consecutive integers (a view instead of a copy), else as it is."""
+    if len(index) and np.array_equal(index, np.arange(index[0], index[0] + len(index))):
+        return slice(int(index[0]), int(index[0]) + len(index))
+    return index
 
 
 class ModalKalmanFilter(KalmanFilter):
@@ -46,12 +55,20 @@ class ModalKalmanFilter(KalmanFilter):
         self._variances = np.diagonal(self.R).copy()
         c = self.F.shape[0] - order
         dense, cols, rows = couplings or (np.arange(c), np.array([], int), np.array([], int))
-        self._dense, self._cols, self._rows = (np.asarray(v, int) for v in (dense, cols, rows))
+        self._dense = _contiguous(np.asarray(dense, int))
+        self._cols, self._rows = np.asarray(cols, int), np.asarray(rows, int)
 
-    def _coupled(self, F12, M):
-        """F₁₂ @ M for M (c, k), using the sparsity of F₁₂."""
-        out = F12[:, self._dense] @ M[self._dense]
-        out[self._rows] += F12[self._rows, self._cols][:, None] * M[self._cols]
+    def _coupled(self, F12_dense, F12_single, M):
+        """F₁₂ @ M for M (c, k), from F₁₂'s dense columns and single nonzeros (its sparsity)."""
+        out = F12_dense @ M[self._dense]
+        out[self._rows] += F12_single[:, None] * M[self._cols]
+        return out
+
+    @staticmethod
+    def _times_F22_transposed(f22, mixed, E, M):
+        """M @ F₂₂ᵀ for M (k, c), with F₂₂ = diag(f22) + E, E (its rows ``mixed``) the only off-diagonal part."""
+        out = M * f22[None, :]
+        out[:, mixed] += M @ E.T
         return out
 
     def predict(self, u: np.ndarray) -> ModalKalmanFilter:
@@ -69,14 +86,21 @@ class ModalKalmanFilter(KalmanFilter):
         """
         r, F, P = self.order, self.F, self.P
         a, F12, F22 = np.diagonal(F)[:r], F[:r, r:], F[r:, r:]
+        dense, single = F12[:, self._dense], F12[self._rows, self._cols]
+        f22 = np.diagonal(F22)
+        mixed = np.flatnonzero(np.count_nonzero(F22, axis=1) > (f22 != 0.0))
+        E = F22[mixed].copy()
+        E[np.arange(len(mixed)), mixed] = 0.0
         P12, P22 = P[:r, r:], P[r:, r:]
-        T12 = a[:, None] * P12 + self._coupled(F12, P22)                   # (F P)₁₂
-        T11 = a[:, None] * P[:r, :r] + self._coupled(F12, P12.T)           # (F P)₁₁
+        T12 = a[:, None] * P12 + self._coupled(dense, single, P22)                   # (F P)₁₂
+        T11 = a[:, None] * P[:r, :r] + self._coupled(dense, single, P12.T)           # (F P)₁₁
         out = np.empty_like(P)
-        out[:r, :r] = T11 * a[None, :] + self._coupled(F12, T12.T).T
-        out[:r, r:] = T12 @ F22.T
+        out[:r, :r] = T11 * a[None, :] + self._coupled(dense, single, T12.T).T
+        out[:r, r:] = self._times_F22_transposed(f22, mixed, E, T12)
         out[r:, :r] = out[:r, r:].T
-        out[r:, r:] = F22 @ P22 @ F22.T
+        FP22 = f22[:, None] * P22                                                     # F₂₂ P₂₂
+        FP22[mixed] += E @ P22
+        out[r:, r:] = self._times_F22_transposed(f22, mixed, E, FP22)
         out += self.Q
         self.P = 0.5 * (out + out.T)
         self.x = F @ self.x + self.G @ u
@@ -108,6 +132,8 @@ class ModalKalmanFilter(KalmanFilter):
         S.flat[::len(S) + 1] += self._variances[seen]
         solved = np.linalg.solve(S, np.column_stack([HP, innovation]))
         gain_t, weighted = solved[:, :-1], solved[:, -1]        # Kᵀ = S⁻¹ H P, S⁻¹ ν
+        nis = float(innovation @ weighted)
+        self.log_likelihood = -0.5 * (nis + np.linalg.slogdet(S)[1] + len(S) * np.log(2.0 * np.pi))
         c = self.consider
         if c is None:
             self.x = self.x + gain_t.T @ innovation
@@ -119,4 +145,4 @@ class ModalKalmanFilter(KalmanFilter):
             self.x = self.x + step
             self.P = self.P - HP.T @ gain_t
             self.P[c, c] = kept
-        return float(innovation @ weighted)
+        return nis

@@ -17,7 +17,20 @@ ROM's input matrix, or a modal coordinate) scaled by an *excitation* eⱼ(t) kno
   its reference power for a source whose driver the observer reads (the spindle), :attr:`NoiseModel.unread_power`
   × it for one it does not read (the feed drives: its whole power is unknown);
 * ``ambient:<zone>`` of every zone driven by the room air reading — the zone air's slow difference from the
-  reading (air pockets, a door, stratification), eⱼ = 1, σ = :attr:`NoiseModel.ambient_K`.
+  reading (air pockets, a door, stratification), eⱼ = 1, σ = :attr:`NoiseModel.ambient_K`;
+* ``concentrated:<k>`` — one heat source the model lacks, of σ_P = :attr:`NoiseModel.concentrated_W` W,
+  concentrated somewhere on the machine (a hydraulic unit, a coolant line, a drive the model does not know):
+  equally likely in each candidate cell of a 0.2 m grid over every part (:data:`CONCENTRATED_GRID_M`, the
+  cells of :func:`twin.gap.discovery.source_cells`, 1 W spread uniformly by volume over the part's tets in
+  the cell, as a HeatSource box).  With bᵢ the ROM's input column of that 1 W (rate of the modal
+  coordinates per W; z₁ᵀbᵢ = 1, so a watt raises the machine's mean temperature by 1/C K/s), its second
+  moment is S = σ_P² · meanᵢ bᵢbᵢᵀ (:func:`concentrated_moment`).  S = Σₖ μₖuₖuₖᵀ is factored by its
+  eigen-decomposition; the components √μₖ uₖ kept are the fewest that carry :data:`CONCENTRATED_SHARE` of
+  each drift axis's steady response (:func:`concentrated_components`), each a disturbance of σ_P with a
+  dense column, eⱼ = 1.  They are estimated, not considered: the readings can show such a source, and
+  when it is not in the model the filter gives its heat to what it does estimate (a zone's air, a feed
+  drive) with a confident, wrong drift.  :class:`~twin.live.multiple_model.MultipleModelObserver` weighs
+  several σ_P by how well each predicts the readings.
 
 **Considered** disturbances (Schmidt–Kalman consider states: the covariance carries their uncertainty, so the
 band does, but the readings never update them — a parameter error the filter should not chase with a few
@@ -38,17 +51,7 @@ thermometers; each acts as strongly as the physics it multiplies, and not at all
   capacity.  Such a source excites the ROM's M-orthonormal modal coordinates isotropically, with variance
   P²/C per coordinate (C the machine's heat capacity, J/K = |z₁|²), so each disturbance is one modal
   coordinate; the coordinates kept are the fewest that carry :data:`DISCREPANCY_SHARE` of each drift
-  axis's steady response to such a source (:func:`discrepancy_modes`);
-* ``concentrated:<k>`` — one heat source the model lacks, of σ_P = :attr:`NoiseModel.concentrated_W` W,
-  concentrated somewhere on the machine (a hydraulic unit, a coolant line, a drive the model does not know):
-  equally likely in each candidate cell of a 0.2 m grid over every part (:data:`CONCENTRATED_GRID_M`, the
-  cells of :func:`twin.gap.discovery.source_cells`, 1 W spread uniformly by volume over the part's tets in
-  the cell, as a HeatSource box).  With bᵢ the ROM's input column of that 1 W (rate of the modal
-  coordinates per W; z₁ᵀbᵢ = 1, so a watt raises the machine's mean temperature by 1/C K/s), its second
-  moment is S = σ_P² · meanᵢ bᵢbᵢᵀ (:func:`concentrated_moment`).  S = Σₖ μₖuₖuₖᵀ is factored by its
-  eigen-decomposition; the components √μₖ uₖ kept are the fewest that carry :data:`CONCENTRATED_SHARE` of
-  each drift axis's steady response (:func:`concentrated_components`), each a disturbance of σ_P with a
-  dense column, eⱼ = 1.
+  axis's steady response to such a source (:func:`discrepancy_modes`).
 
 The lagged air w follows its lag with σ :attr:`NoiseModel.ambient_K`; the offsets b are constant with the
 sensor's accuracy as prior (DS18S20 ±0.5 °C uniform, one each; the S65 camera's spots share one, ±2 °C).
@@ -121,7 +124,7 @@ class NoiseModel:
     discrepancy : float
         Considered: standard deviation of the misplaced heat, fraction of the heat the model moves, 1 (0: none).
     concentrated_W : float
-        Considered: standard deviation σ_P of one heat source the model lacks, concentrated in an unknown
+        Estimated: standard deviation σ_P of one heat source the model lacks, concentrated in an unknown
         0.2 m cell of the machine, W (0: none).
     correlation_time_s : float
         Correlation time of every disturbance but the air offset (a constant), s.
@@ -435,7 +438,7 @@ class ObserverModel:
         for zone in rom.measured_zones:
             j = self.input_names.index(f"ambient:{zone}")
             out.append(Disturbance(f"ambient:{zone}", "one", nm.ambient_K, ss.B[:, j].copy(), ss.D[:, j].copy()))
-        return out + self._considered()
+        return out + self._concentrated() + self._considered()
 
     def _considered(self):
         """The consider disturbances: parameter errors and misplaced heat the band carries, never estimated."""
@@ -461,7 +464,7 @@ class ObserverModel:
                 column = np.zeros(self.n)
                 column[k] = unit
                 out.append(Disturbance(f"discrepancy:{k}", "heat", nm.discrepancy, column, zero_y, consider=True))
-        return out + self._concentrated()
+        return out
 
     def _concentrated(self):
         """The concentrated-heat disturbances: one per kept component of the source's second moment (σ_P, W)."""
@@ -470,7 +473,7 @@ class ObserverModel:
             return []
         moment = concentrated_moment(rom) if self._moment is None else np.asarray(self._moment, float)
         zero_z, zero_y = np.zeros(self.n - rom.order), np.zeros(rom.n_outputs)
-        return [Disturbance(f"concentrated:{k}", "one", sigma, np.r_[component, zero_z], zero_y, consider=True)
+        return [Disturbance(f"concentrated:{k}", "one", sigma, np.r_[component, zero_z], zero_y)
                 for k, component in enumerate(concentrated_components(rom, moment).T)]
 
     def _coupling_layout(self):

@@ -78,7 +78,36 @@ class Estimate:
     inflation: float = 1.0
 
 
-class DriftObserver:
+class RecordRunner:
+    """What every observer of this package shares: filtering a whole record sample by sample with ``step``."""
+
+    def run(self, times_s: ArrayLike, spindle_rpm: ArrayLike, room_C: ArrayLike,
+            temperatures_C: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Filter a whole record.
+
+        Parameters
+        ----------
+        times_s : array_like
+            (k,) sample times, s, increasing.
+        spindle_rpm, room_C : array_like
+            (k,) spindle speed (rpm) and room air (°C).
+        temperatures_C : array_like
+            (k, p) thermometer readings, °C.
+
+        Returns
+        -------
+        tuple of numpy.ndarray
+            The drift (k, 3) and the half-width of its 95 % band (k, 3), µm.
+        """
+        T = np.asarray(temperatures_C, float)
+        drift, band = np.empty((len(times_s), 3)), np.empty((len(times_s), 3))
+        for k, t in enumerate(times_s):
+            e = self.step(float(t), float(spindle_rpm[k]), float(room_C[k]), T[k])
+            drift[k], band[k] = e.drift_um, e.band_um
+        return drift, band
+
+
+class DriftObserver(RecordRunner):
     """Kalman observer of the ROM driven by spindle speed and room air, fusing a few thermometers.
 
     Parameters
@@ -251,6 +280,11 @@ class DriftObserver:
         return Estimate(self.time_s, L @ kf.x + model.M @ u, Z95 * sd, Lf @ kf.x + model.Mf @ u, used,
                         self.inflation)
 
+    @property
+    def log_likelihood(self) -> float:
+        """ln N(ν; 0, S) of the last readings fused: how well the model predicted them (:class:`~twin.live.multiple_model.MultipleModelObserver`)."""
+        return self._kf.log_likelihood
+
     def field(self) -> np.ndarray:
         """The full FE temperature field (°C per thermal node) of the present state.
 
@@ -269,36 +303,10 @@ class DriftObserver:
                                  "full field; Estimate.temperatures_C has the ROM thermometers")
         return self.rom.basis @ self._kf.x[:self.rom.order]
 
-    def run(self, times_s: ArrayLike, spindle_rpm: ArrayLike, room_C: ArrayLike,
-            temperatures_C: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """Filter a whole record.
-
-        Parameters
-        ----------
-        times_s : array_like
-            (k,) sample times, s, increasing.
-        spindle_rpm, room_C : array_like
-            (k,) spindle speed (rpm) and room air (°C).
-        temperatures_C : array_like
-            (k, p) thermometer readings, °C.
-
-        Returns
-        -------
-        tuple of numpy.ndarray
-            The drift (k, 3) and the half-width of its 95 % band (k, 3), µm.
-        """
-        T = np.asarray(temperatures_C, float)
-        drift, band = np.empty((len(times_s), 3)), np.empty((len(times_s), 3))
-        for k, t in enumerate(times_s):
-            e = self.step(float(t), float(spindle_rpm[k]), float(room_C[k]), T[k])
-            drift[k], band[k] = e.drift_um, e.band_um
-        return drift, band
-
 
 #: The noise model's sizes (:class:`~twin.live.model.NoiseModel`): set from the physics, but for the misplaced
-#: heat κ = 0.05 and the concentrated source σ_P = 0 W, chosen on the training records by the rule of
-#: ``python bench/bench_live.py --calibrate`` (docs/live.md, "Calibration protocol"; on 2026-11-26 the rule
-#: picked σ_P = 0 among 0, 5, 10, 20, 40 W: κ = 0.05 already covers the training's unseen sources).
+#: heat κ = 0.05, chosen on the training records (docs/live.md, "Calibration protocol").  The concentrated
+#: source's σ_P is that of each hypothesis ``twin live`` weighs (:data:`twin.live.multiple_model.HYPOTHESES_W`).
 NOISE = NoiseModel(discrepancy=0.05, concentrated_W=0.0)
 #: The adaptive widening (:class:`Adaptation`): a 1 h window, chosen with κ on the training records.
 ADAPTATION = Adaptation(window_s=3600.0)
