@@ -6,7 +6,7 @@ A few thermometers cannot say where an unread source is, so one filter must eith
 :class:`~twin.live.observer.DriftObserver` per hypothesis on the concentrated source's size σ_P
 (:attr:`~twin.live.model.NoiseModel.concentrated_W`, 0 = none) and weighs them by how well each predicted the
 readings (multiple-model adaptive estimation, Magill 1965; Maybeck, *Stochastic Models, Estimation and
-Control* vol. 2, § 10.8):
+Control* vol. 2, ch. 10):
 
     wᵢ(k) ∝ w̃ᵢ(k) · N(νᵢ(k); 0, Sᵢ(k)),     w̃(k) = (1 − ε) w(k−1) + ε/m,   ε = 1 − exp(−Δt/τ)
 
