@@ -1,5 +1,6 @@
 """Progress bars count what the work counts: time steps, scenarios, fits, cases."""
 import inspect
+import weakref
 
 import pytest
 
@@ -13,6 +14,26 @@ def test_the_bar_shows_its_unit(unit, capsys):
     update(4, 4)
     err = capsys.readouterr().err
     assert f"{unit}/s" in err and "sample/s" not in err
+
+
+def test_a_bar_is_known_to_the_clean_up_before_it_draws(capsys, monkeypatch):
+    """``close_bars`` (Ctrl-C's clean-up) must know a bar before its first line is on stderr: a Ctrl-C in
+    between left the line open, and the one-line interrupt message joined the bar's line."""
+    from twin.infra import progress
+
+    drawn_when_registered = []
+
+    class Registry(weakref.WeakSet):
+        def add(self, bar):
+            drawn_when_registered.append(capsys.readouterr().err)
+            super().add(bar)
+
+    monkeypatch.setattr(progress, "_open_bars", Registry())
+    update = progress_bar("simulating", unit="step")
+    update(0, 10)
+    assert drawn_when_registered == [""]
+    update(10, 10)
+    assert "simulating" in capsys.readouterr().err
 
 
 def test_the_unit_must_be_chosen():

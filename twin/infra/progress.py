@@ -30,7 +30,9 @@ def progress_bar(description: str, unit: str) -> Callable[[int, int], None]:
 
     def update(done, total):
         if bar["tqdm"] is None:
-            bar["tqdm"] = tqdm(total=total, desc=description, unit=unit, leave=False, mininterval=0.5)
+            # delay > 0: the constructor draws nothing, so the bar is known to close_bars before its first
+            # line reaches stderr (a Ctrl-C between the two left the line open, and the message joined it)
+            bar["tqdm"] = tqdm(total=total, desc=description, unit=unit, leave=False, mininterval=0.5, delay=1e-9)
             _open_bars.add(bar["tqdm"])
         bar["tqdm"].n = done
         bar["tqdm"].refresh() if done == total else bar["tqdm"].update(0)
