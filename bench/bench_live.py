@@ -168,13 +168,12 @@ def visibility(rom, names):
     thermometer rise per W — where an unread source moves the drift most and is seen least."""
     from twin.core.machine import build_machine
     from twin.gap.discovery import source_cells
-    from twin.live.model import concentrated_columns
+    from twin.live.model import concentrated_columns, steady_rows
 
     machine = build_machine("vmc_ram")
     columns, cells = concentrated_columns(machine, rom), source_cells(machine)
-    steady = 1.0 / rom.eigenvalues
-    z = np.abs((rom.output_matrix[rom.output_index("Z")] * steady) @ columns)
-    seen = np.abs(np.array([rom.output_matrix[rom.output_index(n)] * steady for n in names]) @ columns).max(axis=0)
+    z = np.abs(steady_rows(rom, ["Z"]) @ columns)[0]
+    seen = np.abs(steady_rows(rom, names) @ columns).max(axis=0)
     print(f"steady response to 1 W in each 0.2 m cell; thermometers {', '.join(names)}\n")
     print("| part | cells | Z per W, median / max (µm/W) | largest thermometer rise per W, median (K/W) | "
           "Z per K seen, median (µm/K) |")

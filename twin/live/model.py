@@ -67,6 +67,7 @@ seconds to minutes against correlation times of hours).
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -237,12 +238,25 @@ def discrepancy_modes(rom: ReducedModel, share: float = DISCREPANCY_SHARE) -> np
     numpy.ndarray
         Indices of the kept modal coordinates (in order of importance).
     """
-    return _fewest_carrying(np.square(_steady_drift_rows(rom)), share)
+    return _fewest_carrying(np.square(steady_rows(rom)), share)
 
 
-def _steady_drift_rows(rom):
-    """(3, r) the steady X, Y, Z drift per unit constant rate of each modal coordinate, µm: C/λ."""
-    return np.array([rom.output_matrix[rom.output_index(a)] for a in AXES]) / rom.eigenvalues
+def steady_rows(rom: ReducedModel, outputs: Sequence[str] = AXES) -> np.ndarray:
+    """The steady change of ROM outputs per unit constant rate of each modal coordinate: C/λ.
+
+    Parameters
+    ----------
+    rom : ReducedModel
+        The ROM.
+    outputs : sequence of str
+        Output names (default: the X, Y, Z drift).
+
+    Returns
+    -------
+    numpy.ndarray
+        (len(outputs), r), in the outputs' units (µm, °C) per unit rate.
+    """
+    return np.array([rom.output_matrix[rom.output_index(name)] for name in outputs]) / rom.eigenvalues
 
 
 def _fewest_carrying(parts, share):
@@ -378,7 +392,7 @@ def concentrated_components(rom: ReducedModel, moment: np.ndarray, share: float 
     """
     mu, vectors = np.linalg.eigh(0.5 * (moment + moment.T))
     components = vectors * np.sqrt(np.clip(mu, 0.0, None))
-    kept = _fewest_carrying(np.square(_steady_drift_rows(rom) @ components), share)
+    kept = _fewest_carrying(np.square(steady_rows(rom) @ components), share)
     return components[:, kept]
 
 

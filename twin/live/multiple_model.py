@@ -26,7 +26,7 @@ from numpy.typing import ArrayLike
 from ..errors import TwinInputError
 from ..rom.reduction import ReducedModel
 from .model import NoiseModel, concentrated_moment
-from .observer import Z95, Adaptation, DriftObserver, Estimate, RecordRunner
+from .observer import NOISE, Z95, Adaptation, DriftObserver, Estimate, RecordRunner
 
 
 class MultipleModelObserver(RecordRunner):
@@ -53,8 +53,6 @@ class MultipleModelObserver(RecordRunner):
     def __init__(self, rom: ReducedModel, thermometers: list[str], concentrated_W: tuple[float, ...],
                  noise: NoiseModel | None = None, adaptation: Adaptation | None = None, sensors: dict | None = None,
                  concentrated: np.ndarray | None = None) -> None:
-        from .observer import NOISE
-
         sizes = tuple(float(s) for s in concentrated_W)
         if len(sizes) < 2 or len(set(sizes)) != len(sizes) or min(sizes) < 0:
             raise TwinInputError(f"concentrated_W needs two or more distinct sizes ≥ 0 W, got {concentrated_W!r}")
@@ -173,8 +171,6 @@ def live_observer(rom: ReducedModel, thermometers: list[str], sensors: dict | No
     DriftObserver or MultipleModelObserver
         A new observer, not started.
     """
-    from .observer import NOISE
-
     sizes = HYPOTHESES_W if hypotheses_W is None else tuple(hypotheses_W)
     if len(sizes) == 1:
         return DriftObserver(rom, thermometers, dataclasses.replace(NOISE, concentrated_W=sizes[0]), sensors=sensors)
