@@ -8,6 +8,7 @@ from models.greybox import GreyBoxRegressor
 from models.selection_cv import (
     blocked_folds,
     fold_prediction,
+    geometric_mean_rmse,
     model_kind,
     rank_agreement,
     regime_blocks,
@@ -86,8 +87,18 @@ def test_selection_prefers_the_model_of_the_right_structure_and_says_why():
     assert max(v for k, v in scores.items() if k != "rolling-origin block 2") < 0.07
     assert scores["rolling-origin block 2"] > 0.5
     assert len(chosen.folds) == 4 + 3
-    assert chosen.reason.startswith("chose grey-box: lowest mean RMSE on operating-regime blocks it did not see")
+    assert chosen.reason.startswith("chose grey-box: lowest geometric-mean RMSE on operating-regime blocks it did not see")
     assert "7 folds (4 leave-one-block-out, 3 rolling-origin)" in chosen.reason
+    assert chosen.ranking == sorted(chosen.score, key=chosen.score.get)
+    for name, folds in chosen.fold_rmse.items():
+        assert chosen.score[name] == pytest.approx(np.exp(np.mean(np.log(folds))))
+
+
+def test_the_score_is_the_geometric_mean_so_no_one_regime_rules_it():
+    # ten times worse on one regime, ten times better on two: as good as 1 on all three (the mean says 3.4)
+    assert geometric_mean_rmse([0.1, 0.1, 10.0], floor=1e-9) == pytest.approx(10 ** (-1 / 3))
+    assert geometric_mean_rmse([1.0, np.inf], floor=1e-9) == np.inf
+    assert geometric_mean_rmse([0.0, 1.0], floor=1e-2) == pytest.approx(0.1)
 
 
 def test_a_candidate_that_cannot_be_fitted_ranks_last():

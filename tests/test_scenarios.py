@@ -180,6 +180,23 @@ def test_iso230_3_spindle_tests():
     assert spectrum.iso_test == "spindle"
 
 
+def test_regime_blocks_56h_is_shaped_like_fl_thermal_part1_and_continues_with_what_it_lacks():
+    from models.selection_cv import regime_blocks
+
+    sc = load_scenario("regime_blocks_56h")
+    times = sc.times()
+    speed, _ = sc.operating(times)
+    part1 = times < 32.5 * HOUR
+    blocks = regime_blocks(speed[part1])
+    assert [float(speed[part1][a:b].max()) for a, b in blocks] == [2000, 4000, 6000, 8000]  # FL's 1 : 2 : 3 : 4
+    runs = [s for s in sc.segments if s.end_s <= 32.5 * HOUR and s.spindle_rpm > 0]
+    assert [round((s.end_s - s.start_s) / HOUR, 6) for s in runs] == [4.0] * 4
+    continuation = set(speed[~part1]) - {0.0}
+    assert continuation and not continuation & set(speed[part1])   # speeds part 1 never ran
+    assert max(continuation) > 8000 and any(2000 < v < 8000 for v in continuation)  # above and between
+    assert sc.duration_s == 56.5 * HOUR
+
+
 def test_iso230_3_etve():
     sc = load_scenario("iso230_3_etve")
     assert sc.iso_test == "etve" and not sc.segments and sc.duration_s >= 24 * HOUR

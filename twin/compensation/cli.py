@@ -125,7 +125,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     t.add_argument("--model", default="anfis", help="model name, e.g. mlr, pcr, anfis, gm1n (default anfis = ANFIS-FCM); an unknown name lists "
                    "them all (the registry is read on use: `--help` must not load numpy)")
     t.add_argument("--select", choices=("auto",), help="choose the model by blocked cross-validation across the "
-                   "record's speed regimes (leave one block out, rolling origin) and print why; overrides --model")
+                   "record's speed regimes (leave one block out, rolling origin; geometric mean of the folds' RMSE), "
+                   "grey-box orders 1-3 included, and print why; overrides --model")
     t.add_argument("--allow-unstable", action="store_true",
                    help="save an unstable grey fit (a < 0 or diverging on its training data) instead of refusing it")
     t.add_argument("--param", action="append", metavar="NAME=VALUE", help="model hyperparameter (repeatable)")

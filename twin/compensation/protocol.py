@@ -3,7 +3,8 @@
 - :func:`auto_select` (``twin train --select auto``): ranks candidate models by
   blocked cross-validation across the operating regimes of the training
   record (:mod:`models.selection_cv`: leave one speed block out and rolling
-  origin) and says why it chose what it chose;
+  origin, scored by the geometric mean of the folds' RMSE; the grey-box
+  orders 1-3 are candidates of their own) and says why it chose what it chose;
 - :func:`stability_problem` (``twin train`` refuses unless ``--allow-unstable``):
   a grey model with a negative development coefficient, or a prediction that
   diverges on its own training data;
@@ -14,7 +15,7 @@
 """
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,8 +26,11 @@ from ..core.dataset import Dataset
 from ..errors import TwinInputError
 from .store import CompensationModel, dataset_label, make_estimator, sampling_interval
 
-#: candidates of ``--select auto``: fast to fit, every family (static, grey, grey-box)
-AUTO_CANDIDATES = ("mlr", "pcr", "anfis", "gm0n", "gm1n", "gmc", "greybox")
+#: candidates of ``--select auto``, label → (model name, hyper-parameters): fast to fit, every family (static,
+#: grey, grey-box).  The grey-box orders are candidates of their own: the order is what its extrapolation
+#: depends on most (FL_THERMAL ch3, block 4: 1.6 µm with 2 poles, 28 µm with 3).
+AUTO_CANDIDATES = {name: (name, {}) for name in ("mlr", "pcr", "anfis", "gm0n", "gm1n", "gmc")} | {
+    f"greybox n_poles={order}": ("greybox", {"n_poles": order}) for order in (1, 2, 3)}
 #: a training prediction this many times larger than the largest measured change has diverged
 DIVERGENCE_FACTOR = 10.0
 
@@ -42,11 +46,12 @@ def _speed_channel(dataset, inputs):
 
 
 def auto_select(datasets: Iterable[Dataset], inputs: list[str], target: str,
-                candidates: Sequence[str] = AUTO_CANDIDATES, zero_reference: bool = True) -> tuple[str, Selection]:
-    """The model name chosen by blocked cross-validation on one training record, and the full ranking.
+                candidates: Mapping[str, tuple[str, dict]] = AUTO_CANDIDATES,
+                zero_reference: bool = True) -> tuple[str, dict, Selection]:
+    """The model and hyper-parameters chosen by blocked cross-validation on one training record, and the ranking.
 
-    The greybox candidate takes the inputs as given: the first must be the
-    spindle speed (rpm); if it is not, the greybox candidate is left out.
+    The greybox candidates take the inputs as given: the first must be the
+    spindle speed (rpm); if it is not, they are left out.
 
     Parameters
     ----------
@@ -56,15 +61,17 @@ def auto_select(datasets: Iterable[Dataset], inputs: list[str], target: str,
         Input channels, the same for every candidate.
     target : str
         Target channel (µm for a drift axis).
-    candidates : sequence of str, default :data:`AUTO_CANDIDATES`
-        Model names to rank.
+    candidates : dict label → (model name, hyper-parameters), default :data:`AUTO_CANDIDATES`
+        The candidates to rank.
     zero_reference : bool, default True
         Reference inputs and target to the first row.
 
     Returns
     -------
-    best : str
+    model : str
         The chosen model name.
+    params : dict
+        Its hyper-parameters (those of the candidate; ``sampling_interval`` is set by the training).
     selection : Selection
         Scores per candidate and fold, the ranking and the reason.
 
@@ -85,19 +92,19 @@ def auto_select(datasets: Iterable[Dataset], inputs: list[str], target: str,
         X, y = X - X[:1], y - y[0]
     dt = sampling_interval(ds, strict=True)
     pool = {}
-    for name in candidates:
+    for label, (name, params) in candidates.items():
         if name == "greybox":
             if inputs[0] != speed_name:
                 continue
-            pool[name] = (make_estimator(name, {"sampling_interval": dt}), range(X.shape[1]))
-        else:
-            pool[name] = (make_estimator(name), range(X.shape[1]))
+            params = {**params, "sampling_interval": dt}
+        pool[label] = (make_estimator(name, params), range(X.shape[1]))
     try:
         selection = select_by_blocked_cv(pool, X, y, ds[speed_name], unit=ds.info(target).unit)
     except ValueError as exc:     # the record's (one speed regime only); a candidate's failed fit is caught inside
         raise TwinInputError(f"{dataset_label(ds)}: --select auto cannot cross-validate on this record: {exc}") \
             from None
-    return selection.best, selection
+    model, params = candidates[selection.best]
+    return model, dict(params), selection
 
 
 def stability_problem(cm: CompensationModel, datasets: Iterable[Dataset]) -> str | None:

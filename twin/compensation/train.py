@@ -238,7 +238,8 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
     overwrite : bool, default False
         Replace an existing ``out``.
     select : {"auto"}, optional
-        Choose the model by blocked cross-validation.
+        Choose the model (and the grey-box order) by blocked cross-validation; ``params`` then override the
+        chosen candidate's.
     allow_unstable : bool, default False
         Save an unstable grey fit instead of refusing it.
 
@@ -258,12 +259,15 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
     if select is not None:
         if select != "auto":
             raise TwinInputError(f"--select {select!r}: the only selection rule is 'auto'")
-        model, selection = auto_select(loaded, split_names(inputs), target, zero_reference=zero_reference)
+        model, chosen_params, selection = auto_select(loaded, split_names(inputs), target,
+                                                      zero_reference=zero_reference)
+        params = {**chosen_params, **(params or {})}
     cm = fit_compensation_model(loaded, split_names(inputs), target, model, params, zero_reference,
                                 reference_samples)
     if selection is not None:
         cm.metadata["selection"] = {"reason": selection.reason, "ranking": selection.ranking,
-                                    "mean_rmse": selection.mean_rmse, "folds": selection.folds}
+                                    "geometric_mean_rmse": selection.score, "mean_rmse": selection.mean_rmse,
+                                    "folds": selection.folds, "fold_rmse": selection.fold_rmse}
     cm.metadata["training_metrics"] = {dataset_label(ds): score(cm.target_values(ds), cm.predict(ds))
                                        for ds in loaded}
     problem = stability_problem(cm, loaded)
