@@ -60,6 +60,8 @@ _UNIFORM_STEP = 1e-9
 #: smallest ratio of successive time constants: coinciding poles make the gains ill-posed (two huge,
 #: cancelling gains imitate a derivative that extrapolates wildly)
 _MIN_RATIO = 2.0
+#: two running speeds identify the exponent of P ∝ n^b when the larger is at least this factor above the smaller
+_DISTINCT_SPEEDS = 1.05
 #: start values of the time constants, s (machine-tool structures: minutes to hours); one fit per row
 _STARTS = ((1800.0, 7200.0, 21600.0, 64800.0), (600.0, 3600.0, 14400.0, 57600.0), (3600.0, 21600.0, 86400.0, 345600.0))
 
@@ -77,7 +79,10 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
     exponent : float
         Exponent b of ``P ∝ n^b``: the start value when ``fit_exponent``, else fixed.
     fit_exponent : bool
-        Fit b within ``exponent_bounds``.
+        Fit b within ``exponent_bounds``; only where the rows fitted (weight > 0) run at two speeds at least
+        :data:`_DISTINCT_SPEEDS` apart: at one speed b only scales the gains and cannot be identified (a
+        free fit runs it to a bound, and the model extrapolates to other speeds by an arbitrary n^b), so it
+        stays at ``exponent``.
     exponent_bounds : (float, float)
     time_constant_bounds : (float, float), s
         Every time constant stays inside; the poles are −1/τ.
@@ -101,6 +106,7 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
     ----------
     time_constants_ : (n_poles,) s, ascending; ``poles_`` = −1/τ (1/s)
     exponent_ : b
+    exponent_fitted_ : whether b was fitted (False: one running speed, or ``fit_exponent`` False)
     gains_ : (n_outputs, n_poles, n_inputs) g (output 0 is y, then the observed columns)
     feedthrough_ : (n_outputs, n_temperature_inputs) d
     offset_ : (n_outputs,) c₀
@@ -229,7 +235,7 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
     def _unpack(self, theta):
         # θ = [log τ₁, log(τ₂/τ₁), …]: the ratios are kept >= _MIN_RATIO, so no two poles coincide
         lam = np.exp(-np.cumsum(theta[: self.n_poles]))
-        exponent = theta[self.n_poles] if self.fit_exponent else float(self.exponent)
+        exponent = theta[self.n_poles] if len(theta) > self.n_poles else float(self.exponent)
         return lam, exponent
 
     # ------------------------------------------------------------ fit
@@ -256,7 +262,7 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
             raise ValueError("GreyBoxRegressor: sample_weight must be finite, >= 0 and one per row of X.")
         return X, y, w
 
-    def _least_squares(self, residuals, n_poles, lo, hi):
+    def _least_squares(self, residuals, n_poles, lo, hi, fit_exponent):
         """The best of the deterministic restarts (:data:`_STARTS`) of the bounded fit in (log τ₁, log ratios, b)."""
         log_lo, log_hi = np.log(lo), np.log(hi)
         if n_poles > 1 and log_hi - log_lo <= (n_poles - 1) * np.log(_MIN_RATIO):
@@ -265,14 +271,14 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         # τ₁ in [lo, hi]; each further ratio in [_MIN_RATIO, hi/lo] (the largest τ may pass hi: still stable)
         lower = np.r_[log_lo, np.full(n_poles - 1, np.log(_MIN_RATIO))]
         upper = np.r_[log_hi, np.full(n_poles - 1, log_hi - log_lo)]
-        if self.fit_exponent:
+        if fit_exponent:
             b_lo, b_hi = (float(v) for v in self.exponent_bounds)
             lower, upper = np.r_[lower, b_lo], np.r_[upper, b_hi]
         budget = check_positive_int(self.max_nfev, "max_nfev")
         best = None
         for taus in _STARTS:  # deterministic restarts: the simulation error has local minima
             start = np.diff(np.log(taus[:n_poles]), prepend=0.0)
-            if self.fit_exponent:
+            if fit_exponent:
                 start = np.r_[start, float(self.exponent)]
             start = np.clip(start, lower + 1e-9, upper - 1e-9)
             result = least_squares(residuals, start, bounds=(lower, upper), max_nfev=budget)
@@ -311,8 +317,10 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
                            hint=" Use fewer poles or temperature inputs.")
         time, speed = self._check_x(X, inputs)
         outputs = np.column_stack([y, X[:, observed]])
-
         used = w > 0
+        running = speed[used & (speed > 0)]
+        fit_exponent = bool(self.fit_exponent and running.size and running.max() >= _DISTINCT_SPEEDS * running.min())
+
         scale = outputs[used].std(axis=0)
         scale[scale == 0] = 1.0
         weights = np.sqrt(w)[:, None] / scale * np.r_[1.0, np.full(n_outputs - 1, float(self.observed_weight))]
@@ -331,13 +339,14 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
             coef, Phi, _ = linear(theta)
             return ((Phi @ coef - outputs) * weights)[used].ravel()
 
-        best = self._least_squares(residuals, n_poles, lo, hi)
+        best = self._least_squares(residuals, n_poles, lo, hi, fit_exponent)
         coef, Phi, U = linear(best.x)
         lam, exponent = self._unpack(best.x)
 
         self.time_constants_ = 1.0 / lam
         self.poles_ = -lam
         self.exponent_ = float(exponent)
+        self.exponent_fitted_ = fit_exponent
         self.offset_ = coef[0].copy()
         self.gains_ = coef[1: 1 + n_poles * m].T.reshape(n_outputs, n_poles, m).copy()
         self.feedthrough_ = coef[1 + n_poles * m:].T.copy()

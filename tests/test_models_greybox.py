@@ -98,6 +98,24 @@ def test_recovers_a_known_network_and_extrapolates_to_an_unseen_speed(training):
     assert np.sqrt(np.mean(error ** 2)) < 0.01 * np.ptp(y_new)
 
 
+def test_one_running_speed_cannot_identify_the_exponent_so_it_stays_at_its_start(training):
+    X, y = training
+    fitted = GreyBoxRegressor(n_poles=2, temperature_inputs=(2,)).fit(X, y)
+    assert fitted.exponent_fitted_
+    # only the 1500 rpm run and its stop carry weight: n^b is one constant there, b only scales the gains
+    one_speed = (X[:, 1] == 1500.0) | (X[:, 1] == 0.0)
+    one_speed[np.argmax(X[:, 1] == 3000.0):] = False
+    model = GreyBoxRegressor(n_poles=2, temperature_inputs=(2,), exponent=1.2).fit(
+        X, y, sample_weight=one_speed.astype(float))
+    assert not model.exponent_fitted_ and model.exponent_ == 1.2
+    assert np.all(np.isfinite(model.predict(X)))
+    # a speed that wanders by less than 5 % is still one speed
+    jitter = X.copy()
+    jitter[:, 1] *= np.where(jitter[:, 1] > 0, 1.0 + 0.02 * np.sin(np.arange(len(X))), 1.0)
+    wandering = GreyBoxRegressor(n_poles=2, temperature_inputs=(2,)).fit(jitter, y, sample_weight=one_speed * 1.0)
+    assert not wandering.exponent_fitted_
+
+
 def test_irregular_sampling_recovers_the_network(training):
     rng = np.random.default_rng(3)
     gaps = rng.uniform(20.0, 180.0, 1500)
