@@ -44,6 +44,7 @@ import time
 import warnings
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -56,6 +57,7 @@ from fl_thermal_study import candidates, fmt, fold_rmse
 from models.selection_cv import (
     SCHEMES,
     Fold,
+    geometric_mean_rmse,
     rank_agreement,
     regime_blocks,
     select_by_blocked_cv,
@@ -81,22 +83,15 @@ BASELINE = "MLR (baseline)"
 QUESTIONS = ("later block", "continuation")
 
 
-def _mean(values):
-    return float(np.mean(values))
-
-
-def _mean_log(values):
-    values = np.asarray(values, float)
-    return float(np.mean(np.log(values))) if np.all(np.isfinite(values)) else np.inf
-
-
 #: The rules compared: which folds, and how a candidate's fold RMSEs are pooled (lower is better).  The mean of
-#: log RMSE weighs every regime alike; the plain mean is ruled by the regime with the largest drift.
+#: log RMSE (the geometric mean) weighs every regime alike; the plain mean is ruled by the regime with the largest
+#: drift.
+_GEOMETRIC_MEAN = partial(geometric_mean_rmse, floor=0.0)
 RULES = {
-    "LOBO + rolling origin, mean": (SCHEMES, _mean),
-    "LOBO, mean": (("leave-one-block-out",), _mean),
-    "LOBO + rolling origin, mean log": (SCHEMES, _mean_log),
-    "LOBO, mean log": (("leave-one-block-out",), _mean_log),
+    "LOBO + rolling origin, mean": (SCHEMES, np.mean),
+    "LOBO, mean": (("leave-one-block-out",), np.mean),
+    "LOBO + rolling origin, mean log": (SCHEMES, _GEOMETRIC_MEAN),
+    "LOBO, mean log": (("leave-one-block-out",), _GEOMETRIC_MEAN),
 }
 #: Ties in the choice of rule go to the first round's rule (the first of :data:`RULES`).
 INCUMBENT = next(iter(RULES))
@@ -163,7 +158,7 @@ def rule_scores(selection, rule: str) -> dict[str, float]:
     """Each candidate's score under ``rule``, from the fold RMSEs of one all-schemes selection."""
     schemes, pool = RULES[rule]
     keep = [i for i, name in enumerate(selection.folds) if name.rsplit(" block ", 1)[0] in schemes]
-    return {k: pool([v[i] for i in keep]) for k, v in selection.fold_rmse.items()}
+    return {k: float(pool([v[i] for i in keep])) for k, v in selection.fold_rmse.items()}
 
 
 def judge(X, y, speed, n_fit, test, zoo):
