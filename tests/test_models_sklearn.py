@@ -79,6 +79,10 @@ pytestmark = pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceW
 
 @parametrize_with_checks(ESTIMATORS, expected_failed_checks=lambda est: EXPECTED.get(type(est).__name__, {}))
 def test_sklearn_estimator_checks(estimator, check):
+    # some checks draw from numpy's global RNG (check_methods_sample_order_invariance permutes the rows with
+    # it): unseeded, an expected failure passed in about 1 run of 20 (AGO-ANFIS with one rule is order-invariant
+    # except at the first row, so a permutation that keeps row 0 in place passes)
+    np.random.seed(0)
     check(estimator)
 
 
