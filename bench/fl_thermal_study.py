@@ -156,6 +156,11 @@ def fold_rmse(estimator, X, y, fold):
     return rmse(truth, pred) if np.all(np.isfinite(pred)) else np.inf
 
 
+def candidate_rmse(zoo, X, y, fold):
+    """Every candidate of ``zoo`` trained on ``fold``'s training rows and scored on its test rows: name → RMSE."""
+    return {name: fold_rmse(est, X[:, list(cols)], y, fold) for name, (est, cols) in zoo.items()}
+
+
 def fmt(value):
     return f"{value:.2f}" if np.isfinite(value) and value < 1e3 else "diverges"
 
@@ -192,8 +197,8 @@ def selection_study(frame):
     rows, agreement, final = [], [], []
     for ch in CHANNELS:
         chosen = select_by_blocked_cv(zoo, X[:cut], Y[ch][:cut], speed[:cut])
-        later = {name: fold_rmse(est, X[:, list(cols)], Y[ch], held_out) for name, (est, cols) in zoo.items()}
-        old = {name: fold_rmse(est, X[:cut, list(cols)], Y[ch][:cut], old_split) for name, (est, cols) in zoo.items()}
+        later = candidate_rmse(zoo, X, Y[ch], held_out)
+        old = candidate_rmse(zoo, X[:cut], Y[ch][:cut], old_split)
         mean_pick = min(chosen.mean_rmse, key=lambda k: (chosen.mean_rmse[k], chosen.worst_rmse[k], k))
         old_pick = min(old, key=old.get)
         rows.append([ch, chosen.best, fmt(later[chosen.best]), mean_pick, fmt(later[mean_pick]), old_pick,

@@ -52,7 +52,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from fl_thermal_study import candidates, fmt, fold_rmse
+from fl_thermal_study import candidate_rmse, candidates, fmt
 
 from models.selection_cv import (
     SCHEMES,
@@ -165,8 +165,7 @@ def judge(X, y, speed, n_fit, test, zoo):
     """Every rule's scores on rows ``[0, n_fit)``, and the candidates' RMSE on ``test`` trained on those rows."""
     selection = select_by_blocked_cv(zoo, X[:n_fit], y[:n_fit], speed[:n_fit], schemes=SCHEMES)
     judged_fold = Fold("judged", 0, test, np.arange(test[1]) < n_fit)
-    judged = {name: fold_rmse(est, X[: test[1], list(cols)], y[: test[1]], judged_fold)
-              for name, (est, cols) in zoo.items()}
+    judged = candidate_rmse(zoo, X[: test[1]], y[: test[1]], judged_fold)
     return {rule: rule_scores(selection, rule) for rule in RULES}, judged
 
 
