@@ -4,16 +4,16 @@ Model (continuous time, modal form of an RC network of order ``n_poles``)::
 
     P(t)      = (n(t) / speed_reference)^b                  spindle heat, b fitted (P ∝ n^b)
     u(t)      = [P, ΔT_1 … ΔT_q]                             ΔT_j = T_j(t) − T_j(first row), K
-    ẋ_ij      = −λ_i (x_ij − u_j),   λ_i = exp(−θ_i) > 0     one first-order lag per pole i and input j
+    ẋ_ij      = −λ_i (x_ij − u_j),   λ_i = 1/τ_i > 0         one first-order lag per pole i and input j
     y(t)      = c₀ + Σ_ij g_ij x_ij + Σ_j d_j ΔT_j           output, e.g. a drift in µm
 
 The poles ``−λ_i = −1/τ_i`` are real and negative by construction (the time
-constants ``τ_i = exp(θ_i)`` are the fitted parameters, kept inside
-``time_constant_bounds``), so every fitted model is stable: a bounded input
-gives a bounded drift. The gains ``g``, feed-throughs ``d`` (temperature
-inputs only: spindle heat does not move the tool instantly) and offset
-``c₀`` enter linearly. They are solved by least squares for given
-``(θ, b)``, and ``(θ, b)`` minimise the **simulation (output) error** over
+constants ``τ_i`` are the fitted parameters, every one kept inside
+``time_constant_bounds`` and at least twice the one before it), so every
+fitted model is stable: a bounded input gives a bounded drift. The gains
+``g``, feed-throughs ``d`` (temperature inputs only: spindle heat does not
+move the tool instantly) and offset ``c₀`` enter linearly. They are solved
+by least squares for given ``(τ, b)``, and ``(τ, b)`` minimise the **simulation (output) error** over
 the whole record (variable projection, :func:`scipy.optimize.least_squares`):
 the model is run from the first row, never fed back measured outputs, so
 the fit rewards what a compensation running for hours needs.
@@ -64,6 +64,33 @@ _MIN_RATIO = 2.0
 _DISTINCT_SPEEDS = 1.05
 #: start values of the time constants, s (machine-tool structures: minutes to hours); one fit per row
 _STARTS = ((1800.0, 7200.0, 21600.0, 64800.0), (600.0, 3600.0, 14400.0, 57600.0), (3600.0, 21600.0, 86400.0, 345600.0))
+
+
+def _time_constants(fractions, log_low, log_high):
+    """Time constants τ₁ < … < τ_n (s) inside ``[exp(log_low), exp(log_high)]``, each at least :data:`_MIN_RATIO`
+    times the one before, from stick-breaking fractions in [0, 1]: τ_i is placed at ``fractions[i]`` of the room
+    left between _MIN_RATIO·τ_(i−1) and the highest place that still leaves room for the poles after it.  The map
+    is smooth and one-to-one, so a box-bounded fit of the fractions keeps every pole inside the bounds."""
+    n, log_ratio = len(fractions), np.log(_MIN_RATIO)
+    log_tau = np.empty(n)
+    low = log_low
+    for i, fraction in enumerate(fractions):
+        high = log_high - (n - 1 - i) * log_ratio
+        log_tau[i] = low + fraction * (high - low)
+        low = log_tau[i] + log_ratio
+    return np.exp(log_tau)
+
+
+def _stick_fractions(taus, log_low, log_high):
+    """The fractions of :func:`_time_constants` that give the ascending ``taus`` (s), moved inside the bounds."""
+    n, log_ratio = len(taus), np.log(_MIN_RATIO)
+    fractions = np.empty(n)
+    low = log_low
+    for i, tau in enumerate(taus):
+        high = log_high - (n - 1 - i) * log_ratio
+        fractions[i] = np.clip((np.log(tau) - low) / (high - low), 1e-6, 1.0 - 1e-6)
+        low = low + fractions[i] * (high - low) + log_ratio
+    return fractions
 
 
 @register_model({"greybox": {"sampling_interval": 1.0}}, time_series=True)
@@ -232,9 +259,8 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         """Regressors ``[1, x_ij…, ΔT_j…]`` for the linear parameters."""
         return np.column_stack([np.ones(len(U)), S.reshape(len(U), -1), U[:, 1:]])
 
-    def _unpack(self, theta):
-        # θ = [log τ₁, log(τ₂/τ₁), …]: the ratios are kept >= _MIN_RATIO, so no two poles coincide
-        lam = np.exp(-np.cumsum(theta[: self.n_poles]))
+    def _unpack(self, theta, log_bounds):
+        lam = 1.0 / _time_constants(theta[: self.n_poles], *log_bounds)
         exponent = theta[self.n_poles] if len(theta) > self.n_poles else float(self.exponent)
         return lam, exponent
 
@@ -262,22 +288,19 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
             raise ValueError("GreyBoxRegressor: sample_weight must be finite, >= 0 and one per row of X.")
         return X, y, w
 
-    def _least_squares(self, residuals, n_poles, lo, hi, fit_exponent):
-        """The best of the deterministic restarts (:data:`_STARTS`) of the bounded fit in (log τ₁, log ratios, b)."""
-        log_lo, log_hi = np.log(lo), np.log(hi)
-        if n_poles > 1 and log_hi - log_lo <= (n_poles - 1) * np.log(_MIN_RATIO):
+    def _least_squares(self, residuals, n_poles, log_bounds, fit_exponent):
+        """The best of the deterministic restarts (:data:`_STARTS`) of the bounded fit in (stick fractions, b)."""
+        if n_poles > 1 and log_bounds[1] - log_bounds[0] <= (n_poles - 1) * np.log(_MIN_RATIO):
             raise ValueError(f"GreyBoxRegressor: time_constant_bounds {self.time_constant_bounds!r} are too narrow "
                              f"for {n_poles} poles {_MIN_RATIO:g}x apart.")
-        # τ₁ in [lo, hi]; each further ratio in [_MIN_RATIO, hi/lo] (the largest τ may pass hi: still stable)
-        lower = np.r_[log_lo, np.full(n_poles - 1, np.log(_MIN_RATIO))]
-        upper = np.r_[log_hi, np.full(n_poles - 1, log_hi - log_lo)]
+        lower, upper = np.zeros(n_poles), np.ones(n_poles)
         if fit_exponent:
             b_lo, b_hi = (float(v) for v in self.exponent_bounds)
             lower, upper = np.r_[lower, b_lo], np.r_[upper, b_hi]
         budget = check_positive_int(self.max_nfev, "max_nfev")
         best = None
         for taus in _STARTS:  # deterministic restarts: the simulation error has local minima
-            start = np.diff(np.log(taus[:n_poles]), prepend=0.0)
+            start = _stick_fractions(np.asarray(taus[:n_poles]), *log_bounds)
             if fit_exponent:
                 start = np.r_[start, float(self.exponent)]
             start = np.clip(start, lower + 1e-9, upper - 1e-9)
@@ -325,8 +348,10 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         scale[scale == 0] = 1.0
         weights = np.sqrt(w)[:, None] / scale * np.r_[1.0, np.full(n_outputs - 1, float(self.observed_weight))]
 
+        log_bounds = (np.log(lo), np.log(hi))
+
         def linear(theta):
-            lam, exponent = self._unpack(theta)
+            lam, exponent = self._unpack(theta, log_bounds)
             U = self._inputs(X, speed, inputs, exponent)
             Phi = self._design(self._states(time, U, lam), U)
             norm = np.sqrt(np.sum(Phi[used] ** 2, axis=0))
@@ -339,9 +364,9 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
             coef, Phi, _ = linear(theta)
             return ((Phi @ coef - outputs) * weights)[used].ravel()
 
-        best = self._least_squares(residuals, n_poles, lo, hi, fit_exponent)
+        best = self._least_squares(residuals, n_poles, log_bounds, fit_exponent)
         coef, Phi, U = linear(best.x)
-        lam, exponent = self._unpack(best.x)
+        lam, exponent = self._unpack(best.x, log_bounds)
 
         self.time_constants_ = 1.0 / lam
         self.poles_ = -lam

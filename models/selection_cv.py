@@ -13,7 +13,16 @@ shuffled rows or on a tail of the same regime:
 * the score of a candidate is the **geometric mean** of its test RMSEs over
   all folds of both schemes (the mean of log RMSE; the arithmetic mean and
   the worst fold are reported too); the ranking is by that score and a
-  candidate that diverges (non-finite prediction) ranks last.
+  candidate that diverges (non-finite prediction) ranks last;
+* **parsimony among nested orders** (:func:`parsimonious_choice`): where the
+  best-scored candidate has simpler versions of itself among the candidates
+  (the same model, columns and parameters but a lower order, see
+  :data:`ORDER_PARAMETERS`), the simplest one that is within one standard
+  error of it is chosen: the mean over folds of the paired difference of log
+  RMSE is at most its standard error (the one-standard-error rule of
+  Breiman et al. 1984, on paired folds).  A higher order that wins by less
+  than the folds' scatter is fitting slow modes the record cannot pin down,
+  and those extrapolate worst.
 
 Why the geometric mean: the regimes differ in how large their drift is, so
 an arithmetic mean of RMSEs is ruled by the regime with the largest drift
@@ -51,6 +60,8 @@ from .greybox import GreyBoxRegressor
 from .metrics import rmse
 
 SCHEMES = ("leave-one-block-out", "rolling-origin")
+#: The hyper-parameter that sets a model family's order, for the parsimony among nested candidates.
+ORDER_PARAMETERS = {GreyBoxRegressor: "n_poles"}
 
 
 def regime_blocks(speed: ArrayLike, min_rows: int = 2) -> list[tuple[int, int]]:
@@ -194,7 +205,8 @@ def fold_prediction(estimator: BaseEstimator, X: np.ndarray, y: np.ndarray, fold
 class Selection:
     """Outcome of :func:`select_by_blocked_cv`."""
 
-    ranking: list[str]              #: candidate names, best first
+    ranking: list[str]              #: candidate names, best score first
+    chosen: str                     #: the choice: the best score, or a simpler order within one standard error
     score: dict[str, float]         #: geometric-mean held-out-block RMSE per candidate (inf: diverged somewhere)
     mean_rmse: dict[str, float]     #: arithmetic mean held-out-block RMSE per candidate
     worst_rmse: dict[str, float]    #: worst fold per candidate
@@ -204,8 +216,8 @@ class Selection:
 
     @property
     def best(self) -> str:
-        """The chosen candidate: the first of the ranking."""
-        return self.ranking[0]
+        """The chosen candidate (:attr:`chosen`)."""
+        return self.chosen
 
 
 def _fold_score(y_true, pred) -> float:
@@ -234,6 +246,94 @@ def geometric_mean_rmse(fold_rmse: Sequence[float], floor: float) -> float:
     if not np.all(np.isfinite(values)):
         return np.inf
     return float(np.exp(np.mean(np.log(np.maximum(values, floor)))))
+
+
+def nested_lower_orders(candidates: Mapping[str, tuple[BaseEstimator, Sequence[int]]], name: str) -> list[str]:
+    """The candidates that are ``name``'s model at a lower order, lowest order first.
+
+    Nested means: the same class (one of :data:`ORDER_PARAMETERS`), the same columns, and every
+    hyper-parameter equal but the order.
+
+    Parameters
+    ----------
+    candidates : dict name → (estimator, columns)
+        As for :func:`select_by_blocked_cv`.
+    name : str
+        The candidate whose simpler versions are wanted.
+
+    Returns
+    -------
+    names : list of str
+        Names of the nested candidates of lower order, by increasing order (empty if none).
+    """
+    estimator, columns = candidates[name]
+    order = ORDER_PARAMETERS.get(type(estimator))
+    if order is None:
+        return []
+    params = estimator.get_params()
+    lower = []
+    for other, (candidate, candidate_columns) in candidates.items():
+        if type(candidate) is not type(estimator) or list(candidate_columns) != list(columns):
+            continue
+        candidate_params = candidate.get_params()
+        same_otherwise = all(candidate_params[k] == v for k, v in params.items() if k != order)
+        if same_otherwise and candidate_params[order] < params[order]:
+            lower.append((candidate_params[order], other))
+    return [other for _, other in sorted(lower)]
+
+
+def within_one_standard_error(simpler_rmse: Sequence[float], best_rmse: Sequence[float], floor: float) -> bool:
+    """Is a simpler candidate within one standard error of the best, on paired folds?
+
+    With ``d`` the per-fold difference of log RMSE (simpler minus best), true when
+    ``mean(d) <= std(d, ddof=1) / sqrt(n_folds)``; false if the simpler one failed on a fold.
+
+    Parameters
+    ----------
+    simpler_rmse, best_rmse : sequence of float
+        RMSE per fold of the two candidates, the same folds in the same order.
+    floor : float
+        RMSEs below it count as ``floor`` (as in :func:`geometric_mean_rmse`).
+
+    Returns
+    -------
+    bool
+    """
+    simpler, best = np.asarray(simpler_rmse, float), np.asarray(best_rmse, float)
+    if not np.all(np.isfinite(simpler)):
+        return False
+    d = np.log(np.maximum(simpler, floor)) - np.log(np.maximum(best, floor))
+    if len(d) < 2:
+        return bool(d.mean() <= 0.0)
+    return bool(d.mean() <= d.std(ddof=1) / np.sqrt(len(d)))
+
+
+def parsimonious_choice(candidates: Mapping[str, tuple[BaseEstimator, Sequence[int]]],
+                        fold_rmse: Mapping[str, Sequence[float]], best: str, floor: float) -> str:
+    """The lowest order nested in ``best`` that is within one standard error of it, else ``best``.
+
+    Parameters
+    ----------
+    candidates : dict name → (estimator, columns)
+        As for :func:`select_by_blocked_cv`.
+    fold_rmse : dict name → sequence of float
+        RMSE per fold of every candidate (the same folds for all).
+    best : str
+        The candidate with the best score.
+    floor : float
+        RMSE floor (see :func:`geometric_mean_rmse`).
+
+    Returns
+    -------
+    name : str
+        The chosen candidate.
+    """
+    if not np.isfinite(geometric_mean_rmse(fold_rmse[best], floor)):
+        return best
+    for simpler in nested_lower_orders(candidates, best):
+        if within_one_standard_error(fold_rmse[simpler], fold_rmse[best], floor):
+            return simpler
+    return best
 
 
 def select_by_blocked_cv(candidates: Mapping[str, tuple[BaseEstimator, Sequence[int]]], X: ArrayLike,
@@ -289,21 +389,26 @@ def select_by_blocked_cv(candidates: Mapping[str, tuple[BaseEstimator, Sequence[
     mean = {k: float(np.mean(v)) for k, v in scores.items()}
     worst = {k: float(np.max(v)) for k, v in scores.items()}
     ranking = sorted(scores, key=lambda k: (score[k], worst[k], k))
-    return Selection(ranking, score, mean, worst, scores, [f.name for f in folds],
-                     _reason(ranking, score, worst, folds, unit))
+    chosen = parsimonious_choice(candidates, scores, ranking[0], floor)
+    return Selection(ranking, chosen, score, mean, worst, scores, [f.name for f in folds],
+                     _reason(ranking, chosen, score, worst, folds, unit))
 
 
-def _reason(ranking, score, worst, folds, unit) -> str:
+def _reason(ranking, chosen, score, worst, folds, unit) -> str:
     n_lobo = sum(f.scheme == "leave-one-block-out" for f in folds)
     best = ranking[0]
-    text = (
-        f"chose {best}: lowest geometric-mean RMSE on operating-regime blocks it did not see, "
-        f"{score[best]:.2f} {unit} over {len(folds)} folds ({n_lobo} leave-one-block-out, "
-        f"{len(folds) - n_lobo} rolling-origin), worst fold {worst[best]:.2f} {unit}"
-    )
-    if len(ranking) > 1:
-        second = ranking[1]
-        text += f"; runner-up {second} {score[second]:.2f} {unit}"
+    over = (f"over {len(folds)} folds ({n_lobo} leave-one-block-out, {len(folds) - n_lobo} rolling-origin), "
+            f"worst fold {worst[chosen]:.2f} {unit}")
+    if chosen == best:
+        text = (f"chose {best}: lowest geometric-mean RMSE on operating-regime blocks it did not see, "
+                f"{score[best]:.2f} {unit} {over}")
+        if len(ranking) > 1:
+            second = ranking[1]
+            text += f"; runner-up {second} {score[second]:.2f} {unit}"
+    else:
+        text = (f"chose {chosen}: the lowest order within one standard error of {best}, whose geometric-mean "
+                f"RMSE on operating-regime blocks it did not see is the lowest ({score[best]:.2f} against "
+                f"{score[chosen]:.2f} {unit} {over})")
     diverged = [k for k in ranking if not np.isfinite(score[k])]
     if diverged:
         text += f"; failed or diverged on some block: {', '.join(diverged)}"

@@ -147,6 +147,20 @@ def test_poles_are_negative_and_the_response_bounded_even_on_noise():
     assert abs(pred[-1] - pred[-2]) < 1e-6 * max(1.0, abs(pred[-1]))  # settled, not growing
 
 
+def test_every_time_constant_stays_inside_its_bounds():
+    # a drift that integrates the spindle heat: the fit wants a pole slower than any bound allows
+    times = np.arange(0.0, 48 * 3600.0, 120.0)
+    speed = duty(times, (2000.0, 6000.0), 4 * 3600.0)
+    X = np.column_stack([times, speed, ambient(times)])
+    y = np.cumsum(speed / 1000.0) * 1e-3
+    bounds = (60.0, 20 * 3600.0)
+    for n_poles in (2, 3):
+        model = GreyBoxRegressor(n_poles=n_poles, time_constant_bounds=bounds).fit(X, y)
+        tau = model.time_constants_
+        assert bounds[0] <= tau[0] and tau[-1] <= bounds[1] * (1 + 1e-9)
+        assert np.all(tau[1:] >= 2.0 * tau[:-1] * (1 - 1e-9))  # distinct poles, at least twofold apart
+
+
 def test_observer_fuses_a_thermometer_to_follow_an_unmodelled_heat():
     times = np.arange(0.0, 30 * 3600.0, 60.0)
     X, y = record(times, [1500.0, 3000.0, 4500.0])

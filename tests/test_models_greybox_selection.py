@@ -10,9 +10,12 @@ from models.selection_cv import (
     fold_prediction,
     geometric_mean_rmse,
     model_kind,
+    nested_lower_orders,
+    parsimonious_choice,
     rank_agreement,
     regime_blocks,
     select_by_blocked_cv,
+    within_one_standard_error,
 )
 
 
@@ -41,8 +44,9 @@ def test_folds_of_both_schemes():
         blocked_folds(blocks, schemes=("random",))
 
 
-def _record(seed=0):
-    """Runs at four speeds with stops; a drift that lags the spindle heat (τ = 40 min) plus the ambient."""
+def _record(seed=0, slow_share=0.0):
+    """Runs at four speeds with stops; a drift that lags the spindle heat (τ = 40 min) plus the ambient, and
+    ``slow_share`` of the heat's drift again through a slow mode (τ = 8 h)."""
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, 32 * 3600.0, 120.0)
     slot = (t // (4 * 3600.0)).astype(int)
@@ -52,7 +56,11 @@ def _record(seed=0):
     for k in range(1, len(t)):
         a = np.exp(-120.0 / 2400.0)
         drift[k] = a * drift[k - 1] + (1 - a) * 4.0 * heat[k - 1]
-    y = drift + 3.0 * (ambient - ambient[0]) + 0.05 * rng.standard_normal(len(t))
+    slow = np.zeros_like(t)
+    for k in range(1, len(t)):
+        a = np.exp(-120.0 / (8 * 3600.0))
+        slow[k] = a * slow[k - 1] + (1 - a) * slow_share * 4.0 * heat[k - 1]
+    y = drift + slow + 3.0 * (ambient - ambient[0]) + 0.05 * rng.standard_normal(len(t))
     X = np.column_stack([t, speed, ambient, rng.standard_normal(len(t))])  # column 3: an irrelevant sensor
     return X, y, speed
 
@@ -99,6 +107,55 @@ def test_the_score_is_the_geometric_mean_so_no_one_regime_rules_it():
     assert geometric_mean_rmse([0.1, 0.1, 10.0], floor=1e-9) == pytest.approx(10 ** (-1 / 3))
     assert geometric_mean_rmse([1.0, np.inf], floor=1e-9) == np.inf
     assert geometric_mean_rmse([0.0, 1.0], floor=1e-2) == pytest.approx(0.1)
+
+
+def _orders(columns=(0, 1, 2)):
+    return {f"{n} poles": (GreyBoxRegressor(n_poles=n, temperature_inputs=(2,)), list(columns)) for n in (1, 2, 3)}
+
+
+def test_nested_orders_are_the_same_model_columns_and_parameters_at_a_lower_order():
+    candidates = {
+        **_orders(),
+        "2 poles, other columns": (GreyBoxRegressor(n_poles=2, temperature_inputs=(2,)), [0, 1, 3]),
+        "1 pole, other parameters": (GreyBoxRegressor(n_poles=1, temperature_inputs=(2,), exponent=1.5), [0, 1, 2]),
+        "MLR": (MLRRegressor(), [2]),
+    }
+    assert nested_lower_orders(candidates, "3 poles") == ["1 poles", "2 poles"]
+    assert nested_lower_orders(candidates, "1 poles") == []
+    assert nested_lower_orders(candidates, "2 poles, other columns") == []
+    assert nested_lower_orders(candidates, "MLR") == []
+
+
+def test_one_standard_error_on_paired_folds():
+    best = [1.0, 2.0, 0.5, 4.0]
+    # the folds differ twentyfold, but the simpler model tracks the best one: within its scatter
+    assert within_one_standard_error([1.05, 1.9, 0.55, 4.1], best, floor=1e-9)
+    # consistently 10 % worse on every fold: the paired difference has no scatter to hide in
+    assert not within_one_standard_error([1.1, 2.2, 0.55, 4.4], best, floor=1e-9)
+    assert not within_one_standard_error([1.0, np.inf, 0.5, 4.0], best, floor=1e-9)
+    assert within_one_standard_error([1.0], [1.0], floor=1e-9)
+
+
+def test_parsimony_takes_the_lowest_order_within_one_standard_error():
+    candidates = _orders()
+    folds = {"3 poles": [1.0, 2.0, 0.5, 4.0], "2 poles": [1.05, 1.9, 0.55, 4.1], "1 poles": [1.5, 3.0, 0.75, 6.0]}
+    assert parsimonious_choice(candidates, folds, "3 poles", floor=1e-9) == "2 poles"
+    folds["1 poles"] = [0.9, 2.2, 0.52, 4.2]
+    assert parsimonious_choice(candidates, folds, "3 poles", floor=1e-9) == "1 poles"
+    folds["3 poles"] = [1.0, np.inf, 0.5, 4.0]  # a best that diverged somewhere is left alone
+    assert parsimonious_choice(candidates, folds, "3 poles", floor=1e-9) == "3 poles"
+
+
+def test_a_second_pole_must_earn_more_than_the_folds_scatter():
+    # a 4 % slow mode: two poles score best, but one pole is within one standard error of them
+    faint = select_by_blocked_cv(_orders(), *_record(seed=0, slow_share=0.04))
+    assert faint.ranking[0] == "2 poles" and faint.best == faint.chosen == "1 poles"
+    assert faint.reason.startswith("chose 1 poles: the lowest order within one standard error of 2 poles, whose "
+                                   "geometric-mean RMSE on operating-regime blocks it did not see is the lowest")
+    # a 30 % slow mode: two poles win by far more than the scatter and are kept
+    clear = select_by_blocked_cv(_orders(), *_record(seed=0, slow_share=0.3))
+    assert clear.ranking[0] == clear.best == "2 poles"
+    assert clear.reason.startswith("chose 2 poles: lowest geometric-mean RMSE")
 
 
 def test_a_candidate_that_cannot_be_fitted_ranks_last():

@@ -265,7 +265,8 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
     cm = fit_compensation_model(loaded, split_names(inputs), target, model, params, zero_reference,
                                 reference_samples)
     if selection is not None:
-        cm.metadata["selection"] = {"reason": selection.reason, "ranking": selection.ranking,
+        cm.metadata["selection"] = {"reason": selection.reason, "chosen": selection.chosen,
+                                    "ranking": selection.ranking,
                                     "geometric_mean_rmse": selection.score, "mean_rmse": selection.mean_rmse,
                                     "folds": selection.folds, "fold_rmse": selection.fold_rmse}
     cm.metadata["training_metrics"] = {dataset_label(ds): score(cm.target_values(ds), cm.predict(ds))
