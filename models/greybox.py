@@ -13,10 +13,11 @@ constants ``τ_i`` are the fitted parameters, every one kept inside
 fitted model is stable: a bounded input gives a bounded drift. The gains
 ``g``, feed-throughs ``d`` (temperature inputs only: spindle heat does not
 move the tool instantly) and offset ``c₀`` enter linearly. They are solved
-by least squares for given ``(τ, b)``, and ``(τ, b)`` minimise the **simulation (output) error** over
-the whole record (variable projection, :func:`scipy.optimize.least_squares`):
-the model is run from the first row, never fed back measured outputs, so
-the fit rewards what a compensation running for hours needs.
+by least squares for given ``(τ, b)``, and ``(τ, b)`` minimise the
+**simulation (output) error** over the whole record (variable projection,
+:func:`scipy.optimize.least_squares`): the model is run from the first row,
+never fed back measured outputs, so the fit rewards what a compensation
+running for hours needs.
 
 Layout of ``X`` (one row per sample, time-ordered):
 

@@ -328,7 +328,7 @@ def parsimonious_choice(candidates: Mapping[str, tuple[BaseEstimator, Sequence[i
     name : str
         The chosen candidate.
     """
-    if not np.isfinite(geometric_mean_rmse(fold_rmse[best], floor)):
+    if not np.all(np.isfinite(fold_rmse[best])):
         return best
     for simpler in nested_lower_orders(candidates, best):
         if within_one_standard_error(fold_rmse[simpler], fold_rmse[best], floor):
