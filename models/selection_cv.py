@@ -21,8 +21,10 @@ shuffled rows or on a tail of the same regime:
   error of it is chosen: the mean over folds of the paired difference of log
   RMSE is at most its standard error (the one-standard-error rule of
   Breiman et al. 1984, on paired folds).  A higher order that wins by less
-  than the folds' scatter is fitting slow modes the record cannot pin down,
-  and those extrapolate worst.
+  than the folds' scatter is fitting slow modes the record cannot pin down:
+  on the FE records of ``bench/selection_synthetic.py`` the simpler order
+  did better on a continuation with new duty (10 of 10 changed choices) and
+  worse on a later block at a speed next to those trained (8 of 8).
 
 Why the geometric mean: the regimes differ in how large their drift is, so
 an arithmetic mean of RMSEs is ruled by the regime with the largest drift
