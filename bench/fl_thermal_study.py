@@ -65,7 +65,7 @@ from models.selection import METHODS  # noqa: E402
 from models.selection_cv import (  # noqa: E402
     Fold,
     blocked_folds,
-    fold_prediction,
+    held_out_rmse,
     rank_agreement,
     regime_blocks,
     select_by_blocked_cv,
@@ -150,15 +150,9 @@ def study_arrays(frame):
     return X, {ch: frame[ch].to_numpy(float) for ch in CHANNELS}, frame["spindle_rpm"].to_numpy(float)
 
 
-def fold_rmse(estimator, X, y, fold):
-    pred = fold_prediction(estimator, X, y, fold)
-    truth = y[fold.test[0]: fold.test[1]]
-    return rmse(truth, pred) if np.all(np.isfinite(pred)) else np.inf
-
-
 def candidate_rmse(zoo, X, y, fold):
     """Every candidate of ``zoo`` trained on ``fold``'s training rows and scored on its test rows: name → RMSE."""
-    return {name: fold_rmse(est, X[:, list(cols)], y, fold) for name, (est, cols) in zoo.items()}
+    return {name: held_out_rmse(est, X[:, list(cols)], y, fold) for name, (est, cols) in zoo.items()}
 
 
 def fmt(value):
@@ -176,7 +170,7 @@ def loro_study(frame):
     rows, ch3 = [], []
     for name, (estimator, cols) in candidates().items():
         Xc = X[:, list(cols)]
-        per = {ch: [fold_rmse(estimator, Xc, Y[ch], f) for f in folds] for ch in CHANNELS}
+        per = {ch: [held_out_rmse(estimator, Xc, Y[ch], f) for f in folds] for ch in CHANNELS}
         rows.append([name] + [f"{fmt(np.mean(v))} / {fmt(np.max(v))}" for v in per.values()])
         ch3.append([name] + [fmt(v) for v in per["ch3_um"]])
     table("Leave one regime block out: mean / worst held-out-block RMSE over the 4 blocks (µm)",

@@ -222,11 +222,37 @@ class Selection:
         return self.chosen
 
 
-def _fold_score(y_true, pred) -> float:
-    pred = np.asarray(pred, float)
+def held_out_rmse(estimator: BaseEstimator, X: np.ndarray, y: np.ndarray, fold: Fold) -> float:
+    """RMSE of :func:`fold_prediction` on the fold's test rows; ``inf`` if the fit fails or the prediction diverges.
+
+    Parameters
+    ----------
+    estimator : BaseEstimator
+        Unfitted model; it is cloned, never changed.
+    X : ndarray, shape (n_samples, n_features)
+        Time-ordered inputs (the model's own columns).
+    y : ndarray, shape (n_samples,)
+        Target, e.g. a drift in µm.
+    fold : Fold
+        The fold.
+
+    Returns
+    -------
+    rmse : float
+        In the unit of ``y``; ``inf`` where the candidate cannot be scored (e.g. too few training rows for
+        its parameters, or a non-finite prediction), so it cannot be chosen.
+    """
+    try:
+        pred = np.asarray(fold_prediction(estimator, X, y, fold), float)
+    except (ValueError, np.linalg.LinAlgError, FloatingPointError):
+        return np.inf
     if not np.all(np.isfinite(pred)):
         return np.inf
-    return rmse(y_true, pred)
+    return rmse(y[fold.test[0]: fold.test[1]], pred)
+
+
+def _log_rmse(fold_rmse: Sequence[float], floor: float) -> np.ndarray:
+    return np.log(np.maximum(np.asarray(fold_rmse, float), floor))
 
 
 def geometric_mean_rmse(fold_rmse: Sequence[float], floor: float) -> float:
@@ -244,10 +270,9 @@ def geometric_mean_rmse(fold_rmse: Sequence[float], floor: float) -> float:
     score : float
         The geometric mean, in the unit of the RMSEs.
     """
-    values = np.asarray(fold_rmse, float)
-    if not np.all(np.isfinite(values)):
+    if not np.all(np.isfinite(fold_rmse)):
         return np.inf
-    return float(np.exp(np.mean(np.log(np.maximum(values, floor)))))
+    return float(np.exp(np.mean(_log_rmse(fold_rmse, floor))))
 
 
 def nested_lower_orders(candidates: Mapping[str, tuple[BaseEstimator, Sequence[int]]], name: str) -> list[str]:
@@ -301,10 +326,9 @@ def within_one_standard_error(simpler_rmse: Sequence[float], best_rmse: Sequence
     -------
     bool
     """
-    simpler, best = np.asarray(simpler_rmse, float), np.asarray(best_rmse, float)
-    if not np.all(np.isfinite(simpler)):
+    if not np.all(np.isfinite(simpler_rmse)):
         return False
-    d = np.log(np.maximum(simpler, floor)) - np.log(np.maximum(best, floor))
+    d = _log_rmse(simpler_rmse, floor) - _log_rmse(best_rmse, floor)
     if len(d) < 2:
         return bool(d.mean() <= 0.0)
     return bool(d.mean() <= d.std(ddof=1) / np.sqrt(len(d)))
@@ -374,18 +398,8 @@ def select_by_blocked_cv(candidates: Mapping[str, tuple[BaseEstimator, Sequence[
     if not candidates:
         raise ValueError("select_by_blocked_cv: no candidate models.")
     folds = blocked_folds(regime_blocks(speed, min_rows), schemes)
-    scores = {}
-    for name, (estimator, columns) in candidates.items():
-        Xc = X[:, list(columns)]
-        row = []
-        for fold in folds:
-            try:
-                pred = fold_prediction(estimator, Xc, y, fold)
-            except (ValueError, np.linalg.LinAlgError, FloatingPointError):
-                row.append(np.inf)  # e.g. too few training rows for its parameters: cannot be chosen
-                continue
-            row.append(_fold_score(y[fold.test[0]: fold.test[1]], pred))
-        scores[name] = row
+    scores = {name: [held_out_rmse(estimator, X[:, list(columns)], y, fold) for fold in folds]
+              for name, (estimator, columns) in candidates.items()}
     floor = 1e-6 * max(float(np.std(y)), np.finfo(float).tiny)  # a millionth of the target's spread
     score = {k: geometric_mean_rmse(v, floor) for k, v in scores.items()}
     mean = {k: float(np.mean(v)) for k, v in scores.items()}
