@@ -227,14 +227,8 @@ def held_out_rmse(estimator: BaseEstimator, X: np.ndarray, y: np.ndarray, fold: 
 
     Parameters
     ----------
-    estimator : BaseEstimator
-        Unfitted model; it is cloned, never changed.
-    X : ndarray, shape (n_samples, n_features)
-        Time-ordered inputs (the model's own columns).
-    y : ndarray, shape (n_samples,)
-        Target, e.g. a drift in µm.
-    fold : Fold
-        The fold.
+    estimator, X, y, fold
+        As for :func:`fold_prediction`.
 
     Returns
     -------
