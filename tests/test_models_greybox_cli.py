@@ -9,7 +9,7 @@ import pytest
 from test_models_greybox import ambient, duty, simulate
 
 from twin.cli import main
-from twin.compensation.protocol import stability_problem
+from twin.compensation.protocol import bridging_inputs, stability_problem
 from twin.compensation.store import CompensationModel
 from twin.compensation.train import evaluate, train
 from twin.core.dataset import ChannelInfo, Dataset
@@ -129,3 +129,61 @@ def test_a_prediction_that_diverges_on_a_training_record_is_named():
     problem = stability_problem(cm, [wide])
     assert problem is not None and problem.startswith("mlr: the prediction diverges on its own training data")
     assert "against max |measured change|" in problem and "um" in problem
+
+
+def _rows(ds, rows, label, shift=0.0):
+    return Dataset(ds.time_s[rows] + shift, ds.matrix(ds.names)[rows], CHANNELS, {"kind": "synthetic",
+                                                                                  "scenario": label})
+
+
+def test_a_continuation_after_a_gap_is_refused_or_bridged_never_run_on(records, tmp_path, capsys):
+    """The later record from an hour in (4500 rpm throughout the hour left out): running the state on as if
+    the hour had not passed is what the check prevents; interpolated inputs stand in for the missing rows."""
+    training, later, _ = records
+    cm = train([training], "spindle,air", "Z", model="greybox")
+    full = evaluate(cm, [later], reference="train", history=training).predictions["later"][2][30:]
+    gapped = _rows(later, slice(30, None), "gapped")
+    with pytest.raises(TwinInputError, match=r"gapped: time_s starts at 79200 s, 3720 s after --history train "
+                                             r"ends \(75480 s\): 30 rows of spindle, air are missing.*--gap interpolate"):
+        evaluate(cm, [gapped], reference="train", history=training)
+    bridged = evaluate(cm, [gapped], reference="train", history=training, gap="interpolate")
+    np.testing.assert_allclose(bridged.predictions["gapped"][2], full, atol=0.01 * np.ptp(full))
+    run_on = evaluate(cm, [_rows(gapped, slice(None), "gapped", shift=-3600.0)], reference="train",
+                      history=training).predictions["gapped"][2]
+    assert np.max(np.abs(run_on - full)) > 0.1 * np.ptp(full)   # what the refusal stands between
+    training.write(tmp_path / "train.csv")
+    gapped.write(tmp_path / "gapped.csv")
+    cm.save(tmp_path / "gb.json")
+    command = ["evaluate", str(tmp_path / "gb.json"), str(tmp_path / "gapped.csv"), "--reference", "train",
+               "--history", str(tmp_path / "train.csv")]
+    assert main(command) == 2
+    assert "30 rows of spindle, air are missing" in capsys.readouterr().err
+    assert main(command + ["--gap", "interpolate"]) == 0
+    assert "30 missing rows after --history train bridged by linear interpolation" in capsys.readouterr().err
+
+
+def test_a_continuation_on_its_own_clock_follows_directly_and_an_overlap_is_refused(records, caplog):
+    training, later, _ = records
+    cm = train([training], "spindle,air", "Z", model="greybox")
+    full = evaluate(cm, [later], reference="train", history=training).predictions["later"][2]
+    restarted = _rows(later, slice(None), "restarted", shift=-later.time_s[0])
+    with caplog.at_level("WARNING", logger="thermal_twin"):
+        result = evaluate(cm, [restarted], reference="train", history=training)
+    np.testing.assert_array_equal(result.predictions["restarted"][2], full)
+    assert "restarted: its time starts at 0 s, not after --history train ends (75480 s)" in caplog.text
+    with pytest.raises(TwinInputError, match=r"inside: time_s starts at 36000 s, inside --history train "
+                                             r"\(0..75480 s\)"):
+        evaluate(cm, [_rows(training, slice(300, None), "inside")], reference="train", history=training)
+    with pytest.raises(TwinInputError, match="not a whole number of the model's 120 s steps"):
+        evaluate(cm, [_rows(later, slice(None), "off grid", shift=50.0)], reference="train", history=training)
+
+
+def test_the_bridging_rows_interpolate_every_input_on_the_model_grid():
+    channels = CHANNELS[:2]
+    history = Dataset(np.array([90.0, 100.0]), np.array([[0.0, 19.0], [0.0, 20.0]]), channels, {"scenario": "h"})
+    record = Dataset(np.array([140.0, 150.0]), np.array([[3000.0, 24.0], [3000.0, 24.0]]), channels,
+                     {"scenario": "r"})
+    expected = [[750.0, 21.0], [1500.0, 22.0], [2250.0, 23.0]]   # at 110, 120 and 130 s
+    np.testing.assert_allclose(bridging_inputs(history, record, ["spindle", "air"], 10.0, "interpolate"), expected)
+    following = Dataset(np.array([110.0]), np.array([[3000.0, 24.0]]), channels, {"scenario": "f"})
+    assert bridging_inputs(history, following, ["spindle", "air"], 10.0).shape == (0, 2)

@@ -64,7 +64,7 @@ def cmd_evaluate(args: argparse.Namespace) -> None:
 
     ev = evaluate(args.model, args.datasets, out_dir=args.out, column_map=_column_map(args),
                   nan_policy=args.nan_policy, plots=not args.no_plots, overwrite=args.overwrite,
-                  reference=args.reference, history=args.history)
+                  reference=args.reference, history=args.history, gap=args.gap)
     print(ev.table(), end="")
     if ev.out_dir is not None:
         print(f"table and plots in {ev.out_dir}/")
@@ -149,6 +149,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "continues the training one (starts warm)")
     e.add_argument("--history", help="with --reference train: the training record, over which time-series models "
                    "run before the evaluated one")
+    e.add_argument("--gap", choices=("refuse", "interpolate"), default="refuse",
+                   help="with --reference train, a record that starts later than one sampling interval after the "
+                   "history ends: refuse it (default), or bridge the missing rows by interpolating the inputs")
     add_overwrite(e)
     _add_data_options(e)
     e.set_defaults(func=cmd_evaluate)

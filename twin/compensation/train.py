@@ -286,7 +286,8 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
              out_dir: Path | str | None = None, column_map: dict[str, str] | None = None,
              nan_policy: Literal["error", "interpolate", "drop"] = "error", machine: Machine | None = None,
              plots: bool = True, overwrite: bool = False, reference: Literal["own", "train"] = "own",
-             history: Dataset | Path | str | None = None) -> Evaluation:
+             history: Dataset | Path | str | None = None, gap: Literal["refuse", "interpolate"] = "refuse"
+             ) -> Evaluation:
     """Score a model (a :class:`CompensationModel` or a saved model path) on datasets.
 
     Writes (when ``out_dir`` is given) ``evaluation.md``, ``evaluation.csv``,
@@ -317,6 +318,9 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
         Zero reference of each record (above).
     history : Dataset, Path or str, optional
         The training record, for ``reference="train"``.
+    gap : {"refuse", "interpolate"}, default "refuse"
+        With ``reference="train"``, a record that starts more than one interval after ``history``
+        ends is refused, or bridged (:func:`~twin.compensation.protocol.bridging_inputs`).
 
     Returns
     -------
@@ -344,7 +348,7 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
         if seen[label] > 1:
             label = f"{label}_{seen[label]}"
         try:
-            y, p = continued_prediction(cm, ds, past) if reference == "train" else (cm.target_values(ds),
+            y, p = continued_prediction(cm, ds, past, gap) if reference == "train" else (cm.target_values(ds),
                                                                                     cm.predict(ds))
         except TwinInputError:
             raise
