@@ -229,7 +229,7 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         if np.any(speed < 0):
             k = int(np.argmax(speed < 0))
             raise ValueError(f"GreyBoxRegressor: spindle speed (column {speed_col}) must be >= 0 rpm, row {k} has "
-                             f"{speed[k]}.")
+                             f"{speed[k]:g}.")
         return time, speed
 
     def _inputs(self, X, speed, inputs, exponent):

@@ -48,6 +48,8 @@ def test_greybox_trains_saves_and_continues_a_warm_record(records, tmp_path):
         evaluate(loaded, [later])
     with pytest.raises(TwinInputError, match="needs the training record as --history"):
         evaluate(loaded, [later], reference="train")
+    with pytest.raises(TwinInputError, match="--history and --gap .* need --reference train"):
+        evaluate(loaded, [later], history=training)
     result = evaluate(loaded, [later], reference="train", history=training)
     measured = result.predictions["later"][1]
     truth = whole["Z"][len(training):] - whole["Z"][0]
@@ -187,3 +189,10 @@ def test_the_bridging_rows_interpolate_every_input_on_the_model_grid():
     np.testing.assert_allclose(bridging_inputs(history, record, ["spindle", "air"], 10.0, "interpolate"), expected)
     following = Dataset(np.array([110.0]), np.array([[3000.0, 24.0]]), channels, {"scenario": "f"})
     assert bridging_inputs(history, following, ["spindle", "air"], 10.0).shape == (0, 2)
+
+
+def test_greybox_names_the_speed_input_it_needs_first(records):
+    training, _, _ = records
+    with pytest.raises(TwinInputError, match=r"greybox takes the spindle speed \(unit rpm\) as its first input, "
+                                             r"and 'air' is in degC; put the speed first"):
+        train([training], "air,spindle", "Z", model="greybox")

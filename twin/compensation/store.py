@@ -517,6 +517,9 @@ def fit_compensation_model(datasets: list, inputs: list[str], target: str, model
         check_reference_samples(reference_samples, len(ds), dataset_label(ds))
     estimator = make_estimator(model, params)
     units, target_unit = _channel_units(datasets, inputs, target)
+    if str(model).lower() == "greybox" and units[0] != "rpm":
+        raise TwinInputError(f"greybox takes the spindle speed (unit rpm) as its first input, and {inputs[0]!r} is "
+                             f"in {units[0]}; put the speed first (--inputs <speed>,<temperatures…>)")
     prep = {"zero_reference": bool(zero_reference), "reference_samples": int(reference_samples),
             "convention": "inputs and target minus their value at the start of each dataset"
             if zero_reference else "raw values"}

@@ -334,6 +334,11 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
     """
     if reference not in ("own", "train"):
         raise TwinInputError(f"--reference {reference!r}: choose 'own' (each record's start) or 'train'")
+    if gap not in ("refuse", "interpolate"):
+        raise TwinInputError(f"--gap {gap!r}: choose 'refuse' or 'interpolate'")
+    if reference == "own" and (history is not None or gap != "refuse"):
+        raise TwinInputError("--history and --gap describe a record that continues the training one; they need "
+                             "--reference train (each record is referenced to its own start without it)")
     check_output_folder(out_dir, overwrite, inputs=_input_files([model, *datasets]))
     cm = model if isinstance(model, CompensationModel) else CompensationModel.load(model)
     loaded = [load_dataset(d, column_map, nan_policy, machine) for d in datasets]
