@@ -196,3 +196,14 @@ def test_greybox_names_the_speed_input_it_needs_first(records):
     with pytest.raises(TwinInputError, match=r"greybox takes the spindle speed \(unit rpm\) as its first input, "
                                              r"and 'air' is in degC; put the speed first"):
         train([training], "air,spindle", "Z", model="greybox")
+
+
+def test_records_in_time_order_continue_one_another(records):
+    training, later, _ = records
+    cm = train([training], "spindle,air", "Z", model="greybox")
+    whole = evaluate(cm, [later], reference="train", history=training).predictions["later"][2]
+    first, second = _rows(later, slice(0, 100), "first"), _rows(later, slice(100, None), "second")
+    chained = evaluate(cm, [first, second], reference="train", history=training).predictions
+    np.testing.assert_allclose(np.r_[chained["first"][2], chained["second"][2]], whole, rtol=1e-12, atol=1e-9)
+    with pytest.raises(TwinInputError, match=r"second: time_s starts at .* 100 rows of spindle, air are missing"):
+        evaluate(cm, [second, first], reference="train", history=training)

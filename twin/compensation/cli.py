@@ -148,7 +148,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="zero reference: each record's own start (default) or the training start, for a record that "
                    "continues the training one (starts warm)")
     e.add_argument("--history", help="with --reference train: the training record, over which time-series models "
-                   "run before the evaluated one")
+                   "run before the evaluated ones (records in time order continue one another)")
     e.add_argument("--gap", choices=("refuse", "interpolate"), default="refuse",
                    help="with --reference train, a record that starts later than one sampling interval after the "
                    "history ends: refuse it (default), or bridge the missing rows by interpolating the inputs")

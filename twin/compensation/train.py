@@ -298,7 +298,9 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
     ``reference="train"``: each dataset continues the training record (it may
     start warm), so it is referenced to the training start, and time-series
     models run over ``history`` (the training record) and then the dataset
-    (:func:`~twin.compensation.protocol.continued_prediction`).
+    (:func:`~twin.compensation.protocol.continued_prediction`). A dataset that
+    starts after the end of the one before it continues that one: the model
+    runs over the history and every dataset before it.
 
     Parameters
     ----------
@@ -362,6 +364,8 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
             raise TwinInputError(f"{label}: {cm.model_name} cannot predict it: {exc}{hint}") from None
         rows.append({"dataset": label, **score(y, p)})
         predictions[label] = (ds.time_s, y, p)
+        if past is not None and cm.is_time_series and ds.time_s[0] > past.time_s[-1]:
+            past = _continued_by(past, ds, [*cm.inputs, cm.target])   # a later record continues this one
     out_dir = Path(out_dir) if out_dir is not None else None
     result = Evaluation(rows, out_dir, predictions)
     if out_dir is not None:
@@ -369,6 +373,13 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
             _write_evaluation(cm, result, tmp, plots)
         result.out_dir = out_dir
     return result
+
+
+def _continued_by(history, record, names):
+    """The history followed by the record, in the model's channels (what a time-series model runs over next)."""
+    a, b = history.select(names), record.select(names)
+    return Dataset(np.r_[a.time_s, b.time_s], np.vstack([a.values, b.values]), a.channels,
+                   {"label": f"{dataset_label(history)} + {dataset_label(record)}"})
 
 
 def _write_evaluation(cm, result, folder, plots):
