@@ -439,27 +439,14 @@ def hybrid_study(train: tuple = HYBRID_TRAIN, test: tuple = HYBRID_TEST, axes: t
     check_output_folder(out_dir, overwrite, inputs=(machine,))
 
     gap = dict(DEFAULT_GAP if gap is None else gap)
-    train, test = _available(train), _available(test)
-    if not train or not test:
-        raise TwinInputError(f"the hybrid study needs training and held-out scenarios; have {train}, {test}")
-    truth = MachineSpec(machine, mesh_size_m, gap.get("source_scale", 1.0), gap.get("convection_scale", 1.0))
-    nominal = MachineSpec(machine, mesh_size_m)
     t0 = time.perf_counter()
-    nominal.build()
-    truth.build()
-    measured = run_tasks([SimulateTask(truth, s) for s in list(train) + list(test)], scheduler=scheduler,
-                         progress=progress)
-    physics = run_tasks([PhysicsTask(nominal, ds, tuple(axes), physics_backend) for ds in measured],
-                        scheduler=scheduler, progress=progress)
+    measured, physics, train, test = hybrid_records(train, test, axes, gap, machine, mesh_size_m, physics_backend,
+                                                    scheduler, progress)
     sim_s = time.perf_counter() - t0
     tr, te = list(range(len(train))), list(range(len(train), len(measured)))
-    rows, curves, used = [], {}, {}
-    for axis in axes:
-        used[axis] = list(inputs) if inputs else select_inputs([measured[i] for i in tr], axis, k, select_method)
-        axis_rows, axis_curves = _hybrid_rows(measured, physics, tr, axis, model, used[axis])
-        rows += axis_rows
-        curves.update(axis_curves)
-    pooled = _pooled(rows, curves, axes)
+    used = {axis: list(inputs) if inputs else select_inputs([measured[i] for i in tr], axis, k, select_method)
+            for axis in axes}
+    rows, curves, pooled = hybrid_scores(measured, physics, len(train), axes, model, used)
     md = hybrid_markdown(rows, pooled, gap, train, test, used, model, k, select_method, physics_backend)
     result = StudyResult("hybrid", None, {"hybrid": rows, "hybrid_pooled": pooled}, md,
                          {"gap": gap, "train": train, "test": test, "inputs": used, "simulation_s": sim_s})
@@ -468,6 +455,83 @@ def hybrid_study(train: tuple = HYBRID_TRAIN, test: tuple = HYBRID_TEST, axes: t
                     lambda tmp: plot_hybrid(curves, te_labels=[dataset_label(measured[i]) for i in te], axes=axes,
                                             path=tmp / "hybrid_heldout.png"))
     return result
+
+
+def hybrid_records(train: tuple, test: tuple, axes: tuple, gap: dict, machine: str = "vmc_ram",
+                   mesh_size_m: float | None = None, physics_backend: str = "fe",
+                   scheduler: str | object = "local", progress: Callable[[int, int], None] | None = None
+                   ) -> tuple[list[Dataset], list[dict], list[str], list[str]]:
+    """The hybrid study's simulations: "measured" records of the machine with ``gap``, and the nominal twin's
+    prediction of each.
+
+    Parameters
+    ----------
+    train, test, axes, machine, mesh_size_m, physics_backend, scheduler, progress
+        See :func:`hybrid_study`.
+    gap : dict
+        ``source_scale`` and ``convection_scale`` of the "real" machine (see :data:`DEFAULT_GAP`).
+
+    Returns
+    -------
+    measured : list of Dataset
+        The training records, then the held-out ones (instrument noise included).
+    physics : list of dict
+        Per record, axis → the nominal twin's drift, µm.
+    train, test : list of str
+        The scenarios available here, in that order.
+
+    Raises
+    ------
+    TwinInputError
+        No training or no held-out scenario available.
+    """
+    train, test = _available(train), _available(test)
+    if not train or not test:
+        raise TwinInputError(f"the hybrid study needs training and held-out scenarios; have {train}, {test}")
+    truth = MachineSpec(machine, mesh_size_m, gap.get("source_scale", 1.0), gap.get("convection_scale", 1.0))
+    nominal = MachineSpec(machine, mesh_size_m)
+    nominal.build()
+    truth.build()
+    measured = run_tasks([SimulateTask(truth, s) for s in list(train) + list(test)], scheduler=scheduler,
+                         progress=progress)
+    physics = run_tasks([PhysicsTask(nominal, ds, tuple(axes), physics_backend) for ds in measured],
+                        scheduler=scheduler, progress=progress)
+    return measured, physics, train, test
+
+
+def hybrid_scores(measured: list[Dataset], physics: list[dict], n_train: int, axes: tuple, model: str,
+                  inputs: dict[str, list[str]]) -> tuple[list[dict], dict, list[dict]]:
+    """Fit the data-driven and the residual model on the first ``n_train`` records and score the three approaches.
+
+    Parameters
+    ----------
+    measured, physics
+        From :func:`hybrid_records`.
+    n_train : int
+        How many of the records (the first ones) are training records.
+    axes : tuple of str
+        Drift axes (µm).
+    model : str
+        Model name of the data-driven and the residual model.
+    inputs : dict
+        Axis → its input channels.
+
+    Returns
+    -------
+    rows : list of dict
+        Per record, axis and approach: RMSE and max |residual| (µm), improvement %.
+    curves : dict
+        (axis, record) → (time_s, measured, physics, data-driven, hybrid), µm.
+    pooled : list of dict
+        The same scores over the held-out records together.
+    """
+    tr = list(range(n_train))
+    rows, curves = [], {}
+    for axis in axes:
+        axis_rows, axis_curves = _hybrid_rows(measured, physics, tr, axis, model, inputs[axis])
+        rows += axis_rows
+        curves.update(axis_curves)
+    return rows, curves, _pooled(rows, curves, axes)
 
 
 def _with_residual(ds, axis, physics_abs):
