@@ -105,12 +105,15 @@ def test_clear_errors_list_what_is_available(tmp_path):
                                                                            "step_size": 0.02}
 
 
-def _wide_record(n_rows, n_inputs=16, seed=0):
-    """``n_inputs`` random-walk thermometers T00.. and a drift Z, ``n_rows`` rows one minute apart."""
+def _wide_record(n_rows, n_inputs=16, seed=0, speed_first=False):
+    """``n_inputs`` random-walk thermometers T00.. and a drift Z, ``n_rows`` rows one minute apart (with
+    ``speed_first``, T00 is a spindle speed in rpm, as the grey-box model takes it)."""
     rng = np.random.default_rng(seed)
     T = 20 + rng.standard_normal((n_rows, n_inputs)).cumsum(axis=0) * 0.1
     Z = (T - 20) @ rng.standard_normal(n_inputs)
     channels = [ChannelInfo(f"T{j:02d}", "degC", "temperature") for j in range(n_inputs)]
+    if speed_first:
+        channels[0] = ChannelInfo("T00", "rpm", "speed")
     return Dataset(np.arange(n_rows) * 60.0, np.column_stack([T, Z]),
                    channels + [ChannelInfo("Z", "um", "displacement")], {"kind": "synthetic", "scenario": "wide"})
 
@@ -123,7 +126,7 @@ def test_every_model_refuses_more_parameters_than_rows(model):
     # 10 rows × 16 inputs: before, MLR "fitted" it with RMSE 1.5e-16 and 100 % improvement.
     # (PCR regresses on the 4 components that explain 85 % of the variance: 5 parameters, a real fit.)
     with pytest.raises(TwinInputError, match=r"cannot fit .* on 10 rows × 16 inputs: .*(parameters|rules)"):
-        fit_compensation_model([_wide_record(10)], WIDE_INPUTS, "Z", model)
+        fit_compensation_model([_wide_record(10, speed_first=model == "greybox")], WIDE_INPUTS, "Z", model)
 
 
 @pytest.mark.parametrize("model", sorted(set(model_names()) - {"greybox"}))   # greybox: its speed input, own tests

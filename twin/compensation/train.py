@@ -334,13 +334,7 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
     TwinInputError
         Bad data or channels, a model that cannot predict a record, or an unusable ``out_dir``.
     """
-    if reference not in ("own", "train"):
-        raise TwinInputError(f"--reference {reference!r}: choose 'own' (each record's start) or 'train'")
-    if gap not in ("refuse", "interpolate"):
-        raise TwinInputError(f"--gap {gap!r}: choose 'refuse' or 'interpolate'")
-    if reference == "own" and (history is not None or gap != "refuse"):
-        raise TwinInputError("--history and --gap describe a record that continues the training one; they need "
-                             "--reference train (each record is referenced to its own start without it)")
+    _check_reference(reference, history, gap)
     check_output_folder(out_dir, overwrite, inputs=_input_files([model, *datasets]))
     cm = model if isinstance(model, CompensationModel) else CompensationModel.load(model)
     loaded = [load_dataset(d, column_map, nan_policy, machine) for d in datasets]
@@ -354,14 +348,7 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
         seen[label] = seen.get(label, 0) + 1
         if seen[label] > 1:
             label = f"{label}_{seen[label]}"
-        try:
-            y, p = continued_prediction(cm, ds, past, gap) if reference == "train" else (cm.target_values(ds),
-                                                                                    cm.predict(ds))
-        except TwinInputError:
-            raise
-        except ValueError as exc:
-            hint = "" if reference == "train" else " (a record that continues the training one: --reference train)"
-            raise TwinInputError(f"{label}: {cm.model_name} cannot predict it: {exc}{hint}") from None
+        y, p = _measured_and_predicted(cm, ds, label, reference, past, gap)
         rows.append({"dataset": label, **score(y, p)})
         predictions[label] = (ds.time_s, y, p)
         if past is not None and cm.is_time_series and ds.time_s[0] > past.time_s[-1]:
@@ -373,6 +360,30 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
             _write_evaluation(cm, result, tmp, plots)
         result.out_dir = out_dir
     return result
+
+
+def _check_reference(reference, history, gap):
+    """Refuse an unknown ``reference`` or ``gap``, and a history or gap without ``reference="train"``."""
+    if reference not in ("own", "train"):
+        raise TwinInputError(f"--reference {reference!r}: choose 'own' (each record's start) or 'train'")
+    if gap not in ("refuse", "interpolate"):
+        raise TwinInputError(f"--gap {gap!r}: choose 'refuse' or 'interpolate'")
+    if reference == "own" and (history is not None or gap != "refuse"):
+        raise TwinInputError("--history and --gap describe a record that continues the training one; they need "
+                             "--reference train (each record is referenced to its own start without it)")
+
+
+def _measured_and_predicted(cm, ds, label, reference, past, gap):
+    """The record's measured and predicted change (see :func:`evaluate`); a model that cannot predict it is named."""
+    try:
+        if reference == "train":
+            return continued_prediction(cm, ds, past, gap)
+        return cm.target_values(ds), cm.predict(ds)
+    except TwinInputError:
+        raise
+    except ValueError as exc:
+        hint = "" if reference == "train" else " (a record that continues the training one: --reference train)"
+        raise TwinInputError(f"{label}: {cm.model_name} cannot predict it: {exc}{hint}") from None
 
 
 def _continued_by(history, record, names):
