@@ -401,7 +401,21 @@ def select_by_blocked_cv(candidates: Mapping[str, tuple[BaseEstimator, Sequence[
     ranking = sorted(scores, key=lambda k: (score[k], worst[k], k))
     chosen = parsimonious_choice(candidates, scores, ranking[0], floor)
     return Selection(ranking, chosen, score, mean, worst, scores, [f.name for f in folds],
-                     _reason(ranking, chosen, score, worst, folds, unit))
+                     _reason(ranking, chosen, score, worst, folds, unit) + _margin(ranking, chosen, scores, floor))
+
+
+def _margin(ranking, chosen, fold_rmse, floor) -> str:
+    """How clearly the choice beats the next-best candidate, fold by fold (the best-scored one, if parsimony chose
+    a lower order); a pair within one standard error is said to be one the folds cannot tell apart."""
+    rivals = [k for k in ranking if k != chosen and np.all(np.isfinite(fold_rmse[k]))]
+    if not rivals or not np.all(np.isfinite(fold_rmse[chosen])):
+        return ""
+    rival = rivals[0]
+    ahead = int(np.sum(np.asarray(fold_rmse[chosen]) < np.asarray(fold_rmse[rival])))
+    text = f" It beats {rival} on {ahead} of {len(fold_rmse[chosen])} folds"
+    if within_one_standard_error(fold_rmse[rival], fold_rmse[chosen], floor):
+        return text + ", and the two are within one standard error: these folds do not tell them apart."
+    return text + "."
 
 
 def _reason(ranking, chosen, score, worst, folds, unit) -> str:

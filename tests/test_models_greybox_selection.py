@@ -97,6 +97,9 @@ def test_selection_prefers_the_model_of_the_right_structure_and_says_why():
     assert len(chosen.folds) == 4 + 3
     assert chosen.reason.startswith("chose grey-box: lowest geometric-mean RMSE on operating-regime blocks it did not see")
     assert "7 folds (4 leave-one-block-out, 3 rolling-origin)" in chosen.reason
+    rival = chosen.ranking[1]
+    ahead = sum(a < b for a, b in zip(chosen.fold_rmse["grey-box"], chosen.fold_rmse[rival]))
+    assert chosen.reason.endswith(f". It beats {rival} on {ahead} of 7 folds.")
     assert chosen.ranking == sorted(chosen.score, key=chosen.score.get)
     for name, folds in chosen.fold_rmse.items():
         assert chosen.score[name] == pytest.approx(np.exp(np.mean(np.log(folds))))
@@ -152,10 +155,14 @@ def test_a_second_pole_must_earn_more_than_the_folds_scatter():
     assert faint.ranking[0] == "2 poles" and faint.best == faint.chosen == "1 poles"
     assert faint.reason.startswith("chose 1 poles: the lowest order within one standard error of 2 poles, whose "
                                    "geometric-mean RMSE on operating-regime blocks it did not see is the lowest")
+    assert faint.reason.endswith("folds, and the two are within one standard error: these folds do not tell them "
+                                 "apart.")
+    assert " It beats 2 poles on " in faint.reason
     # a 30 % slow mode: two poles win by far more than the scatter and are kept
     clear = select_by_blocked_cv(_orders(), *_record(seed=0, slow_share=0.3))
     assert clear.ranking[0] == clear.best == "2 poles"
     assert clear.reason.startswith("chose 2 poles: lowest geometric-mean RMSE")
+    assert clear.reason.endswith(f" It beats {clear.ranking[1]} on 7 of 7 folds.")
 
 
 def test_a_candidate_that_cannot_be_fitted_ranks_last():
