@@ -207,3 +207,21 @@ def test_records_in_time_order_continue_one_another(records):
     np.testing.assert_allclose(np.r_[chained["first"][2], chained["second"][2]], whole, rtol=1e-12, atol=1e-9)
     with pytest.raises(TwinInputError, match=r"second: time_s starts at .* 100 rows of spindle, air are missing"):
         evaluate(cm, [second, first], reference="train", history=training)
+
+
+def test_a_record_cut_into_files_trains_as_one(records, caplog):
+    training, _, _ = records
+    first, second = _rows(training, slice(0, 300), "day 1"), _rows(training, slice(300, None), "day 2")
+    with caplog.at_level("INFO", logger="thermal_twin"):
+        cut = train([first, second], "spindle,air", "Z", model="greybox")
+    assert "day 2 continues day 1: trained on as one record" in caplog.text
+    whole = train([training], "spindle,air", "Z", model="greybox")
+    np.testing.assert_allclose(cut.predict(training), whole.predict(training), rtol=1e-9, atol=1e-9)
+    assert [t["label"] for t in cut.training] == ["day 1 + day 2"]
+    with pytest.raises(TwinInputError, match="got 2 datasets that do not continue one another"):
+        train([second, first], "spindle,air", "Z", model="greybox")
+    # a static model too: one zero reference, at the first start (day 2 alone would start warm)
+    static = train([first, second], "spindle,air", "Z", model="mlr")
+    np.testing.assert_allclose(static.predict(training), train([training], "spindle,air", "Z", model="mlr")
+                               .predict(training))
+    assert static.metadata["training_metrics"]["day 1 + day 2"]["rows"] == len(training)

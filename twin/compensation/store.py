@@ -27,6 +27,7 @@ On disk (``.json``, no pickle)::
 from __future__ import annotations
 
 import json
+import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,6 +41,8 @@ from models.registry import is_time_series, registered_models
 from ..core.dataset import Dataset, json_default, project_version
 from ..core.files import write_text_atomic
 from ..errors import TwinInputError
+
+log = logging.getLogger("thermal_twin")
 
 FORMAT = "thermal-twin-compensation-model"
 FORMAT_VERSION = 1
@@ -159,6 +162,63 @@ def sampling_interval(dataset: Dataset, strict: bool = True) -> float:
         raise TwinInputError(f"{dataset_label(dataset)}: grey time-series models need evenly sampled data; "
                              f"steps range from {steps.min():g} to {steps.max():g} s")
     return dt
+
+
+def continued_record(first: Dataset, later: Dataset, names: Sequence[str]) -> Dataset:
+    """``first`` and then ``later`` as one record, in the channels ``names`` (labelled "first + later").
+
+    Parameters
+    ----------
+    first, later : Dataset
+        Records in time order; both have ``names``.
+    names : sequence of str
+        Channels kept, in ``first``'s units.
+
+    Returns
+    -------
+    Dataset
+        The rows of both.
+    """
+    a, b = first.select(list(names)), later.select(list(names))
+    return Dataset(np.r_[a.time_s, b.time_s], np.vstack([a.values, b.values]), a.channels,
+                   {"label": f"{dataset_label(first)} + {dataset_label(later)}"})
+
+
+def joined_when_contiguous(datasets: Sequence[Dataset], names: Sequence[str]) -> list[Dataset]:
+    """Records that continue one another (each starts one sampling interval after the one before it ends, with
+    the same channels and units) joined into one, in the channels ``names``; the others as they are.
+
+    A record cut into files (a day per file) is one history: the second file starts warm, so neither a
+    time-series model nor a zero reference at its own start fits it alone.
+
+    Parameters
+    ----------
+    datasets : sequence of Dataset
+        Records in the order given.
+    names : sequence of str
+        The model's channels (inputs and target).
+
+    Returns
+    -------
+    list of Dataset
+        As many as there are runs of contiguous records.
+    """
+    joined: list[Dataset] = []
+    for ds in datasets:
+        if joined and _continues(joined[-1], ds, names):
+            log.info("%s continues %s: trained on as one record", dataset_label(ds), dataset_label(joined[-1]))
+            joined[-1] = continued_record(joined[-1], ds, names)
+        else:
+            joined.append(ds)
+    return joined
+
+
+def _continues(first, later, names):
+    if len(first) < 2 or not all(n in first and n in later and first.info(n).unit == later.info(n).unit
+                                 for n in names):
+        return False
+    dt = float(np.median(np.diff(first.time_s)))
+    return abs(later.time_s[0] - first.time_s[-1] - dt) <= 1e-6 * dt
 
 
 def check_channels(dataset: Dataset, names: Sequence[str], units: Sequence[str] | None = None,
@@ -528,8 +588,9 @@ def fit_compensation_model(datasets: list, inputs: list[str], target: str, model
     if cm.is_time_series:
         if len(datasets) > 1:
             raise TwinInputError(f"model {model!r} is a grey time-series model and trains on one contiguous "
-                                 f"record; got {len(datasets)} datasets (use a static model: mlr, pcr, ann, "
-                                 "anfis)")
+                                 f"record; got {len(datasets)} datasets that do not continue one another (each "
+                                 "must start one sampling interval after the one before it ends, in time order; or "
+                                 "use a static model: mlr, pcr, ann, anfis)")
         dt = sampling_interval(datasets[0], strict=True)
         if "sampling_interval" in estimator.get_params(deep=False):  # the grey-box model's time constants are in s
             estimator.set_params(sampling_interval=dt)

@@ -39,7 +39,7 @@ from ..infra.outdir import atomic_directory, check_output_file, check_output_fol
 from ..infra.tables import markdown_table
 from ..rom.reduction import cached_rom
 from .protocol import auto_select, continued_prediction, stability_problem
-from .store import CompensationModel, dataset_label, fit_compensation_model
+from .store import CompensationModel, continued_record, dataset_label, fit_compensation_model, joined_when_contiguous
 
 if TYPE_CHECKING:
     from ..core.machine import Machine
@@ -220,7 +220,9 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
     Parameters
     ----------
     datasets : sequence of Dataset, Path or str
-        Training records (see :func:`load_dataset`).
+        Training records (see :func:`load_dataset`). Records that continue one another (each starts
+        one sampling interval after the one before it ends) are one record
+        (:func:`~twin.compensation.store.joined_when_contiguous`).
     inputs : str or list of str
         Input channels (comma-separated names allowed, as ``--inputs`` gives them).
     target : str
@@ -254,7 +256,8 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
     """
     if out is not None:
         check_output_file(out, overwrite, inputs=_input_files(datasets))
-    loaded = [load_dataset(d, column_map, nan_policy, machine) for d in datasets]
+    loaded = joined_when_contiguous([load_dataset(d, column_map, nan_policy, machine) for d in datasets],
+                                    [*split_names(inputs), target])
     selection = None
     if select is not None:
         if select != "auto":
@@ -352,7 +355,7 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
         rows.append({"dataset": label, **score(y, p)})
         predictions[label] = (ds.time_s, y, p)
         if past is not None and cm.is_time_series and ds.time_s[0] > past.time_s[-1]:
-            past = _continued_by(past, ds, [*cm.inputs, cm.target])   # a later record continues this one
+            past = continued_record(past, ds, [*cm.inputs, cm.target])   # a later record continues this one
     out_dir = Path(out_dir) if out_dir is not None else None
     result = Evaluation(rows, out_dir, predictions)
     if out_dir is not None:
@@ -384,13 +387,6 @@ def _measured_and_predicted(cm, ds, label, reference, past, gap):
     except ValueError as exc:
         hint = "" if reference == "train" else " (a record that continues the training one: --reference train)"
         raise TwinInputError(f"{label}: {cm.model_name} cannot predict it: {exc}{hint}") from None
-
-
-def _continued_by(history, record, names):
-    """The history followed by the record, in the model's channels (what a time-series model runs over next)."""
-    a, b = history.select(names), record.select(names)
-    return Dataset(np.r_[a.time_s, b.time_s], np.vstack([a.values, b.values]), a.channels,
-                   {"label": f"{dataset_label(history)} + {dataset_label(record)}"})
 
 
 def _write_evaluation(cm, result, folder, plots):
