@@ -207,6 +207,12 @@ def test_records_in_time_order_continue_one_another(records):
     np.testing.assert_allclose(np.r_[chained["first"][2], chained["second"][2]], whole, rtol=1e-12, atol=1e-9)
     with pytest.raises(TwinInputError, match=r"second: time_s starts at .* 100 rows of spindle, air are missing"):
         evaluate(cm, [second, first], reference="train", history=training)
+    # after a bridged gap the chain holds the bridge: the third record runs on from it
+    late, last = _rows(later, slice(130, 200), "late"), _rows(later, slice(200, None), "last")
+    bridged = evaluate(cm, [first, late, last], reference="train", history=training, gap="interpolate").predictions
+    together = evaluate(cm, [first, _rows(later, slice(130, None), "late and last")], reference="train",
+                        history=training, gap="interpolate").predictions["late and last"][2]
+    np.testing.assert_allclose(np.r_[bridged["late"][2], bridged["last"][2]], together, rtol=1e-12, atol=1e-9)
 
 
 def test_a_record_cut_into_files_trains_as_one(records, caplog):

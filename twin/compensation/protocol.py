@@ -26,15 +26,15 @@ from models.selection_cv import Selection, select_by_blocked_cv
 
 from ..core.dataset import Dataset
 from ..errors import TwinInputError
-from .store import CompensationModel, dataset_label, make_estimator, sampling_interval
+from .store import CompensationModel, dataset_label, linear_bridge, make_estimator, sampling_interval
+
+log = logging.getLogger("thermal_twin")
 
 #: candidates of ``--select auto``, label → (model name, hyper-parameters): fast to fit, every family (static,
 #: grey, grey-box).  The grey-box orders are candidates of their own: the order is what its extrapolation
 #: depends on most (FL_THERMAL ch3, block 4: 1.6 µm with 2 poles, 28 µm with 3).
 AUTO_CANDIDATES = {name: (name, {}) for name in ("mlr", "pcr", "anfis", "gm0n", "gm1n", "gmc")} | {
     f"greybox n_poles={order}": ("greybox", {"n_poles": order}) for order in (1, 2, 3)}
-log = logging.getLogger("thermal_twin")
-
 #: a training prediction this many times larger than the largest measured change has diverged
 DIVERGENCE_FACTOR = 10.0
 
@@ -270,8 +270,6 @@ def bridging_inputs(history: Dataset, dataset: Dataset, inputs: list[str], inter
                              f"ends ({end:g} s): {n_missing} rows of {', '.join(inputs)} are missing, and a "
                              "time-series model carries its state through them. Pass the missing rows, or "
                              "--gap interpolate to bridge them by linear interpolation (the spindle speed too)")
-    weight = (np.arange(1, n_missing + 1) / (n_missing + 1))[:, None]
-    first, last = dataset.matrix(inputs)[0], history.matrix(inputs)[-1]
     log.warning("%s: %d missing rows after --history %s bridged by linear interpolation of the inputs",
                 label, n_missing, source)
-    return (1.0 - weight) * last + weight * first
+    return linear_bridge(history.matrix(inputs)[-1], dataset.matrix(inputs)[0], n_missing)

@@ -164,7 +164,8 @@ def sampling_interval(dataset: Dataset, strict: bool = True) -> float:
     return dt
 
 
-def continued_record(first: Dataset, later: Dataset, names: Sequence[str]) -> Dataset:
+def continued_record(first: Dataset, later: Dataset, names: Sequence[str], interval_s: float | None = None
+                     ) -> Dataset:
     """``first`` and then ``later`` as one record, in the channels ``names`` (labelled "first + later").
 
     Parameters
@@ -173,15 +174,39 @@ def continued_record(first: Dataset, later: Dataset, names: Sequence[str]) -> Da
         Records in time order; both have ``names``.
     names : sequence of str
         Channels kept, in ``first``'s units.
+    interval_s : float, optional
+        A sampling interval, s: the whole intervals missing between the two are filled by
+        :func:`linear_bridge` (as ``twin evaluate --gap interpolate`` does).
 
     Returns
     -------
     Dataset
-        The rows of both.
+        The rows of both, and the bridge between them.
     """
     a, b = first.select(list(names)), later.select(list(names))
-    return Dataset(np.r_[a.time_s, b.time_s], np.vstack([a.values, b.values]), a.channels,
+    n_missing = 0 if interval_s is None else round((b.time_s[0] - a.time_s[-1]) / interval_s) - 1
+    bridge_t = a.time_s[-1] + interval_s * np.arange(1, n_missing + 1) if n_missing > 0 else np.empty(0)
+    bridge = linear_bridge(a.values[-1], b.values[0], len(bridge_t))
+    return Dataset(np.r_[a.time_s, bridge_t, b.time_s], np.vstack([a.values, bridge, b.values]), a.channels,
                    {"label": f"{dataset_label(first)} + {dataset_label(later)}"})
+
+
+def linear_bridge(before: ArrayLike, after: ArrayLike, n_rows: int) -> NDArray[np.float64]:
+    """``n_rows`` evenly spaced rows on the straight line from ``before`` to ``after`` (both left out).
+
+    Parameters
+    ----------
+    before, after : array-like, shape (k,)
+        The rows either side of the gap, in their channels' units.
+    n_rows : int
+        Rows missing between them.
+
+    Returns
+    -------
+    ndarray, shape (n_rows, k)
+    """
+    weight = (np.arange(1, n_rows + 1) / (n_rows + 1))[:, None]
+    return (1.0 - weight) * np.asarray(before, float) + weight * np.asarray(after, float)
 
 
 def joined_when_contiguous(datasets: Sequence[Dataset], names: Sequence[str]) -> list[Dataset]:

@@ -355,7 +355,8 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
         rows.append({"dataset": label, **score(y, p)})
         predictions[label] = (ds.time_s, y, p)
         if past is not None and cm.is_time_series and ds.time_s[0] > past.time_s[-1]:
-            past = continued_record(past, ds, [*cm.inputs, cm.target])   # a later record continues this one
+            # a later record continues this one (and the bridge, where --gap interpolate made one)
+            past = continued_record(past, ds, [*cm.inputs, cm.target], cm.sampling_interval_s)
     out_dir = Path(out_dir) if out_dir is not None else None
     result = Evaluation(rows, out_dir, predictions)
     if out_dir is not None:
