@@ -26,7 +26,13 @@ from models.selection_cv import Selection, select_by_blocked_cv
 
 from ..core.dataset import Dataset
 from ..errors import TwinInputError
-from .store import CompensationModel, dataset_label, linear_bridge, make_estimator, sampling_interval
+from .store import (
+    CompensationModel,
+    dataset_label,
+    linear_bridge,
+    make_estimator,
+    sampling_interval,
+)
 
 log = logging.getLogger("thermal_twin")
 
