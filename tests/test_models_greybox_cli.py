@@ -39,7 +39,8 @@ def records():
 def test_greybox_trains_saves_and_continues_a_warm_record(records, tmp_path):
     training, later, whole = records
     cm = train([training], "spindle,air", "Z", model="greybox", out=tmp_path / "gb.json")
-    assert cm.estimator.sampling_interval == 120.0
+    assert cm.estimator.sampling_interval is None and cm.preprocessing["time_column"]   # it takes the time itself
+    assert cm.sampling_interval_s == 120.0
     loaded = CompensationModel.load(tmp_path / "gb.json")
     np.testing.assert_array_equal(loaded.predict(training), cm.predict(training))
     # the later record starts warm at 4500 rpm: its own start is no reference for the model
@@ -176,8 +177,36 @@ def test_a_continuation_on_its_own_clock_follows_directly_and_an_overlap_is_refu
     with pytest.raises(TwinInputError, match=r"inside: time_s starts at 36000 s, inside --history train "
                                              r"\(0..75480 s\)"):
         evaluate(cm, [_rows(training, slice(300, None), "inside")], reference="train", history=training)
+    off_grid = _rows(later, slice(None), "off grid", shift=50.0)
+    gridded = train([training], "spindle,air", "Z", model="greybox", params={"sampling_interval": 120.0})
     with pytest.raises(TwinInputError, match="not a whole number of the model's 120 s steps"):
-        evaluate(cm, [_rows(later, slice(None), "off grid", shift=50.0)], reference="train", history=training)
+        evaluate(gridded, [off_grid], reference="train", history=training)
+    # a model that takes the time steps over the extra 50 s (inputs held) and on
+    held = evaluate(cm, [off_grid], reference="train", history=training).predictions["off grid"][2]
+    assert 0 < np.max(np.abs(held - full)) < 0.01 * np.ptp(full)
+
+
+def test_a_record_with_jitter_or_missing_rows_trains_and_continues():
+    """The greybox takes the record's own times: jittered stamps (the truth integrated at those very times)
+    and a record with rows missing train and continue as the evenly sampled record does."""
+    rng = np.random.default_rng(3)
+    times = np.arange(0.0, 44 * 3600.0, 120.0)
+    jittered = times + np.r_[0.0, rng.uniform(-20.0, 20.0, len(times) - 1)]
+    cut = int(np.searchsorted(times, 21 * 3600.0))
+    speeds = [1500.0, 3000.0, 4500.0, 6000.0]
+    even = _dataset(times, duty(times, speeds, 4 * 3600.0), "even")
+    shaky = _dataset(jittered, duty(jittered, speeds, 4 * 3600.0), "shaky")
+    holes = np.ones(len(times), bool)
+    holes[[50, 51, 52, 200, 400, 401]] = False
+    holey = _rows(even, np.flatnonzero(holes[:cut]), "holey")
+    reference = train([_rows(even, slice(0, cut), "train")], "spindle,air", "Z", model="greybox")
+    for record in (_rows(shaky, slice(0, cut), "shaky train"), holey):
+        cm = train([record], "spindle,air", "Z", model="greybox")
+        np.testing.assert_allclose(cm.estimator.time_constants_, reference.estimator.time_constants_, rtol=0.05)
+        later = _rows(shaky if record is not holey else even, slice(cut, None), "later")
+        result = evaluate(cm, [later], reference="train", history=record)
+        truth = later["Z"] - record["Z"][0]
+        assert result.rows[0]["rmse"] < 0.02 * np.ptp(truth)   # 6000 rpm was never seen in training
 
 
 def test_the_bridging_rows_interpolate_every_input_on_the_model_grid():
@@ -186,9 +215,14 @@ def test_the_bridging_rows_interpolate_every_input_on_the_model_grid():
     record = Dataset(np.array([140.0, 150.0]), np.array([[3000.0, 24.0], [3000.0, 24.0]]), channels,
                      {"scenario": "r"})
     expected = [[750.0, 21.0], [1500.0, 22.0], [2250.0, 23.0]]   # at 110, 120 and 130 s
-    np.testing.assert_allclose(bridging_inputs(history, record, ["spindle", "air"], 10.0, "interpolate"), expected)
+    times, rows, record_times = bridging_inputs(history, record, ["spindle", "air"], 10.0, "interpolate")
+    np.testing.assert_allclose(rows, expected)
+    np.testing.assert_allclose(times, [110.0, 120.0, 130.0])
+    np.testing.assert_array_equal(record_times, record.time_s)
     following = Dataset(np.array([110.0]), np.array([[3000.0, 24.0]]), channels, {"scenario": "f"})
-    assert bridging_inputs(history, following, ["spindle", "air"], 10.0).shape == (0, 2)
+    assert bridging_inputs(history, following, ["spindle", "air"], 10.0)[1].shape == (0, 2)
+    restarted = Dataset(np.array([0.0, 10.0]), record.values, channels, {"scenario": "r"})
+    np.testing.assert_allclose(bridging_inputs(history, restarted, ["spindle", "air"], 10.0)[2], [110.0, 120.0])
 
 
 def test_greybox_names_the_speed_input_it_needs_first(records):
@@ -231,3 +265,11 @@ def test_a_record_cut_into_files_trains_as_one(records, caplog):
     np.testing.assert_allclose(static.predict(training), train([training], "spindle,air", "Z", model="mlr")
                                .predict(training))
     assert static.metadata["training_metrics"]["day 1 + day 2"]["rows"] == len(training)
+
+
+def test_a_long_hole_in_a_record_is_named(records, caplog):
+    training, _, _ = records
+    holed = _rows(training, np.r_[0:100, 130:len(training)], "holed")
+    with caplog.at_level("WARNING", logger="thermal_twin"):
+        train([holed], "spindle,air", "Z", model="greybox")
+    assert "holed: 1 step(s) over 10× the usual 120 s, the longest 3720 s after t = 11880 s" in caplog.text

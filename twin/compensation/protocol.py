@@ -31,6 +31,7 @@ from .store import (
     dataset_label,
     linear_bridge,
     make_estimator,
+    note_long_steps,
     sampling_interval,
 )
 
@@ -202,7 +203,10 @@ def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Datas
         raise TwinInputError(f"{cm.model_name} is a time-series model: --reference train needs the training record "
                              "as --history to run over the whole history")
     cm.check(history)
-    for ds in (history, dataset):
+    timed = bool(cm.preprocessing.get("time_column"))
+    for ds in (history, dataset) if timed else ():
+        note_long_steps(ds)
+    for ds in (history, dataset) if not timed else ():   # a model that takes the time steps exactly, at any sampling
         dt = sampling_interval(ds, strict=True)
         if abs(dt - cm.sampling_interval_s) > 1e-6 * dt:
             raise TwinInputError(f"{dataset_label(ds)}: sampled every {dt:g} s, the model was trained at "
@@ -211,14 +215,18 @@ def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Datas
     if not np.allclose(start, ref["inputs"], rtol=1e-9, atol=1e-9):
         raise TwinInputError(f"{dataset_label(history)}: --history does not start like the training record "
                              f"(inputs {np.round(start, 4).tolist()} against {np.round(ref['inputs'], 4).tolist()})")
-    bridge = bridging_inputs(history, dataset, cm.inputs, cm.sampling_interval_s, gap)
+    bridge_s, bridge, record_s = bridging_inputs(history, dataset, cm.inputs, cm.sampling_interval_s, gap,
+                                                 on_grid=not timed)
     X = np.vstack([history.matrix(cm.inputs), bridge, dataset.matrix(cm.inputs)]) - x_ref
+    if timed:
+        X = np.column_stack([np.r_[history.time_s, bridge_s, record_s] - history.time_s[0], X])
     predicted = np.asarray(cm.estimator.predict(X), float)[len(history) + len(bridge):]
     return measured, predicted - (cm.estimator.y_reference_ if zero else 0.0)
 
 
 def bridging_inputs(history: Dataset, dataset: Dataset, inputs: list[str], interval_s: float,
-                    gap: Literal["refuse", "interpolate"] = "refuse") -> NDArray[np.float64]:
+                    gap: Literal["refuse", "interpolate"] = "refuse", on_grid: bool = True
+                    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Input rows between the end of ``history`` and the start of ``dataset``, at the model's interval.
 
     A time-series model carries its thermal state from the history into the
@@ -242,11 +250,18 @@ def bridging_inputs(history: Dataset, dataset: Dataset, inputs: list[str], inter
         between the history's last row and the record's first (the spindle
         speed too: a guess, which the state forgets after a few of its slowest
         time constants).
+    on_grid : bool, default True
+        The record must start a whole number of intervals after the history (a model with a
+        sampling interval); False for a model that takes the time (any sampling, jitter allowed).
 
     Returns
     -------
-    ndarray, shape (n_missing, n_inputs)
+    bridge_time : ndarray, shape (n_missing,)
+        Times of the bridging rows, s on the history's clock.
+    bridge : ndarray, shape (n_missing, n_inputs)
         The bridging rows (none when the record follows the history, or when its clock restarts).
+    record_time : ndarray, shape (n_rows,)
+        The record's times on the history's clock, s (shifted when its clock restarts).
 
     Raises
     ------
@@ -256,19 +271,19 @@ def bridging_inputs(history: Dataset, dataset: Dataset, inputs: list[str], inter
     """
     end, start = float(history.time_s[-1]), float(dataset.time_s[0])
     label, source = dataset_label(dataset), dataset_label(history)
-    none = np.empty((0, len(inputs)))
+    none = np.empty(0), np.empty((0, len(inputs))), dataset.time_s
     if start <= float(history.time_s[0]):
         log.warning("%s: its time starts at %g s, not after --history %s ends (%g s): taken to follow it directly",
                     label, start, source, end)
-        return none
+        return none[0], none[1], dataset.time_s - start + end + interval_s
     if start <= end:
         raise TwinInputError(f"{label}: time_s starts at {start:g} s, inside --history {source} ({history.time_s[0]:g}"
                              f"..{end:g} s); pass as --history the record that ends where this one starts")
     missing = (start - end) / interval_s - 1.0
-    if abs(missing - round(missing)) > 1e-6 * (1.0 + missing):
+    if on_grid and abs(missing - round(missing)) > 1e-6 * (1.0 + missing):
         raise TwinInputError(f"{label}: time_s starts at {start:g} s, {start - end:g} s after --history {source} "
                              f"ends: not a whole number of the model's {interval_s:g} s steps")
-    n_missing = round(missing)
+    n_missing = max(round(missing), 0)
     if n_missing == 0:
         return none
     if gap != "interpolate":
@@ -278,4 +293,5 @@ def bridging_inputs(history: Dataset, dataset: Dataset, inputs: list[str], inter
                              "--gap interpolate to bridge them by linear interpolation (the spindle speed too)")
     log.warning("%s: %d missing rows after --history %s bridged by linear interpolation of the inputs",
                 label, n_missing, source)
-    return linear_bridge(history.matrix(inputs)[-1], dataset.matrix(inputs)[0], n_missing)
+    return (end + interval_s * np.arange(1, n_missing + 1),
+            linear_bridge(history.matrix(inputs)[-1], dataset.matrix(inputs)[0], n_missing), dataset.time_s)

@@ -160,8 +160,33 @@ def sampling_interval(dataset: Dataset, strict: bool = True) -> float:
     dt = float(np.median(steps))
     if strict and np.abs(steps - dt).max() > 1e-6 * dt:
         raise TwinInputError(f"{dataset_label(dataset)}: grey time-series models need evenly sampled data; "
-                             f"steps range from {steps.min():g} to {steps.max():g} s")
+                             f"steps range from {steps.min():g} to {steps.max():g} s (the grey-box model, "
+                             "--model greybox, takes the record's own times)")
     return dt
+
+
+#: a step this many times the record's median counts as missing rows, and is named
+LONG_STEP_FACTOR = 10.0
+
+
+def note_long_steps(dataset: Dataset) -> None:
+    """Name, on the ``thermal_twin`` logger, the steps of a record longer than :data:`LONG_STEP_FACTOR` times its
+    median: a model that takes the time holds the inputs over them, which is a guess for a long one.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        A record (twin or measured).
+    """
+    steps = np.diff(dataset.time_s)
+    if len(steps) == 0:
+        return
+    long = np.flatnonzero(steps > LONG_STEP_FACTOR * np.median(steps))
+    if len(long):
+        k = long[np.argmax(steps[long])]
+        log.warning("%s: %d step(s) over %g× the usual %g s, the longest %g s after t = %g s; the inputs are held "
+                    "over them", dataset_label(dataset), len(long), LONG_STEP_FACTOR, float(np.median(steps)),
+                    float(steps[k]), float(dataset.time_s[k]))
 
 
 def continued_record(first: Dataset, later: Dataset, names: Sequence[str], interval_s: float | None = None
@@ -334,11 +359,13 @@ class CompensationModel:
     input_units, target_unit : list of str, str
         Their units (``degC``, ``um`` …), checked on every dataset.
     preprocessing : dict
-        ``zero_reference``, ``reference_samples`` and, once fitted, the raw ``training_reference``.
+        ``zero_reference``, ``reference_samples``, ``time_column`` (true when the estimator takes the
+        time since the record's start as its first column: the grey-box model) and, once fitted, the raw
+        ``training_reference``.
     training : list of dict
         Label, rows, source, scenario, kind and duration (h) of each training record.
     sampling_interval_s : float or None
-        The training interval, s (time-series models only).
+        The training interval, s (time-series models only; the median step when the model takes the time).
     metadata : dict
         Training metrics, selection and stability notes.
     """
@@ -392,11 +419,15 @@ class CompensationModel:
 
         Returns
         -------
-        ndarray, shape (n_rows, n_inputs)
-            In the inputs' units.
+        ndarray, shape (n_rows, n_inputs) or (n_rows, 1 + n_inputs)
+            In the inputs' units; a model that takes the time (``preprocessing["time_column"]``) gets
+            the time since the record's start first, s.
         """
         check_channels(dataset, self.inputs, self.input_units, "input")
-        return reference_rows(dataset.matrix(self.inputs), self.preprocessing, dataset_label(dataset))
+        X = reference_rows(dataset.matrix(self.inputs), self.preprocessing, dataset_label(dataset))
+        if self.preprocessing.get("time_column"):
+            return np.column_stack([dataset.time_s - dataset.time_s[0], X])
+        return X
 
     def target_values(self, dataset: Dataset) -> NDArray[np.float64]:
         """The measured target as the model sees it (zero-referenced unless that is switched off).
@@ -433,6 +464,8 @@ class CompensationModel:
         X = self.features(dataset)
         if not self.is_time_series:
             return np.asarray(self.estimator.predict(X), float)
+        if self.preprocessing.get("time_column"):  # it steps exactly from row to row, at any sampling
+            return self._predict_series(X)
         dt = sampling_interval(dataset, strict=False)
         t = dataset.time_s
         if self.sampling_interval_s is None or abs(dt - self.sampling_interval_s) <= 1e-6 * dt:
@@ -560,6 +593,23 @@ def _channel_units(datasets, inputs, target):
     return units, target_unit
 
 
+def _time_series_interval(cm, datasets, params):
+    """The training interval of a time-series model (s), after setting up how it takes the time."""
+    if len(datasets) > 1:
+        raise TwinInputError(f"model {cm.model_name!r} is a grey time-series model and trains on one contiguous "
+                             f"record; got {len(datasets)} datasets that do not continue one another (each "
+                             "must start one sampling interval after the one before it ends, in time order; or "
+                             "use a static model: mlr, pcr, ann, anfis)")
+    if "sampling_interval" in cm.estimator.get_params(deep=False) and "sampling_interval" not in (params or {}):
+        # the grey-box model takes the time itself and steps exactly over every interval, so a record with
+        # jitter or missing rows needs no resampling; its time constants are in s
+        cm.estimator.set_params(sampling_interval=None)
+        cm.preprocessing["time_column"] = True
+        note_long_steps(datasets[0])
+        return sampling_interval(datasets[0], strict=False)
+    return sampling_interval(datasets[0], strict=True)
+
+
 def fit_compensation_model(datasets: list, inputs: list[str], target: str, model: str = "anfis",
                            params: dict | None = None, zero_reference: bool = True,
                            reference_samples: int = 1) -> CompensationModel:
@@ -609,16 +659,7 @@ def fit_compensation_model(datasets: list, inputs: list[str], target: str, model
             "convention": "inputs and target minus their value at the start of each dataset"
             if zero_reference else "raw values"}
     cm = CompensationModel(estimator, str(model).lower(), inputs, target, units, target_unit, prep)
-    dt = None
-    if cm.is_time_series:
-        if len(datasets) > 1:
-            raise TwinInputError(f"model {model!r} is a grey time-series model and trains on one contiguous "
-                                 f"record; got {len(datasets)} datasets that do not continue one another (each "
-                                 "must start one sampling interval after the one before it ends, in time order; or "
-                                 "use a static model: mlr, pcr, ann, anfis)")
-        dt = sampling_interval(datasets[0], strict=True)
-        if "sampling_interval" in estimator.get_params(deep=False):  # the grey-box model's time constants are in s
-            estimator.set_params(sampling_interval=dt)
+    dt = _time_series_interval(cm, datasets, params) if cm.is_time_series else None
     X = np.vstack([cm.features(ds) for ds in datasets])
     y = np.concatenate([cm.target_values(ds) for ds in datasets])
     try:
@@ -626,7 +667,7 @@ def fit_compensation_model(datasets: list, inputs: list[str], target: str, model
     except ValueError as exc:
         hint = " (in `twin train`, --model anfis-fcm is the FCM-initialised ANFIS)" \
             if getattr(estimator, "init", None) == "grid" else ""
-        raise TwinInputError(f"cannot fit {model!r} on {X.shape[0]} rows × {X.shape[1]} inputs: {exc}{hint}") \
+        raise TwinInputError(f"cannot fit {model!r} on {X.shape[0]} rows × {len(inputs)} inputs: {exc}{hint}") \
             from None
     cm.sampling_interval_s = dt
     # raw values at the training start: `twin evaluate --reference train` continues from them

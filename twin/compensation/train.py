@@ -39,7 +39,14 @@ from ..infra.outdir import atomic_directory, check_output_file, check_output_fol
 from ..infra.tables import markdown_table
 from ..rom.reduction import cached_rom
 from .protocol import auto_select, continued_prediction, stability_problem
-from .store import CompensationModel, continued_record, dataset_label, fit_compensation_model, joined_when_contiguous
+from .store import (
+    CompensationModel,
+    continued_record,
+    dataset_label,
+    fit_compensation_model,
+    joined_when_contiguous,
+    note_long_steps,
+)
 
 if TYPE_CHECKING:
     from ..core.machine import Machine
@@ -382,6 +389,8 @@ def _measured_and_predicted(cm, ds, label, reference, past, gap):
     try:
         if reference == "train":
             return continued_prediction(cm, ds, past, gap)
+        if cm.preprocessing.get("time_column"):
+            note_long_steps(ds)
         return cm.target_values(ds), cm.predict(ds)
     except TwinInputError:
         raise
