@@ -204,9 +204,10 @@ def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Datas
                              "as --history to run over the whole history")
     cm.check(history)
     timed = bool(cm.preprocessing.get("time_column"))
-    for ds in (history, dataset) if timed else ():
-        note_long_steps(ds)
-    for ds in (history, dataset) if not timed else ():   # a model that takes the time steps exactly, at any sampling
+    for ds in (history, dataset):
+        if timed:   # a model that takes the time steps exactly, at any sampling
+            note_long_steps(ds)
+            continue
         dt = sampling_interval(ds, strict=True)
         if abs(dt - cm.sampling_interval_s) > 1e-6 * dt:
             raise TwinInputError(f"{dataset_label(ds)}: sampled every {dt:g} s, the model was trained at "
