@@ -64,6 +64,7 @@ from models.selection_cv import (
     SCHEMES,
     Fold,
     geometric_mean_rmse,
+    margin,
     parsimonious_choice,
     rank_agreement,
     regime_blocks,
@@ -182,15 +183,18 @@ def study_arrays(case: Case, layout: str):
     return X, targets, speed, int(np.searchsorted(time_s, PART1_END_S))
 
 
-def rule_choices(selection, rule: str, zoo) -> tuple[dict[str, float], str, str]:
+def rule_choices(selection, rule: str, zoo) -> tuple[dict[str, float], str, str, bool]:
     """Each candidate's score under ``rule`` (from the fold RMSEs of one all-schemes selection), the best-scored
-    candidate, and the choice with the parsimony among nested grey-box orders."""
+    candidate, the choice with the parsimony among nested grey-box orders, and whether the folds cannot tell
+    that choice from the next-best candidate (:func:`~models.selection_cv.margin`)."""
     schemes, pool = RULES[rule]
     keep = [i for i, name in enumerate(selection.folds) if name.rsplit(" block ", 1)[0] in schemes]
     folds = {k: [v[i] for i in keep] for k, v in selection.fold_rmse.items()}
     score = {k: float(pool(v)) for k, v in folds.items()}
     best = min(score, key=lambda k: (score[k], k))
-    return score, best, parsimonious_choice(zoo, folds, best, floor=np.finfo(float).tiny)
+    chosen = parsimonious_choice(zoo, folds, best, floor=np.finfo(float).tiny)
+    found = margin(sorted(score, key=lambda k: (score[k], k)), chosen, folds, floor=np.finfo(float).tiny)
+    return score, best, chosen, found is not None and found[2]
 
 
 def judge(X, y, speed, n_fit, test, zoo):
@@ -216,11 +220,12 @@ def run_case(task) -> list[dict]:
         for question, n_fit, test in zip(QUESTIONS, (blocks[-1][0], n1), (blocks[-1], (n1, len(X)))):
             choices, judged = judge(X, y, speed, n_fit, test, zoo)
             best = min(judged, key=judged.get)
-            for rule, (score, choice, parsimonious) in choices.items():
+            for rule, (score, choice, parsimonious, indistinct) in choices.items():
                 rows.append({"split": split, "case": case.label, "layout": layout, "channel": ch,
                              "question": question, "rule": rule, "rho": rank_agreement(score, judged),
                              "choice": choice, "choice_rmse": judged[choice],
                              "parsimonious": parsimonious, "parsimonious_rmse": judged[parsimonious],
+                             "indistinct": indistinct,
                              "baseline_rmse": judged[BASELINE], "best": best, "best_rmse": judged[best]})
     return rows
 
@@ -282,6 +287,28 @@ def parsimony_summary(rows, chosen) -> None:
                   f"{regret['choice']:.3f} | {regret['parsimonious']:.3f} |")
 
 
+def margin_summary(rows, chosen) -> None:
+    """Whether the reason's last sentence means something: the chosen rule's choices (with parsimony) that the
+    folds cannot tell from the next-best candidate, against the clear ones, by their RMSE over the best in
+    hindsight (geometric mean) and how often they beat MLR16."""
+    print(f"\n#### Choices the folds cannot tell from the next-best, with the chosen rule ({chosen}) and parsimony\n")
+    print("| split | question | flagged | flagged: geometric-mean RMSE / best | beats MLR16 | "
+          "clear: geometric-mean RMSE / best | beats MLR16 |")
+    print("|---|---|---|---|---|---|---|")
+    for split in dict.fromkeys(r["split"] for r in rows):
+        for question in QUESTIONS:
+            sel = [r for r in rows if r["split"] == split and r["question"] == question and r["rule"] == chosen]
+            cells = []
+            for flagged in (True, False):
+                part = [r for r in sel if r["indistinct"] == flagged]
+                regret = np.exp(np.mean([np.log(r["parsimonious_rmse"] / r["best_rmse"]) for r in part])) \
+                    if part else np.nan
+                beats = sum(r["parsimonious_rmse"] < r["baseline_rmse"] for r in part)
+                cells.append(f"{regret:.3f} | {beats}/{len(part)}")
+            print(f"| {split} | {question} | {sum(r['indistinct'] for r in sel)}/{len(sel)} | "
+                  f"{cells[0]} | {cells[1]} |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--workers", type=int, default=2, help="processes (default 2)")
@@ -301,6 +328,7 @@ def main() -> None:
     for split in splits:
         summary(rows, split, chosen)
     parsimony_summary(rows, chosen)
+    margin_summary(rows, chosen)
     print(f"\nRule chosen on the development cases (highest median ρ): {chosen}.")
     print(f"{len(tasks)} records ({len(LAYOUTS)} sensor layouts) × {len(CHANNELS)} channels × 2 questions, "
           f"{len(candidates())} candidates; {time.perf_counter() - start:.0f} s")

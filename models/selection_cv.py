@@ -404,16 +404,45 @@ def select_by_blocked_cv(candidates: Mapping[str, tuple[BaseEstimator, Sequence[
                      _reason(ranking, chosen, score, worst, folds, unit) + _margin(ranking, chosen, scores, floor))
 
 
-def _margin(ranking, chosen, fold_rmse, floor) -> str:
-    """How clearly the choice beats the next-best candidate, fold by fold (the best-scored one, if parsimony chose
-    a lower order); a pair within one standard error is said to be one the folds cannot tell apart."""
+def margin(ranking: Sequence[str], chosen: str, fold_rmse: Mapping[str, Sequence[float]], floor: float
+           ) -> tuple[str, int, bool] | None:
+    """How clearly ``chosen`` beats the next-best candidate (the best-scored one, if parsimony chose a lower order).
+
+    Parameters
+    ----------
+    ranking : sequence of str
+        Candidates, best score first.
+    chosen : str
+        The choice.
+    fold_rmse : dict name → sequence of float
+        RMSE per fold of every candidate (the same folds for all).
+    floor : float
+        RMSE floor (see :func:`geometric_mean_rmse`).
+
+    Returns
+    -------
+    (rival, folds_ahead, indistinct) or None
+        The next-best candidate that did not fail on a fold, on how many folds ``chosen`` has the
+        lower RMSE, and whether the two are within one standard error of each other on paired folds
+        (:func:`within_one_standard_error`: the folds cannot tell them apart). None when ``chosen``
+        failed on a fold or no rival is left.
+    """
     rivals = [k for k in ranking if k != chosen and np.all(np.isfinite(fold_rmse[k]))]
     if not rivals or not np.all(np.isfinite(fold_rmse[chosen])):
-        return ""
+        return None
     rival = rivals[0]
     ahead = int(np.sum(np.asarray(fold_rmse[chosen]) < np.asarray(fold_rmse[rival])))
+    return rival, ahead, within_one_standard_error(fold_rmse[rival], fold_rmse[chosen], floor)
+
+
+def _margin(ranking, chosen, fold_rmse, floor) -> str:
+    """The reason's last sentence: :func:`margin` in words."""
+    found = margin(ranking, chosen, fold_rmse, floor)
+    if found is None:
+        return ""
+    rival, ahead, indistinct = found
     text = f" It beats {rival} on {ahead} of {len(fold_rmse[chosen])} folds"
-    if within_one_standard_error(fold_rmse[rival], fold_rmse[chosen], floor):
+    if indistinct:
         return text + ", and the two are within one standard error: these folds do not tell them apart."
     return text + "."
 

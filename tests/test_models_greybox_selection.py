@@ -9,6 +9,7 @@ from models.selection_cv import (
     blocked_folds,
     fold_prediction,
     geometric_mean_rmse,
+    margin,
     model_kind,
     nested_lower_orders,
     parsimonious_choice,
@@ -183,3 +184,12 @@ def test_rank_agreement():
     assert rank_agreement(a, {"x": 4.0, "y": 3.0, "z": 2.0, "w": 1.0}) == pytest.approx(-1.0)
     with pytest.raises(ValueError, match="at least 3 common"):
         rank_agreement({"x": 1.0, "y": 2.0}, {"x": 1.0, "y": 2.0})
+
+
+def test_the_margin_names_the_next_best_and_whether_the_folds_separate_them():
+    folds = {"a": [1.0, 1.0, 1.0, 1.0], "b": [2.0, 2.0, 2.0, 2.1], "c": [1.05, 0.95, 1.1, 0.9],
+             "d": [0.5, np.inf, 0.5, 0.5]}
+    assert margin(["a", "c", "b", "d"], "a", folds, floor=1e-9) == ("c", 2, True)    # within the scatter
+    assert margin(["a", "b", "d"], "a", folds, floor=1e-9) == ("b", 4, False)        # clear on every fold
+    assert margin(["d", "a"], "d", folds, floor=1e-9) is None                       # the choice failed on a fold
+    assert margin(["a", "d"], "a", folds, floor=1e-9) is None                       # no rival left
