@@ -164,4 +164,10 @@ def test_spoiled_user_mesh_is_reported_and_meshed_again(cache, caplog):
         again = build_machine(MINI)
     assert f"cache file {original.mesh_path} is corrupt" in caplog.text and "meshing mini" in caplog.text
     assert again.mesh_path == original.mesh_path and content_problem(again.mesh_path) is None
-    assert again.mesh.volumes.sum() == pytest.approx(original.mesh.volumes.sum(), rel=1e-6)
+    # fTetWild keeps each mesh within its envelope (epsilon × the bounding-box diagonal) of the input surface,
+    # and meshes differ from run to run inside it: two meshes of one geometry differ in volume by at most
+    # twice the envelope's thickness times the surface area (a 1e-6 tolerance failed once, at 1.4e-6)
+    mesh = original.mesh
+    envelope = original.definition.geometry.envelope_epsilon * np.linalg.norm(np.ptp(mesh.points, axis=0))
+    area = mesh.facet_geometry(*mesh.boundary_facets())[2].sum()
+    assert abs(again.mesh.volumes.sum() - mesh.volumes.sum()) <= 2 * envelope * area
