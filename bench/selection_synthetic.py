@@ -191,10 +191,10 @@ def rule_choices(selection, rule: str, zoo) -> tuple[dict[str, float], str, str,
     keep = [i for i, name in enumerate(selection.folds) if name.rsplit(" block ", 1)[0] in schemes]
     folds = {k: [v[i] for i in keep] for k, v in selection.fold_rmse.items()}
     score = {k: float(pool(v)) for k, v in folds.items()}
-    best = min(score, key=lambda k: (score[k], k))
-    chosen = parsimonious_choice(zoo, folds, best, floor=np.finfo(float).tiny)
-    found = margin(sorted(score, key=lambda k: (score[k], k)), chosen, folds, floor=np.finfo(float).tiny)
-    return score, best, chosen, found is not None and found[2]
+    ranking = sorted(score, key=lambda k: (score[k], k))
+    chosen = parsimonious_choice(zoo, folds, ranking[0], floor=np.finfo(float).tiny)
+    found = margin(ranking, chosen, folds, floor=np.finfo(float).tiny)
+    return score, ranking[0], chosen, found is not None and found[2]
 
 
 def judge(X, y, speed, n_fit, test, zoo):
@@ -269,6 +269,16 @@ def details(rows, chosen) -> None:
                   f"{r['best']} {fmt(r['best_rmse'])} |")
 
 
+def chosen_rule_rows(rows, split, question, chosen) -> list[dict]:
+    """The rows of one split and question under the chosen rule."""
+    return [r for r in rows if r["split"] == split and r["question"] == question and r["rule"] == chosen]
+
+
+def geometric_regret(rows, key) -> float:
+    """Geometric mean over ``rows`` of ``row[key + "_rmse"]`` over the best in hindsight (nan without rows)."""
+    return float(np.exp(np.mean([np.log(r[key + "_rmse"] / r["best_rmse"]) for r in rows]))) if rows else np.nan
+
+
 def parsimony_summary(rows, chosen) -> None:
     """The chosen rule with and without the parsimony among nested grey-box orders: geometric-mean RMSE over the
     best in hindsight, and how often the choice changes and gets better or worse."""
@@ -277,14 +287,12 @@ def parsimony_summary(rows, chosen) -> None:
     print("|---|---|---|---|---|---|")
     for split in dict.fromkeys(r["split"] for r in rows):
         for question in QUESTIONS:
-            sel = [r for r in rows if r["split"] == split and r["question"] == question and r["rule"] == chosen]
+            sel = chosen_rule_rows(rows, split, question, chosen)
             changed = [r for r in sel if r["parsimonious"] != r["choice"]]
             better = sum(r["parsimonious_rmse"] < r["choice_rmse"] for r in changed)
             worse = sum(r["parsimonious_rmse"] > r["choice_rmse"] for r in changed)
-            regret = {key: np.exp(np.mean([np.log(r[key + "_rmse"] / r["best_rmse"]) for r in sel]))
-                      for key in ("choice", "parsimonious")}
             print(f"| {split} | {question} | {len(changed)}/{len(sel)} | {better} / {worse} | "
-                  f"{regret['choice']:.3f} | {regret['parsimonious']:.3f} |")
+                  f"{geometric_regret(sel, 'choice'):.3f} | {geometric_regret(sel, 'parsimonious'):.3f} |")
 
 
 def margin_summary(rows, chosen) -> None:
@@ -297,14 +305,12 @@ def margin_summary(rows, chosen) -> None:
     print("|---|---|---|---|---|---|---|")
     for split in dict.fromkeys(r["split"] for r in rows):
         for question in QUESTIONS:
-            sel = [r for r in rows if r["split"] == split and r["question"] == question and r["rule"] == chosen]
+            sel = chosen_rule_rows(rows, split, question, chosen)
             cells = []
             for flagged in (True, False):
                 part = [r for r in sel if r["indistinct"] == flagged]
-                regret = np.exp(np.mean([np.log(r["parsimonious_rmse"] / r["best_rmse"]) for r in part])) \
-                    if part else np.nan
                 beats = sum(r["parsimonious_rmse"] < r["baseline_rmse"] for r in part)
-                cells.append(f"{regret:.3f} | {beats}/{len(part)}")
+                cells.append(f"{geometric_regret(part, 'parsimonious'):.3f} | {beats}/{len(part)}")
             print(f"| {split} | {question} | {sum(r['indistinct'] for r in sel)}/{len(sel)} | "
                   f"{cells[0]} | {cells[1]} |")
 

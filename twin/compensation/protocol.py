@@ -28,6 +28,7 @@ from ..core.dataset import Dataset
 from ..errors import TwinInputError
 from .store import (
     CompensationModel,
+    bridge_times,
     dataset_label,
     linear_bridge,
     make_estimator,
@@ -272,11 +273,11 @@ def bridging_inputs(history: Dataset, dataset: Dataset, inputs: list[str], inter
     """
     end, start = float(history.time_s[-1]), float(dataset.time_s[0])
     label, source = dataset_label(dataset), dataset_label(history)
-    none = np.empty(0), np.empty((0, len(inputs))), dataset.time_s
+    no_bridge = np.empty(0), np.empty((0, len(inputs)))
     if start <= float(history.time_s[0]):
         log.warning("%s: its time starts at %g s, not after --history %s ends (%g s): taken to follow it directly",
                     label, start, source, end)
-        return none[0], none[1], dataset.time_s - start + end + interval_s
+        return *no_bridge, dataset.time_s - start + end + interval_s
     if start <= end:
         raise TwinInputError(f"{label}: time_s starts at {start:g} s, inside --history {source} ({history.time_s[0]:g}"
                              f"..{end:g} s); pass as --history the record that ends where this one starts")
@@ -284,15 +285,14 @@ def bridging_inputs(history: Dataset, dataset: Dataset, inputs: list[str], inter
     if on_grid and abs(missing - round(missing)) > 1e-6 * (1.0 + missing):
         raise TwinInputError(f"{label}: time_s starts at {start:g} s, {start - end:g} s after --history {source} "
                              f"ends: not a whole number of the model's {interval_s:g} s steps")
-    n_missing = max(round(missing), 0)
-    if n_missing == 0:
-        return none
+    times = bridge_times(end, start, interval_s)
+    if len(times) == 0:
+        return *no_bridge, dataset.time_s
     if gap != "interpolate":
         raise TwinInputError(f"{label}: time_s starts at {start:g} s, {start - end:g} s after --history {source} "
-                             f"ends ({end:g} s): {n_missing} rows of {', '.join(inputs)} are missing, and a "
+                             f"ends ({end:g} s): {len(times)} rows of {', '.join(inputs)} are missing, and a "
                              "time-series model carries its state through them. Pass the missing rows, or "
                              "--gap interpolate to bridge them by linear interpolation (the spindle speed too)")
     log.warning("%s: %d missing rows after --history %s bridged by linear interpolation of the inputs",
-                label, n_missing, source)
-    return (end + interval_s * np.arange(1, n_missing + 1),
-            linear_bridge(history.matrix(inputs)[-1], dataset.matrix(inputs)[0], n_missing), dataset.time_s)
+                label, len(times), source)
+    return times, linear_bridge(history.matrix(inputs)[-1], dataset.matrix(inputs)[0], len(times)), dataset.time_s

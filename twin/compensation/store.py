@@ -178,15 +178,15 @@ def note_long_steps(dataset: Dataset) -> None:
     dataset : Dataset
         A record (twin or measured).
     """
-    steps = np.diff(dataset.time_s)
-    if len(steps) == 0:
+    if len(dataset) < 2:
         return
-    long = np.flatnonzero(steps > LONG_STEP_FACTOR * np.median(steps))
+    steps, usual = np.diff(dataset.time_s), sampling_interval(dataset, strict=False)
+    long = np.flatnonzero(steps > LONG_STEP_FACTOR * usual)
     if len(long):
         k = long[np.argmax(steps[long])]
         log.warning("%s: %d step(s) over %g× the usual %g s, the longest %g s after t = %g s; the inputs are held "
-                    "over them", dataset_label(dataset), len(long), LONG_STEP_FACTOR, float(np.median(steps)),
-                    float(steps[k]), float(dataset.time_s[k]))
+                    "over them", dataset_label(dataset), len(long), LONG_STEP_FACTOR, usual, float(steps[k]),
+                    float(dataset.time_s[k]))
 
 
 def continued_record(first: Dataset, later: Dataset, names: Sequence[str], interval_s: float | None = None
@@ -209,11 +209,30 @@ def continued_record(first: Dataset, later: Dataset, names: Sequence[str], inter
         The rows of both, and the bridge between them.
     """
     a, b = first.select(list(names)), later.select(list(names))
-    n_missing = 0 if interval_s is None else round((b.time_s[0] - a.time_s[-1]) / interval_s) - 1
-    bridge_t = a.time_s[-1] + interval_s * np.arange(1, n_missing + 1) if n_missing > 0 else np.empty(0)
+    bridge_t = np.empty(0) if interval_s is None else bridge_times(a.time_s[-1], b.time_s[0], interval_s)
     bridge = linear_bridge(a.values[-1], b.values[0], len(bridge_t))
     return Dataset(np.r_[a.time_s, bridge_t, b.time_s], np.vstack([a.values, bridge, b.values]), a.channels,
                    {"label": f"{dataset_label(first)} + {dataset_label(later)}"})
+
+
+def bridge_times(end_s: float, start_s: float, interval_s: float) -> NDArray[np.float64]:
+    """Times of the whole sampling intervals missing between a record that ends at ``end_s`` and one that starts
+    at ``start_s`` (s; empty when the second follows within about one interval).
+
+    Parameters
+    ----------
+    end_s, start_s : float
+        The first record's last time and the second's first, s.
+    interval_s : float
+        The sampling interval, s.
+
+    Returns
+    -------
+    ndarray, shape (n_missing,)
+        ``end_s + k·interval_s`` for k = 1 … n_missing, s.
+    """
+    n_missing = max(round((start_s - end_s) / interval_s) - 1, 0)
+    return end_s + interval_s * np.arange(1, n_missing + 1)
 
 
 def linear_bridge(before: ArrayLike, after: ArrayLike, n_rows: int) -> NDArray[np.float64]:
@@ -267,7 +286,7 @@ def _continues(first, later, names):
     if len(first) < 2 or not all(n in first and n in later and first.info(n).unit == later.info(n).unit
                                  for n in names):
         return False
-    dt = float(np.median(np.diff(first.time_s)))
+    dt = sampling_interval(first, strict=False)
     return abs(later.time_s[0] - first.time_s[-1] - dt) <= 1e-6 * dt
 
 
