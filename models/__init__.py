@@ -27,7 +27,7 @@ from .kalman import FilterResult, KalmanFilter, discretize
 from .metrics import improvement_percent, max_abs_residual, nse, pearson_r, rmse
 from .persistence import load_model, save_model
 from .pso import PSOResult, particle_swarm_minimize
-from .registry import model_names, register_model, registered_models
+from .registry import model_names, model_traits, register_model, registered_models
 from .regression import ANNRegressor, MLRRegressor, PCRRegressor, make_ann_pipeline
 from .selection import SensorSelection, select_sensors
 
@@ -60,6 +60,7 @@ __all__ = [
     "make_ann_pipeline",
     "max_abs_residual",
     "model_names",
+    "model_traits",
     "network_layers",
     "network_output",
     "nse",

@@ -67,6 +67,51 @@ _DISTINCT_SPEEDS = 1.05
 _STARTS = ((1800.0, 7200.0, 21600.0, 64800.0), (600.0, 3600.0, 14400.0, 57600.0), (3600.0, 21600.0, 86400.0, 345600.0))
 
 
+#: the largest decay exponent λ·Δt inside one closed-form stretch of :func:`_uneven_lag` (e^300 ≈ 2e130 stays
+#: far from overflow, and a stretch still spans 300 time constants)
+_STRETCH_DECAYS = 300.0
+
+
+def _uneven_lag(time, rate, U, start):
+    """First-order lag ``s' = rate (u − s)`` of ZOH inputs at uneven times, in closed form.
+
+    With ``E_k = rate (t_k − t_c)`` from a stretch's first row c,
+    ``s_k = e^{−E_k} (s_c + Σ_{j<k} (1 − e^{−rate Δt_j}) u_j e^{E_{j+1}})``:
+    the recurrence ``s_{k+1} = a_k s_k + (1 − a_k) u_k`` as a cumulative sum,
+    so a record with jitter costs a few array passes instead of a loop over
+    rows. A stretch ends before ``E`` passes :data:`_STRETCH_DECAYS`. The sum's
+    rounding, scaled back by ``e^{−E_k}``, is of the order of the recurrence's
+    own (``tests/test_models_greybox.py`` compares the two).
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        Strictly increasing, s.
+    rate : float
+        1/τ, 1/s.
+    U : ndarray, shape (n, m)
+        Inputs, held from each row to the next.
+    start : ndarray, shape (m,)
+        The lag's value at row 0.
+
+    Returns
+    -------
+    ndarray, shape (n, m)
+    """
+    out = np.empty_like(U)
+    out[0] = start
+    decays = rate * (time - time[0])
+    first = 0
+    while first < len(time) - 1:
+        stop = int(np.searchsorted(decays, decays[first] + _STRETCH_DECAYS, side="right"))
+        stop = max(stop, first + 2)   # a single step longer than a stretch is one exact term
+        grow = np.exp(rate * (time[first + 1: stop] - time[first]))[:, None]   # e^{E_k}, k = first+1 … stop-1
+        gain = -np.expm1(-rate * np.diff(time[first:stop]))[:, None]          # 1 − a_j
+        out[first + 1: stop] = (out[first] + np.cumsum(gain * U[first: stop - 1] * grow, axis=0)) / grow
+        first = stop - 1
+    return out
+
+
 def _time_constants(fractions, log_low, log_high):
     """Time constants τ₁ < … < τ_n (s) inside ``[exp(log_low), exp(log_high)]``, each at least :data:`_MIN_RATIO`
     times the one before, from stick-breaking fractions in [0, 1]: τ_i is placed at ``fractions[i]`` of the room
@@ -94,7 +139,8 @@ def _stick_fractions(taus, log_low, log_high):
     return fractions
 
 
-@register_model({"greybox": {"sampling_interval": 1.0}}, time_series=True)
+@register_model({"greybox": {"sampling_interval": 1.0}}, time_series=True, takes_time=True,
+                first_input=("spindle speed", "rpm"))
 class GreyBoxRegressor(RegressorMixin, BaseEstimator):
     """Grey-box RC-network thermal-drift model, fitted by output-error minimisation.
 
@@ -249,10 +295,8 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
                 a = np.exp(-rate * steps[0])
                 S[:, i, :] = lfilter([0.0, 1.0 - a], [1.0, -a], U, axis=0, zi=U[:1])[0]
             return S
-        decay = np.exp(-np.outer(steps, lam))[:, :, None]  # (n-1, n_poles, 1)
-        S[0] = U[0]
-        for k in range(n - 1):
-            S[k + 1] = decay[k] * S[k] + (1.0 - decay[k]) * U[k]
+        for i, rate in enumerate(lam):
+            S[:, i, :] = _uneven_lag(time, rate, U, U[0])
         return S
 
     @staticmethod

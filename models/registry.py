@@ -10,13 +10,17 @@ Usage, in the module that defines the estimator::
     @register_model({"gmc": {"random_state": 0}}, time_series=True)
     class GMCRegressor(...): ...
 
+    @register_model({"greybox": {...}}, time_series=True, takes_time=True, first_input=("spindle speed", "rpm"))
+    class GreyBoxRegressor(...): ...
+
     @register_model()                                              # persisted, but not a `twin train` model
     class FuzzyCMeans(...): ...
 
 Everything that lists models derives from here: :mod:`models.persistence`
 (which classes a model file may name), ``twin train --model`` and
-:mod:`twin.compensation.store` (names, defaults, time-series handling) and
-the tests' parametrisations.  Every module of the ``models`` package is
+:mod:`twin.compensation.store` (names, defaults, and the input contract of
+:class:`ModelTraits`: time-series handling, a time column, a required first
+input) and the tests' parametrisations.  Every module of the ``models`` package is
 imported before the registry is read, so a new module's decorator is all it
 takes.
 
@@ -38,6 +42,28 @@ T = TypeVar("T", bound=type)
 
 
 @dataclass(frozen=True)
+class ModelTraits:
+    """What a class needs of its inputs, declared where it registers (so that callers need not know it by name).
+
+    Attributes
+    ----------
+    time_series : bool
+        A grey time-series model: it runs over the record's history, trained on one contiguous record;
+        ``predict`` returns ``y_reference_`` + the predicted change. Without ``takes_time`` its
+        coefficients are per sample, so the record must be evenly sampled.
+    takes_time : bool
+        The class has a ``sampling_interval`` parameter (s); set to None, column 0 of ``X`` is the time
+        (s) and any sampling (jitter, missing rows) is taken as it is.
+    first_input : (str, str) or None
+        What the first input must be, and its unit, e.g. ``("spindle speed", "rpm")``.
+    """
+
+    time_series: bool = False
+    takes_time: bool = False
+    first_input: tuple[str, str] | None = None
+
+
+@dataclass(frozen=True)
 class ModelEntry:
     """One command-line model name.
 
@@ -49,15 +75,14 @@ class ModelEntry:
         The estimator class.
     defaults : dict
         Hyperparameters that differ from the class defaults for this name.
-    time_series : bool
-        True for grey time-series models: coefficients per sample, trained on one contiguous, evenly sampled
-        record; ``predict`` returns ``y_reference_`` + the predicted change.
+    traits : ModelTraits
+        The class's input contract.
     """
 
     name: str
     cls: type
     defaults: dict = field(default_factory=dict)
-    time_series: bool = False
+    traits: ModelTraits = ModelTraits()
 
     def make(self, **params: object) -> object:
         """An unfitted estimator with this name's defaults, overridden by ``params``.
@@ -77,10 +102,11 @@ class ModelEntry:
 
 _CLASSES: dict[str, type] = {}
 _MODELS: dict[str, ModelEntry] = {}
-_TIME_SERIES: set[str] = set()
+_TRAITS: dict[str, ModelTraits] = {}
 
 
-def register_model(names: dict[str, dict] | None = None, time_series: bool = False) -> Callable[[T], T]:
+def register_model(names: dict[str, dict] | None = None, time_series: bool = False, takes_time: bool = False,
+                   first_input: tuple[str, str] | None = None) -> Callable[[T], T]:
     """Class decorator: register an estimator for persistence and, with ``names``, for ``twin train``.
 
     Parameters
@@ -88,8 +114,8 @@ def register_model(names: dict[str, dict] | None = None, time_series: bool = Fal
     names : dict of str to dict, optional
         Command-line name → default hyperparameters (several names may share a class, e.g. the ANFIS
         initialisations).  None: persisted only.
-    time_series : bool
-        The class is a grey time-series model (see :class:`ModelEntry`).
+    time_series, takes_time, first_input
+        The class's input contract (see :class:`ModelTraits`).
 
     Returns
     -------
@@ -104,14 +130,14 @@ def register_model(names: dict[str, dict] | None = None, time_series: bool = Fal
     def decorate(cls):
         if _CLASSES.get(cls.__name__, cls) is not cls:
             raise ValueError(f"estimator class name {cls.__name__!r} is registered twice")
-        entries = [ModelEntry(name.lower(), cls, dict(defaults), time_series) for name, defaults in (names or {}).items()]
+        traits = ModelTraits(time_series, takes_time, None if first_input is None else tuple(first_input))
+        entries = [ModelEntry(name.lower(), cls, dict(defaults), traits) for name, defaults in (names or {}).items()]
         for e in entries:                    # checked before anything is registered: a refusal leaves no trace
             if e.name in _MODELS and _MODELS[e.name].cls is not cls:
                 raise ValueError(f"model name {e.name!r} is registered twice ({_MODELS[e.name].cls.__name__}, "
                                  f"{cls.__name__})")
         _CLASSES[cls.__name__] = cls
-        if time_series:
-            _TIME_SERIES.add(cls.__name__)
+        _TRAITS[cls.__name__] = traits
         _MODELS.update({e.name: e for e in entries})
         return cls
     return decorate
@@ -161,6 +187,22 @@ def model_names() -> list[str]:
     return sorted(registered_models())
 
 
+def model_traits(estimator: object) -> ModelTraits:
+    """The input contract of ``estimator``'s class; the default (static, any inputs) if it is not registered.
+
+    Parameters
+    ----------
+    estimator : object
+        Any object (its class name is looked up).
+
+    Returns
+    -------
+    ModelTraits
+    """
+    _load_all()
+    return _TRAITS.get(type(estimator).__name__, ModelTraits())
+
+
 def is_time_series(estimator: object) -> bool:
     """True if ``estimator`` is an instance of a registered grey time-series class.
 
@@ -173,5 +215,4 @@ def is_time_series(estimator: object) -> bool:
     -------
     bool
     """
-    _load_all()
-    return type(estimator).__name__ in _TIME_SERIES
+    return model_traits(estimator).time_series

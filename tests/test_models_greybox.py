@@ -131,6 +131,25 @@ def test_irregular_sampling_recovers_the_network(training):
     assert np.sqrt(np.mean((model.predict(X_reg) - y_reg) ** 2)) < 0.01 * np.ptp(y_reg)
 
 
+@pytest.mark.parametrize("time_constant", [30.0, 3600.0, 1e6])
+def test_the_lag_states_at_uneven_times_are_the_zoh_recurrence(time_constant):
+    """The closed-form stretches of ``_states`` against the row-by-row recurrence, over jitter and holes
+    longer than a stretch (300 time constants), to the recurrence's own rounding."""
+    rng = np.random.default_rng(5)
+    steps = 15.0 + rng.uniform(-5.0, 5.0, 4000)
+    steps[[1000, 2500]] = [400 * 30.0, 5 * 3600.0]
+    times = np.cumsum(np.r_[7.0e4, steps])
+    U = rng.normal(0.0, 10.0, (len(times), 3))
+    rate = 1.0 / time_constant
+    expected = np.empty_like(U)
+    expected[0] = U[0]
+    for k, step in enumerate(steps):
+        decay = np.exp(-rate * step)
+        expected[k + 1] = decay * expected[k] + (1.0 - decay) * U[k]
+    states = GreyBoxRegressor._states(times, U, np.array([rate]))[:, 0, :]
+    np.testing.assert_allclose(states, expected, rtol=0, atol=1e-12 * np.abs(U).max())
+
+
 def test_poles_are_negative_and_the_response_bounded_even_on_noise():
     rng = np.random.default_rng(0)
     times = np.arange(0.0, 500 * 60.0, 60.0)

@@ -186,9 +186,9 @@ def test_a_continuation_on_its_own_clock_follows_directly_and_an_overlap_is_refu
     assert 0 < np.max(np.abs(held - full)) < 0.01 * np.ptp(full)
 
 
-def test_a_record_with_jitter_or_missing_rows_trains_and_continues():
-    """The greybox takes the record's own times: jittered stamps (the truth integrated at those very times)
-    and a record with rows missing train and continue as the evenly sampled record does."""
+def _uneven_records():
+    """``(even, shaky, holey, cut)``: a 44 h record from rest; the same run with stamps jittered by ±20 s (the
+    truth integrated at those very times); the even one's first 21 h (``cut`` rows) with six rows missing."""
     rng = np.random.default_rng(3)
     times = np.arange(0.0, 44 * 3600.0, 120.0)
     jittered = times + np.r_[0.0, rng.uniform(-20.0, 20.0, len(times) - 1)]
@@ -198,7 +198,13 @@ def test_a_record_with_jitter_or_missing_rows_trains_and_continues():
     shaky = _dataset(jittered, duty(jittered, speeds, 4 * 3600.0), "shaky")
     holes = np.ones(len(times), bool)
     holes[[50, 51, 52, 200, 400, 401]] = False
-    holey = _rows(even, np.flatnonzero(holes[:cut]), "holey")
+    return even, shaky, _rows(even, np.flatnonzero(holes[:cut]), "holey"), cut
+
+
+def test_a_record_with_jitter_or_missing_rows_trains_and_continues():
+    """The greybox takes the record's own times: jittered stamps and a record with rows missing train and
+    continue as the evenly sampled record does."""
+    even, shaky, holey, cut = _uneven_records()
     reference = train([_rows(even, slice(0, cut), "train")], "spindle,air", "Z", model="greybox")
     for record in (_rows(shaky, slice(0, cut), "shaky train"), holey):
         cm = train([record], "spindle,air", "Z", model="greybox")
@@ -207,6 +213,32 @@ def test_a_record_with_jitter_or_missing_rows_trains_and_continues():
         result = evaluate(cm, [later], reference="train", history=record)
         truth = later["Z"] - record["Z"][0]
         assert result.rows[0]["rmse"] < 0.02 * np.ptp(truth)   # 6000 rpm was never seen in training
+
+
+def test_select_auto_on_uneven_times_runs_the_greybox_on_them_and_names_what_it_left_out():
+    """By each model's input contract: the grey-box orders run on the record's own times and score as on
+    the evenly sampled record; GM(0,N), GM(1,N) and GMC (coefficients per sample) are left out, and said so."""
+    even, shaky, _, cut = _uneven_records()
+    chosen = train([_rows(shaky, slice(0, cut), "shaky train")], "spindle,air", "Z", select="auto")
+    selection = chosen.metadata["selection"]
+    assert chosen.model_name == "greybox" and chosen.preprocessing["time_column"]
+    assert selection["chosen"] in ("greybox n_poles=2", "greybox n_poles=3")
+    assert not {"gm0n", "gm1n", "gmc"} & set(selection["ranking"])
+    assert selection["reason"].endswith("Left out: gm0n, gm1n, gmc (coefficients per sample need even sampling; "
+                                        "steps here range from 80.68 to 158.9 s).")
+    reference = train([_rows(even, slice(0, cut), "train")], "spindle,air", "Z", select="auto").metadata["selection"]
+    assert "Left out" not in reference["reason"] and "gm1n" in reference["ranking"]
+    for label in ("mlr", "greybox n_poles=1"):   # the exact orders score ~0 either way; these have an error
+        assert selection["geometric_mean_rmse"][label] == pytest.approx(reference["geometric_mean_rmse"][label],
+                                                                       rel=0.05)
+
+
+def test_select_auto_names_a_greybox_left_out_for_its_first_input(records):
+    training, _, _ = records
+    selection = train([training], "air,spindle", "Z", select="auto").metadata["selection"]
+    assert not any(label.startswith("greybox") for label in selection["ranking"])
+    assert selection["reason"].endswith("Left out: greybox n_poles=1, greybox n_poles=2, greybox n_poles=3 (the "
+                                        "first input must be the spindle speed in rpm).")
 
 
 def test_the_bridging_rows_interpolate_every_input_on_the_model_grid():
@@ -228,7 +260,7 @@ def test_the_bridging_rows_interpolate_every_input_on_the_model_grid():
 def test_greybox_names_the_speed_input_it_needs_first(records):
     training, _, _ = records
     with pytest.raises(TwinInputError, match=r"greybox takes the spindle speed \(unit rpm\) as its first input, "
-                                             r"and 'air' is in degC; put the speed first"):
+                                             r"and 'air' is in degC; put the spindle speed first"):
         train([training], "air,spindle", "Z", model="greybox")
 
 

@@ -22,6 +22,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from models.registry import model_traits
 from models.selection_cv import Selection, select_by_blocked_cv
 
 from ..core.dataset import Dataset
@@ -30,6 +31,7 @@ from .store import (
     CompensationModel,
     bridge_times,
     dataset_label,
+    evenly_sampled,
     linear_bridge,
     make_estimator,
     note_long_steps,
@@ -62,13 +64,18 @@ def auto_select(datasets: Iterable[Dataset], inputs: list[str], target: str,
                 zero_reference: bool = True) -> tuple[str, dict, Selection]:
     """The model and hyper-parameters chosen by blocked cross-validation on one training record, and the ranking.
 
-    The greybox candidates take the inputs as given: the first must be the
-    spindle speed (rpm); if it is not, they are left out.
+    Each candidate's input contract (:class:`models.registry.ModelTraits`)
+    decides whether it can take the record: one whose first input must be the
+    spindle speed (the grey-box model) is left out when the first input is not
+    in rpm; on an unevenly sampled record (jitter, missing rows) a model that
+    takes the time runs on the record's own times, and one with coefficients
+    per sample (GM, GMC) is left out. The reason ends by naming what was left
+    out and why.
 
     Parameters
     ----------
     datasets : iterable of Dataset
-        Exactly one training record, evenly sampled, with a spindle-speed input (rpm).
+        Exactly one training record, with a spindle-speed input (rpm).
     inputs : list of str
         Input channels, the same for every candidate.
     target : str
@@ -83,14 +90,14 @@ def auto_select(datasets: Iterable[Dataset], inputs: list[str], target: str,
     model : str
         The chosen model name.
     params : dict
-        Its hyper-parameters (those of the candidate; ``sampling_interval`` is set by the training).
+        Its hyper-parameters (those of the candidate; how it takes the time is set by the training).
     selection : Selection
         Scores per candidate and fold, the ranking and the reason.
 
     Raises
     ------
     TwinInputError
-        Not one record, no rpm input, uneven sampling, or fewer than two operating-regime blocks.
+        Not one record, no rpm input, or fewer than two operating-regime blocks.
     """
     datasets = list(datasets)
     if len(datasets) != 1:
@@ -102,21 +109,45 @@ def auto_select(datasets: Iterable[Dataset], inputs: list[str], target: str,
     y = ds[target]
     if zero_reference:
         X, y = X - X[:1], y - y[0]
-    dt = sampling_interval(ds, strict=True)
-    pool = {}
-    for label, (name, params) in candidates.items():
-        if name == "greybox":
-            if inputs[0] != speed_name:
-                continue
-            params = {**params, "sampling_interval": dt}
-        pool[label] = (make_estimator(name, params), range(X.shape[1]))
+    pool, left_out = _candidate_pool(ds, inputs, candidates)
+    X = np.column_stack([ds.time_s - ds.time_s[0], X])   # column 0, the time (s), for the models that take it
     try:
         selection = select_by_blocked_cv(pool, X, y, ds[speed_name], unit=ds.info(target).unit)
     except ValueError as exc:     # the record's (one speed regime only); a candidate's failed fit is caught inside
         raise TwinInputError(f"{dataset_label(ds)}: --select auto cannot cross-validate on this record: {exc}") \
             from None
-    model, params = candidates[selection.best]
+    if left_out:
+        selection.reason += " Left out: " + "; ".join(f"{', '.join(labels)} ({why})"
+                                                      for why, labels in left_out.items()) + "."
+    model, params = candidates[selection.chosen]
     return model, dict(params), selection
+
+
+def _candidate_pool(dataset, inputs, candidates):
+    """``(pool, left_out)``: label → (estimator, columns of ``[time, inputs…]``) of the candidates that can
+    take this record, and why → labels of those that cannot, by each class's input contract."""
+    even = evenly_sampled(dataset)
+    first_unit = dataset.info(inputs[0]).unit
+    pool, left_out = {}, {}
+    for label, (name, params) in candidates.items():
+        estimator = make_estimator(name, params)
+        traits = model_traits(estimator)
+        columns = range(1, len(inputs) + 1)
+        why = None
+        if traits.first_input is not None and first_unit != traits.first_input[1]:
+            why = f"the first input must be the {traits.first_input[0]} in {traits.first_input[1]}"
+        elif traits.takes_time:   # at the record's interval, or on its own times where they are uneven
+            estimator.set_params(sampling_interval=sampling_interval(dataset) if even else None)
+            columns = range(len(inputs) + 1) if not even else columns
+        elif traits.time_series and not even:
+            steps = np.diff(dataset.time_s)
+            why = (f"coefficients per sample need even sampling; steps here range from {steps.min():.4g} to "
+                   f"{steps.max():.4g} s")
+        if why is None:
+            pool[label] = (estimator, columns)
+        else:
+            left_out.setdefault(why, []).append(label)
+    return pool, left_out
 
 
 def stability_problem(cm: CompensationModel, datasets: Iterable[Dataset]) -> str | None:

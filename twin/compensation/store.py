@@ -36,7 +36,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from models.persistence import model_from_document, model_to_document
-from models.registry import is_time_series, registered_models
+from models.registry import is_time_series, model_traits, registered_models
 
 from ..core.dataset import Dataset, json_default, project_version
 from ..core.files import write_text_atomic
@@ -134,6 +134,28 @@ def dataset_label(dataset: Dataset) -> str:
     return "dataset"
 
 
+#: steps within this fraction of their median count as even sampling
+EVEN_STEP_TOLERANCE = 1e-6
+
+
+def evenly_sampled(dataset: Dataset) -> bool:
+    """Whether every time step of a record is within :data:`EVEN_STEP_TOLERANCE` of their median.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        A record (one row counts as even).
+
+    Returns
+    -------
+    bool
+    """
+    steps = np.diff(dataset.time_s)
+    if len(steps) == 0:
+        return True
+    return bool(np.abs(steps - np.median(steps)).max() <= EVEN_STEP_TOLERANCE * np.median(steps))
+
+
 def sampling_interval(dataset: Dataset, strict: bool = True) -> float:
     """The constant sampling interval of a dataset (s); with ``strict`` an uneven one is an error.
 
@@ -142,7 +164,7 @@ def sampling_interval(dataset: Dataset, strict: bool = True) -> float:
     dataset : Dataset
         A record (twin or measured).
     strict : bool, default True
-        Refuse steps that differ from their median by more than 1e-6 of it.
+        Refuse uneven steps (:func:`evenly_sampled`).
 
     Returns
     -------
@@ -158,7 +180,7 @@ def sampling_interval(dataset: Dataset, strict: bool = True) -> float:
     if len(steps) == 0:
         raise TwinInputError(f"{dataset_label(dataset)}: a dataset with one row has no sampling interval")
     dt = float(np.median(steps))
-    if strict and np.abs(steps - dt).max() > 1e-6 * dt:
+    if strict and not evenly_sampled(dataset):
         raise TwinInputError(f"{dataset_label(dataset)}: grey time-series models need evenly sampled data; "
                              f"steps range from {steps.min():g} to {steps.max():g} s (the grey-box model, "
                              "--model greybox, takes the record's own times)")
@@ -619,9 +641,9 @@ def _time_series_interval(cm, datasets, params):
                              f"record; got {len(datasets)} datasets that do not continue one another (each "
                              "must start one sampling interval after the one before it ends, in time order; or "
                              "use a static model: mlr, pcr, ann, anfis)")
-    if "sampling_interval" in cm.estimator.get_params(deep=False) and "sampling_interval" not in (params or {}):
-        # the grey-box model takes the time itself and steps exactly over every interval, so a record with
-        # jitter or missing rows needs no resampling; its time constants are in s
+    if model_traits(cm.estimator).takes_time and "sampling_interval" not in (params or {}):
+        # a model that takes the time (the grey-box model) steps exactly over every interval, so a record
+        # with jitter or missing rows needs no resampling; its time constants are in s
         cm.estimator.set_params(sampling_interval=None)
         cm.preprocessing["time_column"] = True
         note_long_steps(datasets[0])
@@ -671,9 +693,10 @@ def fit_compensation_model(datasets: list, inputs: list[str], target: str, model
         check_reference_samples(reference_samples, len(ds), dataset_label(ds))
     estimator = make_estimator(model, params)
     units, target_unit = _channel_units(datasets, inputs, target)
-    if str(model).lower() == "greybox" and units[0] != "rpm":
-        raise TwinInputError(f"greybox takes the spindle speed (unit rpm) as its first input, and {inputs[0]!r} is "
-                             f"in {units[0]}; put the speed first (--inputs <speed>,<temperatures…>)")
+    first = model_traits(estimator).first_input
+    if first is not None and units[0] != first[1]:
+        raise TwinInputError(f"{model} takes the {first[0]} (unit {first[1]}) as its first input, and {inputs[0]!r} "
+                             f"is in {units[0]}; put the {first[0]} first (--inputs <{first[0]}>,<the others…>)")
     prep = {"zero_reference": bool(zero_reference), "reference_samples": int(reference_samples),
             "convention": "inputs and target minus their value at the start of each dataset"
             if zero_reference else "raw values"}
