@@ -5,8 +5,11 @@ candidates are scored on whole *regime blocks* they did not see, never on
 shuffled rows or on a tail of the same regime:
 
 * **regime blocks** (:func:`regime_blocks`): a block starts where the spindle
-  starts a run (or changes speed while running) and holds the run and the
-  stop after it; rows before the first run join the first block;
+  runs at a speed other than its last running speed, from standstill or
+  while running, and holds every run and stop until the next such start;
+  rows before the first run join the first block. A measured speed's noise
+  and ramps are not regimes, nor is a restart at the same speed (a duty
+  cycle at one speed is one regime);
 * **leave one block out**: train on every other block, test on the block;
 * **rolling origin**: train on blocks ``0..k-1``, test on block ``k``
   (a forecast into the next, unseen regime);
@@ -66,19 +69,33 @@ SCHEMES = ("leave-one-block-out", "rolling-origin")
 ORDER_PARAMETERS = {GreyBoxRegressor: "n_poles"}
 
 
-def regime_blocks(speed: ArrayLike, min_rows: int = 2) -> list[tuple[int, int]]:
+#: a speed change by more than this fraction of the running speed starts another regime
+SPEED_TOLERANCE = 0.05
+#: a speed below this fraction of the record's top speed is standstill (a measured standstill reads a few rpm)
+STANDSTILL_FRACTION = 0.05
+
+
+def regime_blocks(speed: ArrayLike, min_rows: int = 2, tolerance: float = SPEED_TOLERANCE
+                  ) -> list[tuple[int, int]]:
     """Row ranges ``[start, stop)`` of the operating-regime blocks of a speed record (rpm).
 
-    A block starts at every run start (speed from 0 to > 0, or a new speed
-    while running) and ends where the next one starts. Blocks shorter than
-    ``min_rows`` are merged into the previous one.
+    A block starts where the spindle runs at a speed that differs from its
+    last running speed by more than ``tolerance`` of it: a run from
+    standstill at a new speed, or a speed step while running. A run that
+    restarts at the last speed continues the block, and so does a speed
+    still moving after a step (a ramp; the block starts at its first row).
+    Speeds below :data:`STANDSTILL_FRACTION` of the top speed are standstill,
+    so a measured speed's noise is no regime. The block ends where the next one starts.
+    Blocks shorter than ``min_rows`` are merged into the previous one.
 
     Parameters
     ----------
     speed : array-like, shape (n_samples,)
-        Spindle speed per row, rpm.
+        Spindle speed per row, rpm (set points or measured).
     min_rows : int, default 2
         Fewest rows of a block.
+    tolerance : float, default :data:`SPEED_TOLERANCE`
+        Relative speed change that starts another regime.
 
     Returns
     -------
@@ -88,12 +105,25 @@ def regime_blocks(speed: ArrayLike, min_rows: int = 2) -> list[tuple[int, int]]:
     speed = np.asarray(speed, float)
     if speed.ndim != 1 or len(speed) < 2 or not np.all(np.isfinite(speed)):
         raise ValueError("regime_blocks: speed must be a finite 1-D series of at least 2 samples (rpm).")
-    running = speed > 0
-    change = [int(s) for s in np.flatnonzero((speed[1:] != speed[:-1]) & running[1:]) + 1]
-    if not running[0]:
-        change = change[1:]  # the rows before the first run join the first block
+    standstill = STANDSTILL_FRACTION * np.max(np.abs(speed))
+    starts = []
+    regime = None      # the settled running speed of the current block
+    previous = None    # the speed of the row before, None at standstill
+    departure = None   # the first row of a run start or speed step that has not settled yet
+    for k, n in enumerate(speed):
+        if n <= standstill:
+            previous = departure = None
+            continue
+        if previous is None or abs(n - previous) > tolerance * previous:   # starting, stepping or ramping
+            departure = k if departure is None else departure
+        elif departure is not None:   # settled: a new regime if the speed is not the block's
+            if regime is None or abs(n - regime) > tolerance * regime:
+                starts.append(departure)
+                regime = n
+            departure = None
+        previous = n
     edges = [0]
-    for s in change:
+    for s in starts[1:]:   # the rows before the first run join the first block
         if s - edges[-1] >= min_rows:
             edges.append(s)
     stops = edges[1:] + [len(speed)]

@@ -29,6 +29,29 @@ def test_regime_blocks_start_at_runs_and_keep_the_stop_after_them():
         regime_blocks([0.0, np.nan, 1.0])
 
 
+def test_regime_blocks_of_a_measured_speed_are_those_of_its_set_points():
+    """Noise, a standstill that reads a few rpm, and ramps after a start or a step are no regimes."""
+    set_points = np.r_[np.zeros(20), np.full(40, 2000.0), np.zeros(30), np.full(40, 4000.0), np.full(40, 6000.0),
+                       np.zeros(30)]
+    rng = np.random.default_rng(0)
+    measured = np.where(set_points > 0, set_points + rng.normal(0.0, 5.0, len(set_points)),
+                        np.abs(rng.normal(0.0, 2.0, len(set_points))))
+    for k in (20, 90):                        # runs that ramp up over three rows
+        measured[k: k + 3] = set_points[k] * np.array([0.3, 0.7, 0.9])
+    measured[130: 133] = [4600.0, 5200.0, 5800.0]   # and a step that ramps
+    expected = [(0, 90), (90, 130), (130, 200)]
+    assert regime_blocks(set_points) == expected
+    assert regime_blocks(measured) == expected
+    assert regime_blocks(set_points, tolerance=0.6) == [(0, 90), (90, 200)]   # 6000 is within 60 % of 4000
+
+
+def test_a_run_that_restarts_at_the_same_speed_continues_its_block():
+    """A duty cycle at one speed is one regime; a restart at another speed is a new one."""
+    cycles = np.tile(np.r_[np.full(5, 3000.0), np.zeros(5)], 4)
+    speed = np.r_[np.zeros(3), cycles, np.full(6, 5000.0), np.zeros(4), np.full(6, 3000.0)]
+    assert regime_blocks(speed) == [(0, 43), (43, 53), (53, 59)]
+
+
 def test_folds_of_both_schemes():
     blocks = [(0, 10), (10, 25), (25, 30)]
     folds = blocked_folds(blocks)
