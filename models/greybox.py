@@ -55,6 +55,7 @@ from ._threads import one_blas_thread
 from ._validation import check_n_features, check_positive_int, require_parameters
 from .kalman import KalmanFilter, discretize
 from .registry import register_model
+from .speed import running
 
 #: relative tolerance under which the steps count as uniform (then a fast recursive filter is used)
 _UNIFORM_STEP = 1e-9
@@ -153,8 +154,8 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
     exponent : float
         Exponent b of ``P ∝ n^b``: the start value when ``fit_exponent``, else fixed.
     fit_exponent : bool
-        Fit b within ``exponent_bounds``; only where the rows fitted (weight > 0) run at two speeds at least
-        :data:`_DISTINCT_SPEEDS` apart: at one speed b only scales the gains and cannot be identified (a
+        Fit b within ``exponent_bounds``; only where the rows fitted (weight > 0) run (:func:`models.speed.running`)
+        at two speeds at least :data:`_DISTINCT_SPEEDS` apart: at one speed b only scales the gains and cannot be identified (a
         free fit runs it to a bound, and the model extrapolates to other speeds by an arbitrary n^b), so it
         stays at ``exponent``.
     exponent_bounds : (float, float)
@@ -386,8 +387,8 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         time, speed = self._check_x(X, inputs)
         outputs = np.column_stack([y, X[:, observed]])
         used = w > 0
-        running = speed[used & (speed > 0)]
-        fit_exponent = bool(self.fit_exponent and running.size and running.max() >= _DISTINCT_SPEEDS * running.min())
+        speeds = speed[used & running(speed)]   # a measured standstill reads a few rpm: not a second speed
+        fit_exponent = bool(self.fit_exponent and speeds.size and speeds.max() >= _DISTINCT_SPEEDS * speeds.min())
 
         scale = outputs[used].std(axis=0)
         scale[scale == 0] = 1.0

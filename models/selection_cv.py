@@ -63,6 +63,7 @@ from sklearn.base import BaseEstimator, clone
 from .grey import GreySeriesRegressor
 from .greybox import GreyBoxRegressor
 from .metrics import rmse
+from .speed import running
 
 SCHEMES = ("leave-one-block-out", "rolling-origin")
 #: The hyper-parameter that sets a model family's order, for the parsimony among nested candidates.
@@ -71,8 +72,6 @@ ORDER_PARAMETERS = {GreyBoxRegressor: "n_poles"}
 
 #: a speed change by more than this fraction of the running speed starts another regime
 SPEED_TOLERANCE = 0.05
-#: a speed below this fraction of the record's top speed is standstill (a measured standstill reads a few rpm)
-STANDSTILL_FRACTION = 0.05
 
 
 def regime_blocks(speed: ArrayLike, min_rows: int = 2, tolerance: float = SPEED_TOLERANCE
@@ -84,8 +83,9 @@ def regime_blocks(speed: ArrayLike, min_rows: int = 2, tolerance: float = SPEED_
     standstill at a new speed, or a speed step while running. A run that
     restarts at the last speed continues the block, and so does a speed
     still moving after a step (a ramp; the block starts at its first row).
-    Speeds below :data:`STANDSTILL_FRACTION` of the top speed are standstill,
-    so a measured speed's noise is no regime. The block ends where the next one starts.
+    Speeds below :data:`~models.speed.STANDSTILL_FRACTION` of the top speed
+    are standstill (:func:`models.speed.running`), so a measured speed's
+    noise is no regime. The block ends where the next one starts.
     Blocks shorter than ``min_rows`` are merged into the previous one.
 
     Parameters
@@ -105,13 +105,13 @@ def regime_blocks(speed: ArrayLike, min_rows: int = 2, tolerance: float = SPEED_
     speed = np.asarray(speed, float)
     if speed.ndim != 1 or len(speed) < 2 or not np.all(np.isfinite(speed)):
         raise ValueError("regime_blocks: speed must be a finite 1-D series of at least 2 samples (rpm).")
-    standstill = STANDSTILL_FRACTION * np.max(np.abs(speed))
+    runs = running(speed)
     starts = []
     regime = None      # the settled running speed of the current block
     previous = None    # the speed of the row before, None at standstill
     departure = None   # the first row of a run start or speed step that has not settled yet
     for k, n in enumerate(speed):
-        if n <= standstill:
+        if not runs[k]:
             previous = departure = None
             continue
         if previous is None or abs(n - previous) > tolerance * previous:   # starting, stepping or ramping

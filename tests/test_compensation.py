@@ -112,8 +112,9 @@ def _wide_record(n_rows, n_inputs=16, seed=0, speed_first=False):
     T = 20 + rng.standard_normal((n_rows, n_inputs)).cumsum(axis=0) * 0.1
     Z = (T - 20) @ rng.standard_normal(n_inputs)
     channels = [ChannelInfo(f"T{j:02d}", "degC", "temperature") for j in range(n_inputs)]
-    if speed_first:
+    if speed_first:   # from standstill, as the grey-box model takes a record's first row as rest
         channels[0] = ChannelInfo("T00", "rpm", "speed")
+        T[:, 0] = np.abs(T[:, 0] - T[0, 0])
     return Dataset(np.arange(n_rows) * 60.0, np.column_stack([T, Z]),
                    channels + [ChannelInfo("Z", "um", "displacement")], {"kind": "synthetic", "scenario": "wide"})
 

@@ -114,6 +114,11 @@ def test_one_running_speed_cannot_identify_the_exponent_so_it_stays_at_its_start
     jitter[:, 1] *= np.where(jitter[:, 1] > 0, 1.0 + 0.02 * np.sin(np.arange(len(X))), 1.0)
     wandering = GreyBoxRegressor(n_poles=2, temperature_inputs=(2,)).fit(jitter, y, sample_weight=one_speed * 1.0)
     assert not wandering.exponent_fitted_
+    # and a standstill that reads a few rpm is no second speed
+    creeping = X.copy()
+    creeping[:, 1] = np.where(creeping[:, 1] > 0, creeping[:, 1], np.arange(len(X)) % 3)
+    at_rest = GreyBoxRegressor(n_poles=2, temperature_inputs=(2,)).fit(creeping, y, sample_weight=one_speed * 1.0)
+    assert not at_rest.exponent_fitted_
 
 
 def test_irregular_sampling_recovers_the_network(training):

@@ -44,8 +44,10 @@ def test_greybox_trains_saves_and_continues_a_warm_record(records, tmp_path):
     loaded = CompensationModel.load(tmp_path / "gb.json")
     np.testing.assert_array_equal(loaded.predict(training), cm.predict(training))
     # the later record starts warm at 4500 rpm: its own start is no reference for the model
-    with pytest.raises(TwinInputError, match=r"later: greybox cannot predict it: .*spindle speed .* "
-                                             r"\(a record that continues the training one: --reference train\)"):
+    with pytest.raises(TwinInputError, match=r"later: the record starts with the spindle running \(spindle 4500 rpm "
+                                             r"at t = 75600 s\), and greybox takes a record's first row as rest .* "
+                                             r"evaluate one that continues the training record with --reference "
+                                             r"train"):
         evaluate(loaded, [later])
     with pytest.raises(TwinInputError, match="needs the training record as --history"):
         evaluate(loaded, [later], reference="train")
@@ -262,6 +264,44 @@ def test_greybox_names_the_speed_input_it_needs_first(records):
     with pytest.raises(TwinInputError, match=r"greybox takes the spindle speed \(unit rpm\) as its first input, "
                                              r"and 'air' is in degC; put the spindle speed first"):
         train([training], "air,spindle", "Z", model="greybox")
+
+
+def _measured_speed(ds, label, seed=0):
+    """``ds`` with the speed as a tachometer reads it: ±5 rpm running, 0–2 rpm at standstill (1 at the start)."""
+    rng = np.random.default_rng(seed)
+    speed = ds["spindle"]
+    reading = np.where(speed > 0, speed + rng.normal(0.0, 5.0, len(speed)), rng.integers(0, 3, len(speed)))
+    reading[0] = 1.0
+    values = ds.values.copy()
+    values[:, ds.names.index("spindle")] = reading
+    return Dataset(ds.time_s, values, CHANNELS, {"kind": "synthetic", "scenario": label})
+
+
+def test_a_measured_speed_is_taken_as_it_reads(records):
+    """The grey-box model takes the speed as measured, not referenced to the first row (a reading of 1 rpm
+    there made every later 0 a negative speed, refused), and --select auto finds the set points' regimes."""
+    training, later, whole = records
+    measured, measured_later = _measured_speed(training, "measured"), _measured_speed(later, "measured later", 1)
+    clean = train([training], "spindle,air", "Z", model="greybox")
+    cm = train([measured], "spindle,air", "Z", model="greybox")
+    assert cm.preprocessing["absolute_inputs"] == ["spindle"]
+    np.testing.assert_allclose(cm.estimator.time_constants_, clean.estimator.time_constants_, rtol=0.02)
+    result = evaluate(cm, [measured_later], reference="train", history=measured)
+    assert result.rows[0]["rmse"] < 0.02 * np.ptp(whole["Z"])
+    selection = train([measured], "spindle,air", "Z", select="auto").metadata["selection"]
+    assert selection["folds"] == train([training], "spindle,air", "Z", select="auto").metadata["selection"]["folds"]
+    assert selection["chosen"].startswith("greybox") and "Left out" not in selection["reason"]
+
+
+def test_a_record_that_starts_with_the_spindle_running_is_not_taken_for_rest(records):
+    _, later, _ = records
+    with pytest.raises(TwinInputError, match=r"later: the record starts with the spindle running \(spindle 4500 "
+                                             r"rpm at t = 75600 s\).* train on a record that starts at rest"):
+        train([later], "spindle,air", "Z", model="greybox")
+    selection = train([later], "spindle,air", "Z", select="auto").metadata["selection"]
+    assert selection["reason"].endswith("Left out: greybox n_poles=1, greybox n_poles=2, greybox n_poles=3 (the "
+                                        "record starts with the spindle running, and they take its first row "
+                                        "as rest).")
 
 
 def test_records_in_time_order_continue_one_another(records):

@@ -36,6 +36,7 @@ from .store import (
     make_estimator,
     note_long_steps,
     sampling_interval,
+    starts_running,
 )
 
 log = logging.getLogger("thermal_twin")
@@ -105,12 +106,13 @@ def auto_select(datasets: Iterable[Dataset], inputs: list[str], target: str,
                              f"got {len(datasets)} datasets")
     ds = datasets[0]
     speed_name = _speed_channel(ds, inputs)
-    X = ds.matrix(inputs)
-    y = ds[target]
+    raw = ds.matrix(inputs)
+    X, y = raw, ds[target]
     if zero_reference:
         X, y = X - X[:1], y - y[0]
-    pool, left_out = _candidate_pool(ds, inputs, candidates)
-    X = np.column_stack([ds.time_s - ds.time_s[0], X])   # column 0, the time (s), for the models that take it
+    pool, left_out = _candidate_pool(ds, inputs, candidates, zero_reference)
+    # [time since the start (s), the inputs as the models see them, the first input as measured]
+    X = np.column_stack([ds.time_s - ds.time_s[0], X, raw[:, 0]])
     try:
         selection = select_by_blocked_cv(pool, X, y, ds[speed_name], unit=ds.info(target).unit)
     except ValueError as exc:     # the record's (one speed regime only); a candidate's failed fit is caught inside
@@ -123,23 +125,24 @@ def auto_select(datasets: Iterable[Dataset], inputs: list[str], target: str,
     return model, dict(params), selection
 
 
-def _candidate_pool(dataset, inputs, candidates):
-    """``(pool, left_out)``: label → (estimator, columns of ``[time, inputs…]``) of the candidates that can
+def _candidate_pool(dataset, inputs, candidates, zero_reference):
+    """``(pool, left_out)``: label → (estimator, its columns of ``auto_select``'s X) of the candidates that can
     take this record, and why → labels of those that cannot, by each class's input contract."""
     even = evenly_sampled(dataset)
-    first_unit = dataset.info(inputs[0]).unit
+    n = len(inputs)
     pool, left_out = {}, {}
     for label, (name, params) in candidates.items():
         estimator = make_estimator(name, params)
         traits = model_traits(estimator)
-        columns = range(1, len(inputs) + 1)
+        columns = list(range(1, n + 1))
         why = None
-        if traits.first_input is not None and first_unit != traits.first_input[1]:
-            why = f"the first input must be the {traits.first_input[0]} in {traits.first_input[1]}"
-        elif traits.takes_time:   # at the record's interval, or on its own times where they are uneven
+        if traits.first_input is not None:
+            why = _first_input_problem(dataset, inputs[0], traits.first_input, zero_reference)
+            columns = [n + 1, *columns[1:]]   # the first input as measured
+        if why is None and traits.takes_time:   # at the record's interval, or on its own times where uneven
             estimator.set_params(sampling_interval=sampling_interval(dataset) if even else None)
-            columns = range(len(inputs) + 1) if not even else columns
-        elif traits.time_series and not even:
+            columns = columns if even else [0, *columns]
+        elif why is None and traits.time_series and not even:
             steps = np.diff(dataset.time_s)
             why = (f"coefficients per sample need even sampling; steps here range from {steps.min():.4g} to "
                    f"{steps.max():.4g} s")
@@ -148,6 +151,16 @@ def _candidate_pool(dataset, inputs, candidates):
         else:
             left_out.setdefault(why, []).append(label)
     return pool, left_out
+
+
+def _first_input_problem(dataset, first, required, zero_reference):
+    """Why ``first`` cannot be a model's declared first input ``required = (what, unit)``, or None."""
+    what, unit = required
+    if dataset.info(first).unit != unit:
+        return f"the first input must be the {what} in {unit}"
+    if zero_reference and starts_running(dataset, first):
+        return "the record starts with the spindle running, and they take its first row as rest"
+    return None
 
 
 def stability_problem(cm: CompensationModel, datasets: Iterable[Dataset]) -> str | None:
@@ -226,7 +239,7 @@ def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Datas
                              "reference); retrain it")
     cm.check(dataset)
     zero = cm.preprocessing.get("zero_reference", True)
-    x_ref = np.asarray(ref["inputs"]) if zero else 0.0
+    x_ref = cm.input_reference()
     y_ref = ref["target"] if zero else 0.0
     measured = dataset[cm.target] - y_ref
     if not cm.is_time_series:

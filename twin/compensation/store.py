@@ -15,7 +15,11 @@ and the model maps X⁰ → y⁰.  A prediction is therefore the *change* of the
 target since the start of the record (the drift since the probe was zeroed),
 and a constant offset of any sensor (a thermometer reading 0.4 °C high, a
 probe zeroed elsewhere) cancels exactly.  Metrics compare it with the
-measured change y⁰.
+measured change y⁰.  The exception is the first input of a model that
+declares it (:class:`models.registry.ModelTraits`: the grey-box model's
+spindle speed): a speed is an operating state, not a sensor with an offset,
+so it is taken as measured (``preprocessing["absolute_inputs"]``), and a
+record must start with it at standstill (:func:`check_starts_at_rest`).
 
 On disk (``.json``, no pickle)::
 
@@ -37,6 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from models.persistence import model_from_document, model_to_document
 from models.registry import is_time_series, model_traits, registered_models
+from models.speed import running
 
 from ..core.dataset import Dataset, json_default, project_version
 from ..core.files import write_text_atomic
@@ -358,7 +363,8 @@ def check_reference_samples(count: object, n_rows: int, label: str) -> None:
                              f"{n_rows} rows it has")
 
 
-def reference_rows(values: ArrayLike, preprocessing: dict, label: str = "dataset") -> NDArray[np.float64]:
+def reference_rows(values: ArrayLike, preprocessing: dict, label: str = "dataset",
+                   absolute: Sequence[int] = ()) -> NDArray[np.float64]:
     """Subtract each column's reference (mean of the first ``reference_samples`` rows) when zero-referencing.
 
     Parameters
@@ -369,6 +375,8 @@ def reference_rows(values: ArrayLike, preprocessing: dict, label: str = "dataset
         A model's ``preprocessing`` (``zero_reference``, ``reference_samples``).
     label : str, default "dataset"
         Names the dataset in errors.
+    absolute : sequence of int, default ()
+        Columns taken as they are (a speed).
 
     Returns
     -------
@@ -380,7 +388,53 @@ def reference_rows(values: ArrayLike, preprocessing: dict, label: str = "dataset
         return values
     k = preprocessing.get("reference_samples", 1)
     check_reference_samples(k, len(values), label)
-    return values - values[:k].mean(axis=0)
+    reference = values[:k].mean(axis=0)
+    reference[list(absolute)] = 0.0
+    return values - reference
+
+
+def starts_running(dataset: Dataset, speed: str) -> bool:
+    """Whether the spindle runs at the record's first row (:func:`models.speed.running`: above 5 % of its top
+    speed, as a measured standstill reads a few rpm).
+
+    Parameters
+    ----------
+    dataset : Dataset
+        A record with the speed channel.
+    speed : str
+        The speed channel (rpm).
+
+    Returns
+    -------
+    bool
+    """
+    return bool(running(dataset[speed])[0])
+
+
+def check_starts_at_rest(dataset: Dataset, speed: str, model_name: str) -> None:
+    """Refuse a record whose first row has the spindle running (:func:`starts_running`), for a model that
+    takes its first row as rest.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        A record with the speed channel.
+    speed : str
+        The speed channel (rpm).
+    model_name : str
+        Names the model in the error.
+
+    Raises
+    ------
+    TwinInputError
+        The record starts with the spindle running.
+    """
+    if starts_running(dataset, speed):
+        raise TwinInputError(f"{dataset_label(dataset)}: the record starts with the spindle running ({speed} "
+                             f"{dataset[speed][0]:g} rpm at t = {dataset.time_s[0]:g} s), and {model_name} takes a "
+                             "record's first row as rest (the spindle stopped, the machine in equilibrium): train "
+                             "on a record that starts at rest, and evaluate one that continues the training "
+                             "record with --reference train")
 
 
 @dataclass
@@ -401,7 +455,8 @@ class CompensationModel:
         Their units (``degC``, ``um`` …), checked on every dataset.
     preprocessing : dict
         ``zero_reference``, ``reference_samples``, ``time_column`` (true when the estimator takes the
-        time since the record's start as its first column: the grey-box model) and, once fitted, the raw
+        time since the record's start as its first column: the grey-box model), ``absolute_inputs``
+        (inputs taken as measured: the grey-box model's speed) and, once fitted, the raw
         ``training_reference``.
     training : list of dict
         Label, rows, source, scenario, kind and duration (h) of each training record.
@@ -426,6 +481,25 @@ class CompensationModel:
     def is_time_series(self) -> bool:
         """Whether the estimator is a grey time-series model (coefficients per sample)."""
         return is_time_series(self.estimator)
+
+    @property
+    def absolute_columns(self) -> list[int]:
+        """Input columns taken as measured, not zero-referenced (``preprocessing["absolute_inputs"]``)."""
+        absolute = self.preprocessing.get("absolute_inputs", [])
+        return [i for i, name in enumerate(self.inputs) if name in absolute]
+
+    def input_reference(self) -> NDArray[np.float64]:
+        """What is subtracted from the inputs of a record that continues the training one: the training
+        start's raw inputs (0 for those taken as measured), or zeros without zero-referencing.
+
+        Returns
+        -------
+        ndarray, shape (n_inputs,)
+            In the inputs' units.
+        """
+        reference = np.array(self.preprocessing["training_reference"]["inputs"], float)
+        reference[self.absolute_columns] = 0.0
+        return reference if self.preprocessing.get("zero_reference", True) else np.zeros_like(reference)
 
     def describe(self) -> str:
         """One line: name, class, kind, inputs → target [unit].
@@ -465,7 +539,10 @@ class CompensationModel:
             the time since the record's start first, s.
         """
         check_channels(dataset, self.inputs, self.input_units, "input")
-        X = reference_rows(dataset.matrix(self.inputs), self.preprocessing, dataset_label(dataset))
+        absolute = self.absolute_columns
+        if absolute and self.preprocessing.get("zero_reference", True):
+            check_starts_at_rest(dataset, self.inputs[absolute[0]], self.model_name)
+        X = reference_rows(dataset.matrix(self.inputs), self.preprocessing, dataset_label(dataset), absolute)
         if self.preprocessing.get("time_column"):
             return np.column_stack([dataset.time_s - dataset.time_s[0], X])
         return X
@@ -700,6 +777,9 @@ def fit_compensation_model(datasets: list, inputs: list[str], target: str, model
     prep = {"zero_reference": bool(zero_reference), "reference_samples": int(reference_samples),
             "convention": "inputs and target minus their value at the start of each dataset"
             if zero_reference else "raw values"}
+    if first is not None:   # a speed is an operating state, not a sensor with an offset
+        prep["absolute_inputs"] = [inputs[0]]
+        prep["convention"] += f" ({inputs[0]} as measured)" if zero_reference else ""
     cm = CompensationModel(estimator, str(model).lower(), inputs, target, units, target_unit, prep)
     dt = _time_series_interval(cm, datasets, params) if cm.is_time_series else None
     X = np.vstack([cm.features(ds) for ds in datasets])
