@@ -27,17 +27,16 @@ from models.selection_cv import Selection, select_by_blocked_cv
 
 from ..core.dataset import Dataset
 from ..errors import TwinInputError
-from .store import (
-    CompensationModel,
+from .records import (
     bridge_times,
     dataset_label,
     evenly_sampled,
     linear_bridge,
-    make_estimator,
     note_long_steps,
     sampling_interval,
     starts_running,
 )
+from .store import CompensationModel, make_estimator
 
 log = logging.getLogger("thermal_twin")
 

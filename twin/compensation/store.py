@@ -41,11 +41,16 @@ from numpy.typing import ArrayLike, NDArray
 
 from models.persistence import model_from_document, model_to_document
 from models.registry import is_time_series, model_traits, registered_models
-from models.speed import running
 
 from ..core.dataset import Dataset, json_default, project_version
 from ..core.files import write_text_atomic
 from ..errors import TwinInputError
+from .records import (
+    check_starts_at_rest,
+    dataset_label,
+    note_long_steps,
+    sampling_interval,
+)
 
 log = logging.getLogger("thermal_twin")
 
@@ -115,206 +120,6 @@ def parse_params(items: Sequence[str] | None) -> dict[str, object]:
         except json.JSONDecodeError:
             out[key.strip()] = value
     return out
-
-
-def dataset_label(dataset: Dataset) -> str:
-    """The name a dataset goes by in tables and messages: its label, scenario, source file stem, or "dataset".
-
-    Parameters
-    ----------
-    dataset : Dataset
-        A record (twin or measured).
-
-    Returns
-    -------
-    str
-    """
-    meta = dataset.metadata
-    if meta.get("label"):
-        return str(meta["label"])
-    if meta.get("scenario"):
-        return str(meta["scenario"])
-    if meta.get("source"):
-        return Path(str(meta["source"])).stem
-    return "dataset"
-
-
-#: steps within this fraction of their median count as even sampling
-EVEN_STEP_TOLERANCE = 1e-6
-
-
-def evenly_sampled(dataset: Dataset) -> bool:
-    """Whether every time step of a record is within :data:`EVEN_STEP_TOLERANCE` of their median.
-
-    Parameters
-    ----------
-    dataset : Dataset
-        A record (one row counts as even).
-
-    Returns
-    -------
-    bool
-    """
-    steps = np.diff(dataset.time_s)
-    if len(steps) == 0:
-        return True
-    return bool(np.abs(steps - np.median(steps)).max() <= EVEN_STEP_TOLERANCE * np.median(steps))
-
-
-def sampling_interval(dataset: Dataset, strict: bool = True) -> float:
-    """The constant sampling interval of a dataset (s); with ``strict`` an uneven one is an error.
-
-    Parameters
-    ----------
-    dataset : Dataset
-        A record (twin or measured).
-    strict : bool, default True
-        Refuse uneven steps (:func:`evenly_sampled`).
-
-    Returns
-    -------
-    float
-        The median time step, s.
-
-    Raises
-    ------
-    TwinInputError
-        One row only, or uneven steps with ``strict``.
-    """
-    steps = np.diff(dataset.time_s)
-    if len(steps) == 0:
-        raise TwinInputError(f"{dataset_label(dataset)}: a dataset with one row has no sampling interval")
-    dt = float(np.median(steps))
-    if strict and not evenly_sampled(dataset):
-        raise TwinInputError(f"{dataset_label(dataset)}: grey time-series models need evenly sampled data; "
-                             f"steps range from {steps.min():g} to {steps.max():g} s (the grey-box model, "
-                             "--model greybox, takes the record's own times)")
-    return dt
-
-
-#: a step this many times the record's median counts as missing rows, and is named
-LONG_STEP_FACTOR = 10.0
-
-
-def note_long_steps(dataset: Dataset) -> None:
-    """Name, on the ``thermal_twin`` logger, the steps of a record longer than :data:`LONG_STEP_FACTOR` times its
-    median: a model that takes the time holds the inputs over them, which is a guess for a long one.
-
-    Parameters
-    ----------
-    dataset : Dataset
-        A record (twin or measured).
-    """
-    if len(dataset) < 2:
-        return
-    steps, usual = np.diff(dataset.time_s), sampling_interval(dataset, strict=False)
-    long = np.flatnonzero(steps > LONG_STEP_FACTOR * usual)
-    if len(long):
-        k = long[np.argmax(steps[long])]
-        log.warning("%s: %d step(s) over %g× the usual %g s, the longest %g s after t = %g s; the inputs are held "
-                    "over them", dataset_label(dataset), len(long), LONG_STEP_FACTOR, usual, float(steps[k]),
-                    float(dataset.time_s[k]))
-
-
-def continued_record(first: Dataset, later: Dataset, names: Sequence[str], interval_s: float | None = None
-                     ) -> Dataset:
-    """``first`` and then ``later`` as one record, in the channels ``names`` (labelled "first + later").
-
-    Parameters
-    ----------
-    first, later : Dataset
-        Records in time order; both have ``names``.
-    names : sequence of str
-        Channels kept, in ``first``'s units.
-    interval_s : float, optional
-        A sampling interval, s: the whole intervals missing between the two are filled by
-        :func:`linear_bridge` (as ``twin evaluate --gap interpolate`` does).
-
-    Returns
-    -------
-    Dataset
-        The rows of both, and the bridge between them.
-    """
-    a, b = first.select(list(names)), later.select(list(names))
-    bridge_t = np.empty(0) if interval_s is None else bridge_times(a.time_s[-1], b.time_s[0], interval_s)
-    bridge = linear_bridge(a.values[-1], b.values[0], len(bridge_t))
-    return Dataset(np.r_[a.time_s, bridge_t, b.time_s], np.vstack([a.values, bridge, b.values]), a.channels,
-                   {"label": f"{dataset_label(first)} + {dataset_label(later)}"})
-
-
-def bridge_times(end_s: float, start_s: float, interval_s: float) -> NDArray[np.float64]:
-    """Times of the whole sampling intervals missing between a record that ends at ``end_s`` and one that starts
-    at ``start_s`` (s; empty when the second follows within about one interval).
-
-    Parameters
-    ----------
-    end_s, start_s : float
-        The first record's last time and the second's first, s.
-    interval_s : float
-        The sampling interval, s.
-
-    Returns
-    -------
-    ndarray, shape (n_missing,)
-        ``end_s + k·interval_s`` for k = 1 … n_missing, s.
-    """
-    n_missing = max(round((start_s - end_s) / interval_s) - 1, 0)
-    return end_s + interval_s * np.arange(1, n_missing + 1)
-
-
-def linear_bridge(before: ArrayLike, after: ArrayLike, n_rows: int) -> NDArray[np.float64]:
-    """``n_rows`` evenly spaced rows on the straight line from ``before`` to ``after`` (both left out).
-
-    Parameters
-    ----------
-    before, after : array-like, shape (k,)
-        The rows either side of the gap, in their channels' units.
-    n_rows : int
-        Rows missing between them.
-
-    Returns
-    -------
-    ndarray, shape (n_rows, k)
-    """
-    weight = (np.arange(1, n_rows + 1) / (n_rows + 1))[:, None]
-    return (1.0 - weight) * np.asarray(before, float) + weight * np.asarray(after, float)
-
-
-def joined_when_contiguous(datasets: Sequence[Dataset], names: Sequence[str]) -> list[Dataset]:
-    """Records that continue one another (each starts one sampling interval after the one before it ends, with
-    the same channels and units) joined into one, in the channels ``names``; the others as they are.
-
-    A record cut into files (a day per file) is one history: the second file starts warm, so neither a
-    time-series model nor a zero reference at its own start fits it alone.
-
-    Parameters
-    ----------
-    datasets : sequence of Dataset
-        Records in the order given.
-    names : sequence of str
-        The model's channels (inputs and target).
-
-    Returns
-    -------
-    list of Dataset
-        As many as there are runs of contiguous records.
-    """
-    joined: list[Dataset] = []
-    for ds in datasets:
-        if joined and _continues(joined[-1], ds, names):
-            log.info("%s continues %s: trained on as one record", dataset_label(ds), dataset_label(joined[-1]))
-            joined[-1] = continued_record(joined[-1], ds, names)
-        else:
-            joined.append(ds)
-    return joined
-
-
-def _continues(first, later, names):
-    if len(first) < 2 or not all(n in first and n in later and first.info(n).unit == later.info(n).unit
-                                 for n in names):
-        return False
-    dt = sampling_interval(first, strict=False)
-    return abs(later.time_s[0] - first.time_s[-1] - dt) <= 1e-6 * dt
 
 
 def check_channels(dataset: Dataset, names: Sequence[str], units: Sequence[str] | None = None,
@@ -391,50 +196,6 @@ def reference_rows(values: ArrayLike, preprocessing: dict, label: str = "dataset
     reference = values[:k].mean(axis=0)
     reference[list(absolute)] = 0.0
     return values - reference
-
-
-def starts_running(dataset: Dataset, speed: str) -> bool:
-    """Whether the spindle runs at the record's first row (:func:`models.speed.running`: above 5 % of its top
-    speed, as a measured standstill reads a few rpm).
-
-    Parameters
-    ----------
-    dataset : Dataset
-        A record with the speed channel.
-    speed : str
-        The speed channel (rpm).
-
-    Returns
-    -------
-    bool
-    """
-    return bool(running(dataset[speed])[0])
-
-
-def check_starts_at_rest(dataset: Dataset, speed: str, model_name: str) -> None:
-    """Refuse a record whose first row has the spindle running (:func:`starts_running`), for a model that
-    takes its first row as rest.
-
-    Parameters
-    ----------
-    dataset : Dataset
-        A record with the speed channel.
-    speed : str
-        The speed channel (rpm).
-    model_name : str
-        Names the model in the error.
-
-    Raises
-    ------
-    TwinInputError
-        The record starts with the spindle running.
-    """
-    if starts_running(dataset, speed):
-        raise TwinInputError(f"{dataset_label(dataset)}: the record starts with the spindle running ({speed} "
-                             f"{dataset[speed][0]:g} rpm at t = {dataset.time_s[0]:g} s), and {model_name} takes a "
-                             "record's first row as rest (the spindle stopped, the machine in equilibrium): train "
-                             "on a record that starts at rest, and evaluate one that continues the training "
-                             "record with --reference train")
 
 
 @dataclass

@@ -33,7 +33,8 @@ from ..core.variants import MachineSpec, as_scenario, zero_referenced
 from ..errors import TwinInputError
 from ..infra.outdir import check_output_folder
 from ..infra.sweep import run_tasks
-from .store import dataset_label, fit_compensation_model
+from .records import dataset_label
+from .store import fit_compensation_model
 from .study_report import (
     StudyResult,
     cross_condition_markdown,

@@ -39,14 +39,13 @@ from ..infra.outdir import atomic_directory, check_output_file, check_output_fol
 from ..infra.tables import markdown_table
 from ..rom.reduction import cached_rom
 from .protocol import auto_select, continued_prediction, stability_problem
-from .store import (
-    CompensationModel,
+from .records import (
     continued_record,
     dataset_label,
-    fit_compensation_model,
     joined_when_contiguous,
     note_long_steps,
 )
+from .store import CompensationModel, fit_compensation_model
 
 if TYPE_CHECKING:
     from ..core.machine import Machine
@@ -229,7 +228,7 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
     datasets : sequence of Dataset, Path or str
         Training records (see :func:`load_dataset`). Records that continue one another (each starts
         one sampling interval after the one before it ends) are one record
-        (:func:`~twin.compensation.store.joined_when_contiguous`).
+        (:func:`~twin.compensation.records.joined_when_contiguous`).
     inputs : str or list of str
         Input channels (comma-separated names allowed, as ``--inputs`` gives them).
     target : str
