@@ -10,7 +10,8 @@ Usage, in the module that defines the estimator::
     @register_model({"gmc": {"random_state": 0}}, time_series=True)
     class GMCRegressor(...): ...
 
-    @register_model({"greybox": {...}}, time_series=True, takes_time=True, first_input=("spindle speed", "rpm"))
+    @register_model({"greybox": {...}}, time_series=True, takes_time=True, first_input=("spindle speed", "rpm"),
+                    observer=True)
     class GreyBoxRegressor(...): ...
 
     @register_model()                                              # persisted, but not a `twin train` model
@@ -56,11 +57,15 @@ class ModelTraits:
         (s) and any sampling (jitter, missing rows) is taken as it is.
     first_input : (str, str) or None
         What the first input must be, and its unit, e.g. ``("spindle speed", "rpm")``.
+    observer : bool
+        The class has an ``observed`` parameter: columns of ``X`` modelled as outputs (thermometers on the
+        structure) and fused while it runs (a Kalman filter).
     """
 
     time_series: bool = False
     takes_time: bool = False
     first_input: tuple[str, str] | None = None
+    observer: bool = False
 
 
 @dataclass(frozen=True)
@@ -106,7 +111,7 @@ _TRAITS: dict[str, ModelTraits] = {}
 
 
 def register_model(names: dict[str, dict] | None = None, time_series: bool = False, takes_time: bool = False,
-                   first_input: tuple[str, str] | None = None) -> Callable[[T], T]:
+                   first_input: tuple[str, str] | None = None, observer: bool = False) -> Callable[[T], T]:
     """Class decorator: register an estimator for persistence and, with ``names``, for ``twin train``.
 
     Parameters
@@ -114,7 +119,7 @@ def register_model(names: dict[str, dict] | None = None, time_series: bool = Fal
     names : dict of str to dict, optional
         Command-line name → default hyperparameters (several names may share a class, e.g. the ANFIS
         initialisations).  None: persisted only.
-    time_series, takes_time, first_input
+    time_series, takes_time, first_input, observer
         The class's input contract (see :class:`ModelTraits`).
 
     Returns
@@ -130,7 +135,7 @@ def register_model(names: dict[str, dict] | None = None, time_series: bool = Fal
     def decorate(cls):
         if _CLASSES.get(cls.__name__, cls) is not cls:
             raise ValueError(f"estimator class name {cls.__name__!r} is registered twice")
-        traits = ModelTraits(time_series, takes_time, None if first_input is None else tuple(first_input))
+        traits = ModelTraits(time_series, takes_time, None if first_input is None else tuple(first_input), observer)
         entries = [ModelEntry(name.lower(), cls, dict(defaults), traits) for name, defaults in (names or {}).items()]
         for e in entries:                    # checked before anything is registered: a refusal leaves no trace
             if e.name in _MODELS and _MODELS[e.name].cls is not cls:

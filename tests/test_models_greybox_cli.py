@@ -4,9 +4,12 @@ The records come from the two-node RC network of ``tests/test_models_greybox.py`
 (integrated by ``solve_ivp``, independent of the model under test).
 """
 
+import re
+
 import numpy as np
 import pytest
 from test_models_greybox import ambient, duty, simulate
+from test_models_greybox import record as network_record
 
 from twin.cli import main
 from twin.compensation.protocol import bridging_inputs, stability_problem
@@ -302,6 +305,51 @@ def test_a_record_that_starts_with_the_spindle_running_is_not_taken_for_rest(rec
     assert selection["reason"].endswith("Left out: greybox n_poles=1, greybox n_poles=2, greybox n_poles=3 (the "
                                         "record starts with the spindle running, and they take its first row "
                                         "as rest).")
+
+
+def _observed_record(levels, label, extra_heat=0.0):
+    """The network from rest with its node-1 thermometer; ``extra_heat`` W unmodelled from the middle on."""
+    times = np.arange(0.0, 30 * 3600.0, 60.0)
+    X, drift = network_record(times, levels, extra_heat=extra_heat)   # columns: time, rpm, ambient, node 1
+    channels = [*CHANNELS[:2], ChannelInfo("node1", "degC", "temperature"), CHANNELS[2]]
+    return Dataset(times, np.column_stack([X[:, 1:], drift]), channels, {"kind": "synthetic", "scenario": label})
+
+
+def test_observe_names_the_thermometers_the_greybox_fuses(tmp_path, capsys):
+    """--observe by channel name, wherever the model's time column puts it: with an unmodelled 80 W heat the
+    observer follows the drift that the open-loop model misses (the truth is solve_ivp's)."""
+    training = _observed_record([1500.0, 3000.0, 4500.0], "training")
+    heated = _observed_record([2000.0, 4000.0], "heated", extra_heat=80.0)
+    path = tmp_path / "train.csv"
+    training.write(path)
+    assert main(["train", str(path), "--inputs", "spindle,air", "--observe", "node1", "--target", "Z",
+                 "--model", "greybox", "--out", str(tmp_path / "observer.json")]) == 0
+    assert "spindle, air → Z [um], observing node1" in capsys.readouterr().out
+    observer = CompensationModel.load(tmp_path / "observer.json")
+    assert observer.estimator.observed == (3,) and observer.preprocessing["observed"] == ["node1"]
+    open_loop = train([training], "spindle,air", "Z", model="greybox")
+    half = len(heated) // 2
+    errors = {name: evaluate(cm, [heated]).predictions["heated"] for name, cm in
+              (("observer", observer), ("open loop", open_loop))}
+    rms = {name: np.sqrt(np.mean((measured[half:] - predicted[half:]) ** 2))
+           for name, (_, measured, predicted) in errors.items()}
+    assert rms["observer"] < 0.3 * rms["open loop"]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--model", "mlr"], r"--observe node1: mlr has no observer that fuses thermometers"),
+    (["--model", "greybox", "--param", "observed=[3]"], r"name the observed thermometers with --observe"),
+    (["--select", "auto"], r"--select auto ranks candidates on the same inputs, without one"),
+])
+def test_observe_is_refused_where_no_observer_takes_it(args, message, tmp_path, capsys):
+    path = tmp_path / "train.csv"
+    _observed_record([1500.0, 3000.0], "training").write(path)
+    code = main(["train", str(path), "--inputs", "spindle,air", "--observe", "node1", "--target", "Z", *args,
+                 "--out", str(tmp_path / "m.json")])
+    assert code == 2
+    assert re.search(message, capsys.readouterr().err)
+    with pytest.raises(TwinInputError, match=r"--observe 'air' is also in --inputs"):
+        train([_observed_record([1500.0, 3000.0], "training")], "spindle,air", "Z", model="greybox", observe="air")
 
 
 def test_records_in_time_order_continue_one_another(records):

@@ -38,7 +38,7 @@ def cmd_train(args: argparse.Namespace) -> None:
     cm = train(args.datasets, args.inputs, args.target, model=args.model, params=parse_params(args.param),
                out=args.out, zero_reference=not args.no_zero_reference, reference_samples=args.reference_samples,
                column_map=_column_map(args), nan_policy=args.nan_policy, overwrite=args.overwrite,
-               select=args.select, allow_unstable=args.allow_unstable)
+               select=args.select, allow_unstable=args.allow_unstable, observe=args.observe)
     if "selection" in cm.metadata:
         print(f"--select auto {cm.metadata['selection']['reason']}")
     if "unstable" in cm.metadata:
@@ -122,6 +122,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     t.add_argument("datasets", nargs="+", help=_datasets_help())
     t.add_argument("--inputs", required=True, action="append", help="input channels, comma-separated")
     t.add_argument("--target", required=True, help="target channel, e.g. Z")
+    t.add_argument("--observe", action="append", help="thermometers the model fuses while it runs (its Kalman "
+                   "observer; --model greybox), comma-separated: outputs of the model, corrected by their readings")
     t.add_argument("--model", default="anfis", help="model name, e.g. mlr, pcr, anfis, gm1n (default anfis = ANFIS-FCM); an unknown name lists "
                    "them all (the registry is read on use: `--help` must not load numpy)")
     t.add_argument("--select", choices=("auto",), help="choose the model by blocked cross-validation across the "

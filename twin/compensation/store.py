@@ -209,7 +209,8 @@ class CompensationModel:
     model_name : str
         Its registry name (``anfis``, ``mlr`` …).
     inputs : list of str
-        Input channels, in the estimator's column order.
+        The channels the estimator's X is made of, in its column order: the inputs, then any observed
+        thermometers (``preprocessing["observed"]``).
     target : str
         Target channel.
     input_units, target_unit : list of str, str
@@ -217,8 +218,8 @@ class CompensationModel:
     preprocessing : dict
         ``zero_reference``, ``reference_samples``, ``time_column`` (true when the estimator takes the
         time since the record's start as its first column: the grey-box model), ``absolute_inputs``
-        (inputs taken as measured: the grey-box model's speed) and, once fitted, the raw
-        ``training_reference``.
+        (inputs taken as measured: the grey-box model's speed), ``observed`` (thermometers the model fuses
+        while it runs) and, once fitted, the raw ``training_reference``.
     training : list of dict
         Label, rows, source, scenario, kind and duration (h) of each training record.
     sampling_interval_s : float or None
@@ -270,8 +271,10 @@ class CompensationModel:
         str
         """
         kind = "grey time-series" if self.is_time_series else "static"
-        return (f"{self.model_name} ({type(self.estimator).__name__}, {kind}): {', '.join(self.inputs)} → "
-                f"{self.target} [{self.target_unit}]")
+        observed = self.preprocessing.get("observed", [])
+        drivers = [name for name in self.inputs if name not in observed]
+        return (f"{self.model_name} ({type(self.estimator).__name__}, {kind}): {', '.join(drivers)} → "
+                f"{self.target} [{self.target_unit}]" + (f", observing {', '.join(observed)}" if observed else ""))
 
     # ------------------------------------------------------------------ data
     def check(self, dataset: Dataset) -> None:
@@ -472,6 +475,23 @@ def _channel_units(datasets, inputs, target):
     return units, target_unit
 
 
+def _with_observed(estimator, model, inputs, observe, params):
+    """The model's channels: ``inputs``, then the thermometers it observes (checked against its contract)."""
+    observe = list(observe)
+    if not observe:
+        return inputs
+    if not model_traits(estimator).observer:
+        raise TwinInputError(f"--observe {','.join(observe)}: {model} has no observer that fuses thermometers (the "
+                             "grey-box model has one: --model greybox)")
+    if "observed" in (params or {}):
+        raise TwinInputError("name the observed thermometers with --observe, not --param observed=")
+    both = [n for n in observe if n in inputs]
+    if both:
+        raise TwinInputError(f"--observe {both[0]!r} is also in --inputs: an observed thermometer is an output of "
+                             "the model, corrected by its readings, not an input")
+    return inputs + observe
+
+
 def _time_series_interval(cm, datasets, params):
     """The training interval of a time-series model (s), after setting up how it takes the time."""
     if len(datasets) > 1:
@@ -491,7 +511,7 @@ def _time_series_interval(cm, datasets, params):
 
 def fit_compensation_model(datasets: list, inputs: list[str], target: str, model: str = "anfis",
                            params: dict | None = None, zero_reference: bool = True,
-                           reference_samples: int = 1) -> CompensationModel:
+                           reference_samples: int = 1, observe: Sequence[str] = ()) -> CompensationModel:
     """Fit a :class:`CompensationModel` on one or more datasets.
 
     Static models (MLR, PCR, ANN, ANFIS) are fitted on the rows of all
@@ -510,6 +530,9 @@ def fit_compensation_model(datasets: list, inputs: list[str], target: str, model
         Model name (see :mod:`models.registry`) and hyperparameters overriding its defaults.
     zero_reference, reference_samples
         Reference inputs and target to the mean of their first ``reference_samples`` rows.
+    observe : sequence of str, default ()
+        Thermometers the model fuses while it runs (a model with an observer, :class:`models.registry.ModelTraits`):
+        outputs of the model, not inputs; a record to predict must hold them (a NaN reading is skipped).
 
     Returns
     -------
@@ -526,11 +549,12 @@ def fit_compensation_model(datasets: list, inputs: list[str], target: str, model
     if not datasets:
         raise TwinInputError("no training dataset given")
     inputs = list(inputs)
-    _check_channel_choice(inputs, target)
+    estimator = make_estimator(model, params)
+    channels = _with_observed(estimator, model, inputs, observe, params)
+    _check_channel_choice(channels, target)
     for ds in datasets:
         check_reference_samples(reference_samples, len(ds), dataset_label(ds))
-    estimator = make_estimator(model, params)
-    units, target_unit = _channel_units(datasets, inputs, target)
+    units, target_unit = _channel_units(datasets, channels, target)
     first = model_traits(estimator).first_input
     if first is not None and units[0] != first[1]:
         raise TwinInputError(f"{model} takes the {first[0]} (unit {first[1]}) as its first input, and {inputs[0]!r} "
@@ -541,8 +565,12 @@ def fit_compensation_model(datasets: list, inputs: list[str], target: str, model
     if first is not None:   # a speed is an operating state, not a sensor with an offset
         prep["absolute_inputs"] = [inputs[0]]
         prep["convention"] += f" ({inputs[0]} as measured)" if zero_reference else ""
-    cm = CompensationModel(estimator, str(model).lower(), inputs, target, units, target_unit, prep)
+    cm = CompensationModel(estimator, str(model).lower(), channels, target, units, target_unit, prep)
     dt = _time_series_interval(cm, datasets, params) if cm.is_time_series else None
+    if len(channels) > len(inputs):   # the observed columns, after the time column the model may take
+        first_observed = len(inputs) + int(bool(cm.preprocessing.get("time_column")))
+        estimator.set_params(observed=tuple(range(first_observed, first_observed + len(observe))))
+        cm.preprocessing["observed"] = list(observe)
     X = np.vstack([cm.features(ds) for ds in datasets])
     y = np.concatenate([cm.target_values(ds) for ds in datasets])
     try:
@@ -555,7 +583,7 @@ def fit_compensation_model(datasets: list, inputs: list[str], target: str, model
     cm.sampling_interval_s = dt
     # raw values at the training start: `twin evaluate --reference train` continues from them
     k = int(reference_samples)
-    cm.preprocessing["training_reference"] = {"inputs": datasets[0].matrix(inputs)[:k].mean(axis=0).tolist(),
+    cm.preprocessing["training_reference"] = {"inputs": datasets[0].matrix(channels)[:k].mean(axis=0).tolist(),
                                               "target": float(np.mean(datasets[0][target][:k]))}
     cm.training = [{"label": dataset_label(ds), "rows": len(ds), "source": ds.metadata.get("source"),
                     "scenario": ds.metadata.get("scenario"), "kind": ds.metadata.get("kind"),

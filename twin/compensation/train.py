@@ -207,7 +207,8 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
           params: dict | None = None, out: Path | str | None = None, zero_reference: bool = True,
           reference_samples: int = 1, column_map: dict[str, str] | None = None,
           nan_policy: Literal["error", "interpolate", "drop"] = "error", machine: Machine | None = None,
-          overwrite: bool = False, select: str | None = None, allow_unstable: bool = False) -> CompensationModel:
+          overwrite: bool = False, select: str | None = None, allow_unstable: bool = False,
+          observe: str | list[str] | None = None) -> CompensationModel:
     """Fit a compensation model on datasets (paths, scenario names or :class:`Dataset`) and save it to ``out``.
 
     ``out`` is checked before the work (:func:`twin.infra.outdir.check_output_file`): an existing
@@ -250,6 +251,9 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
         chosen candidate's.
     allow_unstable : bool, default False
         Save an unstable grey fit instead of refusing it.
+    observe : str or list of str, optional
+        Thermometers the model fuses while it runs (``--observe``; a model with an observer, the
+        grey-box model): outputs of the model, corrected by their readings, not inputs.
 
     Returns
     -------
@@ -262,17 +266,21 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
     """
     if out is not None:
         check_output_file(out, overwrite, inputs=_input_files(datasets))
+    observe = split_names(observe)
     loaded = joined_when_contiguous([load_dataset(d, column_map, nan_policy, machine) for d in datasets],
-                                    [*split_names(inputs), target])
+                                    [*split_names(inputs), *observe, target])
     selection = None
     if select is not None:
         if select != "auto":
             raise TwinInputError(f"--select {select!r}: the only selection rule is 'auto'")
+        if observe:
+            raise TwinInputError("--observe names thermometers for a model with an observer (--model greybox); "
+                                 "--select auto ranks candidates on the same inputs, without one")
         model, chosen_params, selection = auto_select(loaded, split_names(inputs), target,
                                                       zero_reference=zero_reference)
         params = {**chosen_params, **(params or {})}
     cm = fit_compensation_model(loaded, split_names(inputs), target, model, params, zero_reference,
-                                reference_samples)
+                                reference_samples, observe)
     if selection is not None:
         cm.metadata["selection"] = {"reason": selection.reason, "chosen": selection.chosen,
                                     "ranking": selection.ranking,
