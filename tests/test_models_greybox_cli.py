@@ -15,7 +15,7 @@ from twin.cli import main
 from twin.compensation.protocol import bridging_inputs, stability_problem
 from twin.compensation.store import CompensationModel
 from twin.compensation.train import evaluate, train
-from twin.core.dataset import ChannelInfo, Dataset
+from twin.core.dataset import ChannelInfo, Dataset, sidecar_path
 from twin.errors import TwinInputError
 
 CHANNELS = [ChannelInfo("spindle", "rpm", "speed"), ChannelInfo("air", "degC", "air"),
@@ -334,6 +334,32 @@ def test_observe_names_the_thermometers_the_greybox_fuses(tmp_path, capsys):
     rms = {name: np.sqrt(np.mean((measured[half:] - predicted[half:]) ** 2))
            for name, (_, measured, predicted) in errors.items()}
     assert rms["observer"] < 0.3 * rms["open loop"]
+
+
+def test_the_observer_runs_over_missing_readings_of_its_thermometer(tmp_path, capsys):
+    """--nan-policy keep: a thermometer the model observes may drop out (the filter carries on with the model);
+    a missing reading anywhere else is refused by name."""
+    training = _observed_record([1500.0, 3000.0, 4500.0], "training")
+    heated = _observed_record([2000.0, 4000.0], "heated", extra_heat=80.0)
+    observer = train([training], "spindle,air", "Z", model="greybox", observe="node1", out=tmp_path / "o.json")
+    whole = evaluate(observer, [heated]).predictions["heated"][2]
+    values = heated.values.copy()
+    values[900:1000, heated.names.index("node1")] = np.nan   # 100 min without the thermometer
+    gappy = tmp_path / "gappy.csv"
+    Dataset(heated.time_s, values, heated.channels, {"scenario": "gappy"}).write(gappy)
+    sidecar_path(gappy).unlink()   # a measured CSV, no sidecar
+    assert main(["evaluate", str(tmp_path / "o.json"), str(gappy)]) == 2
+    assert "choose nan_policy" in capsys.readouterr().err
+    assert main(["evaluate", str(tmp_path / "o.json"), str(gappy), "--nan-policy", "keep"]) == 0
+    held = evaluate(observer, [gappy], nan_policy="keep").predictions["gappy"][2]
+    np.testing.assert_allclose(held[:900], whole[:900], atol=1e-9)   # the same filter until the readings stop
+    assert np.all(np.isfinite(held)) and np.max(np.abs(held - whole)) < 0.1 * np.ptp(whole)
+    values[500, heated.names.index("air")] = np.nan
+    Dataset(heated.time_s, values, heated.channels, {"scenario": "gappy"}).write(gappy)
+    sidecar_path(gappy).unlink()
+    with pytest.raises(TwinInputError, match=r"gappy: air has no reading at t = 30000 s \(1 rows\); only the "
+                                             r"thermometers a model observes may miss readings \(node1\)"):
+        evaluate(observer, [gappy], nan_policy="keep")
 
 
 @pytest.mark.parametrize("args, message", [

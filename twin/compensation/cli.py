@@ -104,10 +104,15 @@ def cmd_study(args: argparse.Namespace) -> None:
     print(f"results in {res.out_dir}/")
 
 
-def _add_data_options(p):
+def _add_data_options(p, keep=False):
     p.add_argument("--column-map", help="JSON file or inline JSON mapping measured CSV columns to <name>_<unit>")
-    p.add_argument("--nan-policy", default="error", choices=("error", "interpolate", "drop"),
-                   help="NaNs in a measured CSV (default: error)")
+    if keep:   # a model that observes thermometers runs over their missing readings
+        p.add_argument("--nan-policy", default="error", choices=("error", "interpolate", "drop", "keep"),
+                       help="NaNs in a measured CSV (default: error); keep: missing readings of the thermometers "
+                       "the model observes (--observe), which its filter skips")
+    else:
+        p.add_argument("--nan-policy", default="error", choices=("error", "interpolate", "drop"),
+                       help="NaNs in a measured CSV (default: error)")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -155,7 +160,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with --reference train, a record that starts later than one sampling interval after the "
                    "history ends: refuse it (default), or bridge the missing rows by interpolating the inputs")
     add_overwrite(e)
-    _add_data_options(e)
+    _add_data_options(e, keep=True)
     e.set_defaults(func=cmd_evaluate)
 
     s = sub.add_parser("study", help="compensation studies: cross-condition transfer, thesis protocol, hybrid")

@@ -288,6 +288,24 @@ class CompensationModel:
         check_channels(dataset, self.inputs, self.input_units, "input")
         check_channels(dataset, [self.target], [self.target_unit], "target")
 
+    def check_readings(self, dataset: Dataset) -> None:
+        """Raise a :class:`TwinInputError` for a missing (NaN) reading the model cannot run over: any but in
+        the thermometers it observes, whose filter skips them.
+
+        Parameters
+        ----------
+        dataset : Dataset
+            A record with the model's channels (:meth:`check`).
+        """
+        observed = self.preprocessing.get("observed", [])
+        for name in [*self.inputs, self.target]:
+            missing = np.flatnonzero(~np.isfinite(dataset[name]))
+            if len(missing) and name not in observed:
+                raise TwinInputError(f"{dataset_label(dataset)}: {name} has no reading at t = "
+                                     f"{dataset.time_s[missing[0]]:g} s ({len(missing)} rows); only the "
+                                     f"thermometers a model observes may miss readings "
+                                     f"({', '.join(observed) or f'{self.model_name} observes none'})")
+
     def features(self, dataset: Dataset) -> NDArray[np.float64]:
         """The input matrix as the estimator sees it (zero-referenced unless that is switched off).
 

@@ -55,7 +55,7 @@ METRIC_COLUMNS = ("rmse", "nse", "r", "max_residual", "improvement_percent", "un
 
 # ----------------------------------------------------------------------------- datasets
 def load_dataset(spec: Dataset | Path | str, column_map: dict[str, str] | None = None,
-                 nan_policy: Literal["error", "interpolate", "drop"] = "error", machine: Machine | None = None,
+                 nan_policy: Literal["error", "interpolate", "drop", "keep"] = "error", machine: Machine | None = None,
                  noise: bool = True, label: str | None = None) -> Dataset:
     """A :class:`Dataset` from a path or a scenario name.
 
@@ -71,8 +71,8 @@ def load_dataset(spec: Dataset | Path | str, column_map: dict[str, str] | None =
         The dataset, a CSV path or a scenario name.
     column_map : dict of str to str, optional
         Measured CSV column → ``<name>_<unit>`` (or ``time_s``); given, a sidecar is ignored.
-    nan_policy : {"error", "interpolate", "drop"}, default "error"
-        NaNs in a measured CSV.
+    nan_policy : {"error", "interpolate", "drop", "keep"}, default "error"
+        NaNs in a measured CSV ("keep" leaves them to the caller).
     machine : Machine, optional
         The machine a scenario runs on (default: the scenario's).
     noise : bool, default True
@@ -301,7 +301,7 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
 
 def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset | Path | str],
              out_dir: Path | str | None = None, column_map: dict[str, str] | None = None,
-             nan_policy: Literal["error", "interpolate", "drop"] = "error", machine: Machine | None = None,
+             nan_policy: Literal["error", "interpolate", "drop", "keep"] = "error", machine: Machine | None = None,
              plots: bool = True, overwrite: bool = False, reference: Literal["own", "train"] = "own",
              history: Dataset | Path | str | None = None, gap: Literal["refuse", "interpolate"] = "refuse"
              ) -> Evaluation:
@@ -328,7 +328,8 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
     out_dir : Path or str, optional
         Folder for the table and plots, written atomically; None writes nothing.
     column_map, nan_policy, machine
-        See :func:`load_dataset`.
+        See :func:`load_dataset`; ``nan_policy="keep"`` leaves missing readings in the thermometers the
+        model observes, which its filter skips (anywhere else they are refused).
     plots : bool, default True
         Write the PNGs.
     overwrite : bool, default False
@@ -355,9 +356,10 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
     check_output_folder(out_dir, overwrite, inputs=_input_files([model, *datasets]))
     cm = model if isinstance(model, CompensationModel) else CompensationModel.load(model)
     loaded = [load_dataset(d, column_map, nan_policy, machine) for d in datasets]
-    for ds in loaded:
-        cm.check(ds)
     past = load_dataset(history, column_map, nan_policy, machine) if history is not None else None
+    for ds in loaded + ([past] if past is not None else []):
+        cm.check(ds)
+        cm.check_readings(ds)
     rows, predictions = [], {}
     seen = {}
     for ds in loaded:
