@@ -207,17 +207,3 @@ def model_traits(estimator: object) -> ModelTraits:
     _load_all()
     return _TRAITS.get(type(estimator).__name__, ModelTraits())
 
-
-def is_time_series(estimator: object) -> bool:
-    """True if ``estimator`` is an instance of a registered grey time-series class.
-
-    Parameters
-    ----------
-    estimator : object
-        Any object (its class name is looked up).
-
-    Returns
-    -------
-    bool
-    """
-    return model_traits(estimator).time_series

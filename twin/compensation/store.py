@@ -40,7 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from models.persistence import model_from_document, model_to_document
-from models.registry import is_time_series, model_traits, registered_models
+from models.registry import model_traits, registered_models
 
 from ..core.dataset import Dataset, json_default, project_version
 from ..core.files import write_text_atomic
@@ -242,7 +242,7 @@ class CompensationModel:
     @property
     def is_time_series(self) -> bool:
         """Whether the estimator is a grey time-series model (coefficients per sample)."""
-        return is_time_series(self.estimator)
+        return model_traits(self.estimator).time_series
 
     @property
     def absolute_columns(self) -> list[int]:
