@@ -154,10 +154,10 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
     exponent : float
         Exponent b of ``P ∝ n^b``: the start value when ``fit_exponent``, else fixed.
     fit_exponent : bool
-        Fit b within ``exponent_bounds``; only where the rows fitted (weight > 0) run (:func:`models.speed.running`)
-        at two speeds at least :data:`_DISTINCT_SPEEDS` apart: at one speed b only scales the gains and cannot be identified (a
-        free fit runs it to a bound, and the model extrapolates to other speeds by an arbitrary n^b), so it
-        stays at ``exponent``.
+        Fit b within ``exponent_bounds``; only where the rows fitted (weight > 0) run
+        (:func:`models.speed.running`) at two speeds at least :data:`_DISTINCT_SPEEDS` apart: at one speed b
+        only scales the gains and cannot be identified (a free fit runs it to a bound, and the model
+        extrapolates to other speeds by an arbitrary n^b), so it stays at ``exponent``.
     exponent_bounds : (float, float)
     time_constant_bounds : (float, float), s
         Every time constant stays inside; the poles are −1/τ.

@@ -114,10 +114,10 @@ def regime_blocks(speed: ArrayLike, min_rows: int = 2, tolerance: float = SPEED_
         if not runs[k]:
             previous = departure = None
             continue
-        if previous is None or abs(n - previous) > tolerance * previous:   # starting, stepping or ramping
+        if previous is None or abs(n - previous) > tolerance * abs(previous):   # starting, stepping or ramping
             departure = k if departure is None else departure
         elif departure is not None:   # settled: a new regime if the speed is not the block's
-            if regime is None or abs(n - regime) > tolerance * regime:
+            if regime is None or abs(n - regime) > tolerance * abs(regime):
                 starts.append(departure)
                 regime = n
             departure = None
