@@ -20,7 +20,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "models.md"
-_BLOCK = re.compile(r"```console\n(.*?)```(?:\s*\n```text\n(.*?)```)?", flags=re.S)
+_BLOCK = re.compile(r"```console\n(.*?)```(?:\s*\n```text\n(.*?)```)?", flags=re.DOTALL)
 
 
 def _blocks():
