@@ -195,15 +195,15 @@ def selection_study(frame):
         old = candidate_rmse(zoo, X[:cut], Y[ch][:cut], old_split)
         mean_pick = min(chosen.mean_rmse, key=lambda k: (chosen.mean_rmse[k], chosen.worst_rmse[k], k))
         old_pick = min(old, key=old.get)
-        rows.append([ch, chosen.best, fmt(later[chosen.best]), mean_pick, fmt(later[mean_pick]), old_pick,
+        rows.append([ch, chosen.chosen, fmt(later[chosen.chosen]), mean_pick, fmt(later[mean_pick]), old_pick,
                      fmt(later[old_pick]), fmt(later["MLR (baseline)"]), min(later, key=later.get),
                      fmt(min(later.values()))])
         agreement.append([ch] + [f"{rank_agreement(scores, later):.2f}" for scores in (
             chosen.score, chosen.mean_rmse, old)])
         print(f"{ch}, blocks 1-3: {chosen.reason}")
         whole = select_by_blocked_cv(zoo, X, Y[ch], speed)
-        other = whole.ranking[1] if whole.best == whole.ranking[0] else whole.ranking[0]
-        final.append([ch, whole.best, fmt(whole.score[whole.best]), fmt(whole.worst_rmse[whole.best]),
+        other = whole.ranking[1] if whole.chosen == whole.ranking[0] else whole.ranking[0]
+        final.append([ch, whole.chosen, fmt(whole.score[whole.chosen]), fmt(whole.worst_rmse[whole.chosen]),
                       other, fmt(whole.score[other]), fmt(whole.score["MLR (baseline)"])])
         print(f"{ch}, all of part 1: {whole.reason}")
     table(f"Chosen on blocks 1-3 (rows 0..{cut - 1}), scored once per candidate on block 4 (rows {cut}..{len(X) - 1}, "

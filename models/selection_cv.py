@@ -246,11 +246,6 @@ class Selection:
     folds: list[str]                #: fold names
     reason: str                     #: one paragraph: what was chosen and why
 
-    @property
-    def best(self) -> str:
-        """The chosen candidate (:attr:`chosen`)."""
-        return self.chosen
-
 
 def held_out_rmse(estimator: BaseEstimator, X: np.ndarray, y: np.ndarray, fold: Fold) -> float:
     """RMSE of :func:`fold_prediction` on the fold's test rows; ``inf`` if the fit fails or the prediction diverges.

@@ -112,7 +112,7 @@ def test_selection_prefers_the_model_of_the_right_structure_and_says_why():
         "too big": (GreyBoxRegressor(n_poles=1), [0, 1] + [3] * 1),  # fine: fits, but the sensor is noise
     }
     chosen = select_by_blocked_cv(candidates, X, y, speed)
-    assert chosen.best == "grey-box"
+    assert chosen.chosen == "grey-box"
     # every held-out block at the noise level (0.05), except rolling origin from the 1000 rpm block
     # alone: one speed cannot identify the exponent of P ∝ n^b, so 2000 rpm is extrapolated blind
     scores = dict(zip(chosen.folds, chosen.fold_rmse["grey-box"]))
@@ -176,7 +176,7 @@ def test_parsimony_takes_the_lowest_order_within_one_standard_error():
 def test_a_second_pole_must_earn_more_than_the_folds_scatter():
     # a 4 % slow mode: two poles score best, but one pole is within one standard error of them
     faint = select_by_blocked_cv(_orders(), *_record(seed=0, slow_share=0.04))
-    assert faint.ranking[0] == "2 poles" and faint.best == faint.chosen == "1 poles"
+    assert faint.ranking[0] == "2 poles" and faint.chosen == "1 poles"
     assert faint.reason.startswith("chose 1 poles: the lowest order within one standard error of 2 poles, whose "
                                    "geometric-mean RMSE on operating-regime blocks it did not see is the lowest")
     assert faint.reason.endswith("folds, and the two are within one standard error: these folds do not tell them "
@@ -184,7 +184,7 @@ def test_a_second_pole_must_earn_more_than_the_folds_scatter():
     assert " It beats 2 poles on " in faint.reason
     # a 30 % slow mode: two poles win by far more than the scatter and are kept
     clear = select_by_blocked_cv(_orders(), *_record(seed=0, slow_share=0.3))
-    assert clear.ranking[0] == clear.best == "2 poles"
+    assert clear.ranking[0] == clear.chosen == "2 poles"
     assert clear.reason.startswith("chose 2 poles: lowest geometric-mean RMSE")
     assert clear.reason.endswith(f" It beats {clear.ranking[1]} on 7 of 7 folds.")
 
