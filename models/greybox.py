@@ -384,15 +384,20 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         n_parameters = n_outputs * n_linear + n_poles + int(bool(self.fit_exponent))
         require_parameters(int(np.count_nonzero(w)), n_parameters, "GreyBoxRegressor",
                            hint=" Use fewer poles or temperature inputs.")
-        time, speed = self._check_x(X, inputs)
+        time, speed = self._check_x(X, inputs, allow_nan_in=observed)
         outputs = np.column_stack([y, X[:, observed]])
+        present = np.isfinite(outputs)   # an observed thermometer may miss readings: they weigh 0
+        outputs = np.where(present, outputs, 0.0)
         used = w > 0
+        W = w[:, None] * present
         speeds = speed[used & running(speed)]   # a measured standstill reads a few rpm: not a second speed
         fit_exponent = bool(self.fit_exponent and speeds.size and speeds.max() >= _DISTINCT_SPEEDS * speeds.min())
 
-        scale = outputs[used].std(axis=0)
-        scale[scale == 0] = 1.0
-        weights = np.sqrt(w)[:, None] / scale * np.r_[1.0, np.full(n_outputs - 1, float(self.observed_weight))]
+        every_reading = bool(present[used].all())
+        scale = outputs[used].std(axis=0) if every_reading else np.array(
+            [outputs[used & present[:, o], o].std() for o in range(n_outputs)])
+        scale[~(scale > 0)] = 1.0
+        weights = np.sqrt(W) / scale * np.r_[1.0, np.full(n_outputs - 1, float(self.observed_weight))]
 
         log_bounds = (np.log(lo), np.log(hi))
 
@@ -402,9 +407,13 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
             Phi = self._design(self._states(time, U, lam), U)
             norm = np.sqrt(np.sum(Phi[used] ** 2, axis=0))
             norm[norm == 0] = 1.0
-            coef = np.linalg.lstsq((Phi / norm)[used] * np.sqrt(w[used])[:, None],
-                                   outputs[used] * np.sqrt(w[used])[:, None], rcond=None)[0] / norm[:, None]
-            return coef, Phi, U
+            design, root = (Phi / norm)[used], np.sqrt(W[used])
+            if every_reading:   # one solve for every output
+                coef = np.linalg.lstsq(design * root[:, :1], outputs[used] * root[:, :1], rcond=None)[0]
+            else:                     # each output on the rows where it was read
+                coef = np.column_stack([np.linalg.lstsq(design * root[:, [o]], outputs[used, o] * root[:, o],
+                                                        rcond=None)[0] for o in range(n_outputs)])
+            return coef / norm[:, None], Phi, U
 
         def residuals(theta):
             coef, Phi, _ = linear(theta)
@@ -422,7 +431,7 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         self.gains_ = coef[1: 1 + n_poles * m].T.reshape(n_outputs, n_poles, m).copy()
         self.feedthrough_ = coef[1 + n_poles * m:].T.copy()
         fitted = Phi @ coef
-        self.output_std_ = np.sqrt(np.average((fitted - outputs) ** 2, axis=0, weights=w))
+        self.output_std_ = np.sqrt(np.average((fitted - outputs) ** 2, axis=0, weights=W))
         self.input_std_ = U[used].std(axis=0)
         self.training_rmse_ = float(self.output_std_[0])
         self.y_reference_ = float(y[0])

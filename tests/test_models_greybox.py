@@ -206,6 +206,21 @@ def test_observer_fuses_a_thermometer_to_follow_an_unmodelled_heat():
     np.testing.assert_allclose(plain.predict_filtered(X_test), plain.predict(X_test), atol=1e-8)
 
 
+def test_missing_readings_of_an_observed_thermometer_are_left_out_of_the_fit():
+    times = np.arange(0.0, 30 * 3600.0, 60.0)
+    X, y = record(times, [1500.0, 3000.0, 4500.0])
+    full = GreyBoxRegressor(n_poles=2, temperature_inputs=(2,), observed=(3,)).fit(X, y)
+    gappy = X.copy()
+    gappy[300:500, 3] = np.nan    # the thermometer out for 200 min, in the first run
+    gappy[1200::7, 3] = np.nan    # and one reading in seven later on
+    model = GreyBoxRegressor(n_poles=2, temperature_inputs=(2,), observed=(3,)).fit(gappy, y)
+    np.testing.assert_allclose(model.time_constants_, full.time_constants_, rtol=0.02)
+    assert np.all(np.isfinite(model.gains_)) and model.output_std_[1] < 0.01
+    with pytest.raises(ValueError, match="column 2 is nan"):   # an input may not miss one
+        gappy[10, 2] = np.nan
+        GreyBoxRegressor(n_poles=2, temperature_inputs=(2,), observed=(3,)).fit(gappy, y)
+
+
 _DETERMINISM = """
 import numpy as np
 from models.greybox import GreyBoxRegressor

@@ -362,6 +362,34 @@ def test_the_observer_runs_over_missing_readings_of_its_thermometer(tmp_path, ca
         evaluate(observer, [gappy], nan_policy="keep")
 
 
+def test_the_observer_trains_on_a_thermometer_that_drops_out(tmp_path, capsys):
+    """--nan-policy keep in training: the missing readings are left out of the fit (not made up), and only
+    the observed thermometer's readings may miss, never its first (the reference of its change)."""
+    training = _observed_record([1500.0, 3000.0, 4500.0], "training")
+    values = training.values.copy()
+    values[300:500, training.names.index("node1")] = np.nan
+    path = tmp_path / "gappy.csv"
+    Dataset(training.time_s, values, training.channels, {"scenario": "gappy"}).write(path)
+    sidecar_path(path).unlink()
+    command = ["train", str(path), "--inputs", "spindle,air", "--observe", "node1", "--target", "Z",
+               "--model", "greybox", "--out", str(tmp_path / "o.json")]
+    assert main(command) == 2 and "choose nan_policy" in capsys.readouterr().err
+    assert main([*command, "--nan-policy", "keep"]) == 0
+    full = train([training], "spindle,air", "Z", model="greybox", observe="node1")
+    np.testing.assert_allclose(CompensationModel.load(tmp_path / "o.json").estimator.time_constants_,
+                               full.estimator.time_constants_, rtol=0.02)
+    values[0, training.names.index("node1")] = np.nan
+    with pytest.raises(TwinInputError, match=r"node1 has no reading at t = 0 s, one of the first 1 row\(s\), which "
+                                             r"are the reference of its change"):
+        train([Dataset(training.time_s, values, training.channels, {"scenario": "gappy"})], "spindle,air", "Z",
+              model="greybox", observe="node1")
+    with pytest.raises(TwinInputError, match=r"gappy: Z has no reading"):
+        values[0, training.names.index("node1")] = 20.0
+        values[50, training.names.index("Z")] = np.nan
+        train([Dataset(training.time_s, values, training.channels, {"scenario": "gappy"})], "spindle,air", "Z",
+              model="greybox", observe="node1")
+
+
 @pytest.mark.parametrize("args, message", [
     (["--model", "mlr"], r"--observe node1: mlr has no observer that fuses thermometers"),
     (["--model", "greybox", "--param", "observed=[3]"], r"name the observed thermometers with --observe"),

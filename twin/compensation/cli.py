@@ -109,7 +109,7 @@ def _add_data_options(p, keep=False):
     if keep:   # a model that observes thermometers runs over their missing readings
         p.add_argument("--nan-policy", default="error", choices=("error", "interpolate", "drop", "keep"),
                        help="NaNs in a measured CSV (default: error); keep: missing readings of the thermometers "
-                       "the model observes (--observe), which its filter skips")
+                       "the model observes (--observe), left out of its fit and skipped by its filter")
     else:
         p.add_argument("--nan-policy", default="error", choices=("error", "interpolate", "drop"),
                        help="NaNs in a measured CSV (default: error)")
@@ -143,7 +143,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="use raw values instead of the change since each dataset's start")
     t.add_argument("--reference-samples", type=int, default=1,
                    help="rows averaged for each dataset's reference (default 1)")
-    _add_data_options(t)
+    _add_data_options(t, keep=True)
     t.set_defaults(func=cmd_train)
 
     e = sub.add_parser("evaluate", help="score a saved model on datasets: table and measured-vs-predicted plots")

@@ -290,7 +290,8 @@ class CompensationModel:
 
     def check_readings(self, dataset: Dataset) -> None:
         """Raise a :class:`TwinInputError` for a missing (NaN) reading the model cannot run over: any but in
-        the thermometers it observes, whose filter skips them.
+        the thermometers it observes (their fit leaves them out, their filter skips them), and theirs in the
+        reference rows.
 
         Parameters
         ----------
@@ -298,6 +299,7 @@ class CompensationModel:
             A record with the model's channels (:meth:`check`).
         """
         observed = self.preprocessing.get("observed", [])
+        first = self.preprocessing.get("reference_samples", 1)
         for name in [*self.inputs, self.target]:
             missing = np.flatnonzero(~np.isfinite(dataset[name]))
             if len(missing) and name not in observed:
@@ -305,6 +307,10 @@ class CompensationModel:
                                      f"{dataset.time_s[missing[0]]:g} s ({len(missing)} rows); only the "
                                      f"thermometers a model observes may miss readings "
                                      f"({', '.join(observed) or f'{self.model_name} observes none'})")
+            if len(missing) and missing[0] < first:
+                raise TwinInputError(f"{dataset_label(dataset)}: {name} has no reading at t = "
+                                     f"{dataset.time_s[missing[0]]:g} s, one of the first {first} row(s), which "
+                                     "are the reference of its change")
 
     def features(self, dataset: Dataset) -> NDArray[np.float64]:
         """The input matrix as the estimator sees it (zero-referenced unless that is switched off).
@@ -493,6 +499,24 @@ def _channel_units(datasets, inputs, target):
     return units, target_unit
 
 
+def _preprocessing(estimator, model, inputs, units, zero_reference, reference_samples, observe):
+    """The model's ``preprocessing``, after checking its declared first input (a speed, taken as measured)."""
+    prep = {"zero_reference": bool(zero_reference), "reference_samples": int(reference_samples),
+            "convention": "inputs and target minus their value at the start of each dataset"
+            if zero_reference else "raw values"}
+    first = model_traits(estimator).first_input
+    if first is not None:
+        if units[0] != first[1]:
+            raise TwinInputError(f"{model} takes the {first[0]} (unit {first[1]}) as its first input, and "
+                                 f"{inputs[0]!r} is in {units[0]}; put the {first[0]} first (--inputs "
+                                 f"<{first[0]}>,<the others…>)")
+        prep["absolute_inputs"] = [inputs[0]]   # a speed is an operating state, not a sensor with an offset
+        prep["convention"] += f" ({inputs[0]} as measured)" if zero_reference else ""
+    if observe:
+        prep["observed"] = list(observe)
+    return prep
+
+
 def _with_observed(estimator, model, inputs, observe, params):
     """The model's channels: ``inputs``, then the thermometers it observes (checked against its contract)."""
     observe = list(observe)
@@ -550,7 +574,8 @@ def fit_compensation_model(datasets: list, inputs: list[str], target: str, model
         Reference inputs and target to the mean of their first ``reference_samples`` rows.
     observe : sequence of str, default ()
         Thermometers the model fuses while it runs (a model with an observer, :class:`models.registry.ModelTraits`):
-        outputs of the model, not inputs; a record to predict must hold them (a NaN reading is skipped).
+        outputs of the model, not inputs; a record must hold them, and only their readings may be missing
+        (NaN: left out of the fit, skipped by the filter).
 
     Returns
     -------
@@ -573,22 +598,14 @@ def fit_compensation_model(datasets: list, inputs: list[str], target: str, model
     for ds in datasets:
         check_reference_samples(reference_samples, len(ds), dataset_label(ds))
     units, target_unit = _channel_units(datasets, channels, target)
-    first = model_traits(estimator).first_input
-    if first is not None and units[0] != first[1]:
-        raise TwinInputError(f"{model} takes the {first[0]} (unit {first[1]}) as its first input, and {inputs[0]!r} "
-                             f"is in {units[0]}; put the {first[0]} first (--inputs <{first[0]}>,<the others…>)")
-    prep = {"zero_reference": bool(zero_reference), "reference_samples": int(reference_samples),
-            "convention": "inputs and target minus their value at the start of each dataset"
-            if zero_reference else "raw values"}
-    if first is not None:   # a speed is an operating state, not a sensor with an offset
-        prep["absolute_inputs"] = [inputs[0]]
-        prep["convention"] += f" ({inputs[0]} as measured)" if zero_reference else ""
+    prep = _preprocessing(estimator, model, inputs, units, zero_reference, reference_samples, observe)
     cm = CompensationModel(estimator, str(model).lower(), channels, target, units, target_unit, prep)
+    for ds in datasets:
+        cm.check_readings(ds)
     dt = _time_series_interval(cm, datasets, params) if cm.is_time_series else None
-    if len(channels) > len(inputs):   # the observed columns, after the time column the model may take
+    if observe:   # the observed columns, after the inputs and the time column the model may take
         first_observed = len(inputs) + int(bool(cm.preprocessing.get("time_column")))
         estimator.set_params(observed=tuple(range(first_observed, first_observed + len(observe))))
-        cm.preprocessing["observed"] = list(observe)
     X = np.vstack([cm.features(ds) for ds in datasets])
     y = np.concatenate([cm.target_values(ds) for ds in datasets])
     try:

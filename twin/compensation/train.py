@@ -206,7 +206,7 @@ class Evaluation:
 def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], target: str, model: str = "anfis",
           params: dict | None = None, out: Path | str | None = None, zero_reference: bool = True,
           reference_samples: int = 1, column_map: dict[str, str] | None = None,
-          nan_policy: Literal["error", "interpolate", "drop"] = "error", machine: Machine | None = None,
+          nan_policy: Literal["error", "interpolate", "drop", "keep"] = "error", machine: Machine | None = None,
           overwrite: bool = False, select: str | None = None, allow_unstable: bool = False,
           observe: str | list[str] | None = None) -> CompensationModel:
     """Fit a compensation model on datasets (paths, scenario names or :class:`Dataset`) and save it to ``out``.
@@ -253,7 +253,8 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
         Save an unstable grey fit instead of refusing it.
     observe : str or list of str, optional
         Thermometers the model fuses while it runs (``--observe``; a model with an observer, the
-        grey-box model): outputs of the model, corrected by their readings, not inputs.
+        grey-box model): outputs of the model, corrected by their readings, not inputs. With
+        ``nan_policy="keep"`` their missing readings are left out of the fit.
 
     Returns
     -------
