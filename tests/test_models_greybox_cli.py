@@ -383,11 +383,13 @@ def test_the_observer_trains_on_a_thermometer_that_drops_out(tmp_path, capsys):
                                              r"are the reference of its change"):
         train([Dataset(training.time_s, values, training.channels, {"scenario": "gappy"})], "spindle,air", "Z",
               model="greybox", observe="node1")
-    with pytest.raises(TwinInputError, match=r"gappy: Z has no reading"):
-        values[0, training.names.index("node1")] = 20.0
-        values[50, training.names.index("Z")] = np.nan
-        train([Dataset(training.time_s, values, training.channels, {"scenario": "gappy"})], "spindle,air", "Z",
-              model="greybox", observe="node1")
+    values[0, training.names.index("node1")] = 20.0
+    values[50, training.names.index("Z")] = np.nan
+    gappy = Dataset(training.time_s, values, training.channels, {"scenario": "gappy"})
+    with pytest.raises(TwinInputError, match=r"gappy: Z has no reading at t = 3000 s \(1 rows\)"):
+        train([gappy], "spindle,air", "Z", model="greybox", observe="node1")
+    with pytest.raises(TwinInputError, match=r"gappy: Z has no reading .* \(it observes none\)"):
+        train([gappy], "spindle,air", "Z", select="auto")   # before the folds, where it would fail every candidate
 
 
 @pytest.mark.parametrize("args, message", [

@@ -104,15 +104,12 @@ def cmd_study(args: argparse.Namespace) -> None:
     print(f"results in {res.out_dir}/")
 
 
-def _add_data_options(p, keep=False):
+def _add_data_options(p):
     p.add_argument("--column-map", help="JSON file or inline JSON mapping measured CSV columns to <name>_<unit>")
-    if keep:   # a model that observes thermometers runs over their missing readings
-        p.add_argument("--nan-policy", default="error", choices=("error", "interpolate", "drop", "keep"),
-                       help="NaNs in a measured CSV (default: error); keep: missing readings of the thermometers "
-                       "the model observes (--observe), left out of its fit and skipped by its filter")
-    else:
-        p.add_argument("--nan-policy", default="error", choices=("error", "interpolate", "drop"),
-                       help="NaNs in a measured CSV (default: error)")
+    p.add_argument("--nan-policy", default="error", choices=("error", "interpolate", "drop", "keep"),
+                   help="NaNs in a measured CSV (default: error); keep: missing readings of the thermometers the "
+                   "model observes (--observe), left out of its fit and skipped by its filter (anywhere else "
+                   "they are refused)")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -143,7 +140,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="use raw values instead of the change since each dataset's start")
     t.add_argument("--reference-samples", type=int, default=1,
                    help="rows averaged for each dataset's reference (default 1)")
-    _add_data_options(t, keep=True)
+    _add_data_options(t)
     t.set_defaults(func=cmd_train)
 
     e = sub.add_parser("evaluate", help="score a saved model on datasets: table and measured-vs-predicted plots")
@@ -160,7 +157,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with --reference train, a record that starts later than one sampling interval after the "
                    "history ends: refuse it (default), or bridge the missing rows by interpolating the inputs")
     add_overwrite(e)
-    _add_data_options(e, keep=True)
+    _add_data_options(e)
     e.set_defaults(func=cmd_evaluate)
 
     s = sub.add_parser("study", help="compensation studies: cross-condition transfer, thesis protocol, hybrid")

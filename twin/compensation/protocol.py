@@ -29,6 +29,7 @@ from ..core.dataset import Dataset
 from ..errors import TwinInputError
 from .records import (
     bridge_times,
+    check_complete,
     dataset_label,
     evenly_sampled,
     linear_bridge,
@@ -105,6 +106,7 @@ def auto_select(datasets: Iterable[Dataset], inputs: list[str], target: str,
                              f"got {len(datasets)} datasets")
     ds = datasets[0]
     speed_name = _speed_channel(ds, inputs)
+    check_complete(ds, [*inputs, target])
     raw = ds.matrix(inputs)
     X, y = raw, ds[target]
     if zero_reference:

@@ -268,3 +268,36 @@ def check_starts_at_rest(dataset: Dataset, speed: str, model_name: str) -> None:
                              "record's first row as rest (the spindle stopped, the machine in equilibrium): train "
                              "on a record that starts at rest, and evaluate one that continues the training "
                              "record with --reference train")
+
+
+def check_complete(dataset: Dataset, names: Sequence[str], may_miss: Sequence[str] = (), reference_rows: int = 1
+                   ) -> None:
+    """Refuse a missing (NaN) reading in ``names``, but for the channels ``may_miss`` (an observer's
+    thermometers) outside their first ``reference_rows`` rows (the reference of their change).
+
+    Parameters
+    ----------
+    dataset : Dataset
+        A record with the channels.
+    names : sequence of str
+        The channels a model reads.
+    may_miss : sequence of str, default ()
+        Those of them that may miss readings.
+    reference_rows : int, default 1
+        Rows that are the zero reference.
+
+    Raises
+    ------
+    TwinInputError
+        Naming the record, the channel, the first time without a reading and how many rows miss one.
+    """
+    for name in names:
+        missing = np.flatnonzero(~np.isfinite(dataset[name]))
+        if len(missing) and name not in may_miss:
+            raise TwinInputError(f"{dataset_label(dataset)}: {name} has no reading at t = "
+                                 f"{dataset.time_s[missing[0]]:g} s ({len(missing)} rows); only the thermometers "
+                                 f"a model observes may miss readings ({', '.join(may_miss) or 'it observes none'})")
+        if len(missing) and missing[0] < reference_rows:
+            raise TwinInputError(f"{dataset_label(dataset)}: {name} has no reading at t = "
+                                 f"{dataset.time_s[missing[0]]:g} s, one of the first {reference_rows} row(s), "
+                                 "which are the reference of its change")

@@ -46,6 +46,7 @@ from ..core.dataset import Dataset, json_default, project_version
 from ..core.files import write_text_atomic
 from ..errors import TwinInputError
 from .records import (
+    check_complete,
     check_starts_at_rest,
     dataset_label,
     note_long_steps,
@@ -291,26 +292,15 @@ class CompensationModel:
     def check_readings(self, dataset: Dataset) -> None:
         """Raise a :class:`TwinInputError` for a missing (NaN) reading the model cannot run over: any but in
         the thermometers it observes (their fit leaves them out, their filter skips them), and theirs in the
-        reference rows.
+        reference rows (:func:`~twin.compensation.records.check_complete`).
 
         Parameters
         ----------
         dataset : Dataset
             A record with the model's channels (:meth:`check`).
         """
-        observed = self.preprocessing.get("observed", [])
-        first = self.preprocessing.get("reference_samples", 1)
-        for name in [*self.inputs, self.target]:
-            missing = np.flatnonzero(~np.isfinite(dataset[name]))
-            if len(missing) and name not in observed:
-                raise TwinInputError(f"{dataset_label(dataset)}: {name} has no reading at t = "
-                                     f"{dataset.time_s[missing[0]]:g} s ({len(missing)} rows); only the "
-                                     f"thermometers a model observes may miss readings "
-                                     f"({', '.join(observed) or f'{self.model_name} observes none'})")
-            if len(missing) and missing[0] < first:
-                raise TwinInputError(f"{dataset_label(dataset)}: {name} has no reading at t = "
-                                     f"{dataset.time_s[missing[0]]:g} s, one of the first {first} row(s), which "
-                                     "are the reference of its change")
+        check_complete(dataset, [*self.inputs, self.target], self.preprocessing.get("observed", ()),
+                       self.preprocessing.get("reference_samples", 1))
 
     def features(self, dataset: Dataset) -> NDArray[np.float64]:
         """The input matrix as the estimator sees it (zero-referenced unless that is switched off).
