@@ -130,6 +130,7 @@ def _candidate_pool(dataset, inputs, candidates, zero_reference):
     """``(pool, left_out)``: label → (estimator, its columns of ``auto_select``'s X) of the candidates that can
     take this record, and why → labels of those that cannot, by each class's input contract."""
     even = evenly_sampled(dataset)
+    interval = sampling_interval(dataset) if even else None   # None: the model takes the record's own times
     n = len(inputs)
     pool, left_out = {}, {}
     for label, (name, params) in candidates.items():
@@ -141,7 +142,7 @@ def _candidate_pool(dataset, inputs, candidates, zero_reference):
             why = _first_input_problem(dataset, inputs[0], traits.first_input, zero_reference)
             columns = [n + 1, *columns[1:]]   # the first input as measured
         if why is None and traits.takes_time:   # at the record's interval, or on its own times where uneven
-            estimator.set_params(sampling_interval=sampling_interval(dataset) if even else None)
+            estimator.set_params(sampling_interval=interval)
             columns = columns if even else [0, *columns]
         elif why is None and traits.time_series and not even:
             steps = np.diff(dataset.time_s)

@@ -65,9 +65,12 @@ def evenly_sampled(dataset: Dataset) -> bool:
     bool
     """
     steps = np.diff(dataset.time_s)
-    if len(steps) == 0:
-        return True
-    return bool(np.abs(steps - np.median(steps)).max() <= EVEN_STEP_TOLERANCE * np.median(steps))
+    return len(steps) == 0 or _even(steps, float(np.median(steps)))
+
+
+def _even(steps, usual):
+    """Whether ``steps`` (s) are all within :data:`EVEN_STEP_TOLERANCE` of ``usual`` (s)."""
+    return bool(np.abs(steps - usual).max() <= EVEN_STEP_TOLERANCE * usual)
 
 
 def sampling_interval(dataset: Dataset, strict: bool = True) -> float:
@@ -94,7 +97,7 @@ def sampling_interval(dataset: Dataset, strict: bool = True) -> float:
     if len(steps) == 0:
         raise TwinInputError(f"{dataset_label(dataset)}: a dataset with one row has no sampling interval")
     dt = float(np.median(steps))
-    if strict and not evenly_sampled(dataset):
+    if strict and not _even(steps, dt):
         raise TwinInputError(f"{dataset_label(dataset)}: grey time-series models need evenly sampled data; "
                              f"steps range from {steps.min():g} to {steps.max():g} s (the grey-box model, "
                              "--model greybox, takes the record's own times)")

@@ -31,7 +31,6 @@ On disk (``.json``, no pickle)::
 from __future__ import annotations
 
 import json
-import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -52,8 +51,6 @@ from .records import (
     note_long_steps,
     sampling_interval,
 )
-
-log = logging.getLogger("thermal_twin")
 
 FORMAT = "thermal-twin-compensation-model"
 FORMAT_VERSION = 1

@@ -405,8 +405,7 @@ def _measured_and_predicted(cm, ds, label, reference, past, gap):
     except TwinInputError:
         raise
     except ValueError as exc:
-        hint = "" if reference == "train" else " (a record that continues the training one: --reference train)"
-        raise TwinInputError(f"{label}: {cm.model_name} cannot predict it: {exc}{hint}") from None
+        raise TwinInputError(f"{label}: {cm.model_name} cannot predict it: {exc}") from None
 
 
 def _write_evaluation(cm, result, folder, plots):
