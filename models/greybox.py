@@ -38,11 +38,18 @@ Layout of ``X`` (one row per sample, time-ordered):
 row of ``X`` (every lag state equals its input there; a spindle running at
 the first row counts as having run at that speed for ever): to continue a
 run, pass the whole history from a rest state and read off the tail.
+
+``fit`` takes several records at once (``record_starts``: the rows where a
+new record begins, e.g. test days separated by nights at rest): each starts
+in equilibrium with its own first row, its temperatures are referenced to
+that row and its time restarts there; the records share the poles, the
+exponent and the gains.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from itertools import pairwise
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -249,8 +256,20 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
             raise ValueError(f"GreyBoxRegressor: columns {sorted(set(inputs) & set(observed))} are both inputs and observed.")
         return inputs, observed
 
-    def _check_x(self, X, inputs, allow_nan_in=()):
-        """``(time s, speed rpm, X)`` with finite time/speed/inputs, strictly increasing time, speed >= 0."""
+    @staticmethod
+    def _records(n_rows, record_starts):
+        """``[start, stop)`` rows of each record, from the rows where the records after the first start."""
+        starts = np.asarray(record_starts if record_starts is not None else (), dtype=float).ravel()
+        if starts.size and (not np.all(starts == np.round(starts)) or np.any(np.diff(starts) <= 0)
+                            or starts[0] < 2 or starts[-1] > n_rows - 2):
+            raise ValueError(f"GreyBoxRegressor: record_starts must be increasing row numbers with at least 2 rows "
+                             f"in every record (2..{n_rows - 2} for {n_rows} rows), got {starts.tolist()}.")
+        edges = [0, *starts.astype(int).tolist(), n_rows]
+        return list(pairwise(edges))
+
+    def _check_x(self, X, inputs, allow_nan_in=(), records=None):
+        """``(time s, speed rpm)`` with finite time/speed/inputs, time strictly increasing in each record,
+        speed >= 0."""
         time_col, speed_col, _ = self._layout()
         must_be_finite = [c for c in (time_col, speed_col) if c is not None] + list(inputs)
         bad = ~np.isfinite(X[:, must_be_finite])
@@ -268,6 +287,8 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         else:
             time = X[:, time_col]
             steps = np.diff(time)
+            restarts = [start - 1 for start, _ in (records or [(0, len(X))])[1:]]   # a record's clock restarts
+            steps[restarts] = 1.0
             if np.any(steps <= 0):
                 k = int(np.argmax(steps <= 0))
                 raise ValueError(f"GreyBoxRegressor: time (column 0) must increase strictly, but row {k + 1} has "
@@ -279,25 +300,30 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
                              f"{speed[k]:g}.")
         return time, speed
 
-    def _inputs(self, X, speed, inputs, exponent):
-        """``u = [P, ΔT…]`` (n, 1 + q): heat from the speed, temperatures referenced to the first row."""
+    def _inputs(self, X, speed, inputs, exponent, records=None):
+        """``u = [P, ΔT…]`` (n, 1 + q): heat from the speed, temperatures referenced to their record's first
+        row."""
         heat = (speed / self.speed_reference) ** exponent
-        return np.column_stack([heat, X[:, inputs] - X[0, inputs]])
+        records = records or [(0, len(X))]
+        first = np.repeat([start for start, _ in records], [stop - start for start, stop in records])
+        return np.column_stack([heat, X[:, inputs] - X[first][:, inputs]])
 
     # ------------------------------------------------------------ simulation
     @staticmethod
-    def _states(time, U, lam):
-        """Lag states x_ij (n, n_poles, m) with ZOH inputs, starting in equilibrium x_ij(t₀) = u_j(t₀)."""
-        steps = np.diff(time)
-        n, m = U.shape
-        S = np.empty((n, len(lam), m))
-        if np.ptp(steps) <= _UNIFORM_STEP * steps[0]:
+    def _states(time, U, lam, records=None):
+        """Lag states x_ij (n, n_poles, m) with ZOH inputs, each record starting in equilibrium
+        x_ij(t₀) = u_j(t₀)."""
+        S = np.empty((len(U), len(lam), U.shape[1]))
+        for start, stop in records or [(0, len(U))]:
+            t, u = time[start:stop], U[start:stop]
+            steps = np.diff(t)
+            uniform = np.ptp(steps) <= _UNIFORM_STEP * steps[0]
             for i, rate in enumerate(lam):
-                a = np.exp(-rate * steps[0])
-                S[:, i, :] = lfilter([0.0, 1.0 - a], [1.0, -a], U, axis=0, zi=U[:1])[0]
-            return S
-        for i, rate in enumerate(lam):
-            S[:, i, :] = _uneven_lag(time, rate, U, U[0])
+                if uniform:
+                    a = np.exp(-rate * steps[0])
+                    S[start:stop, i, :] = lfilter([0.0, 1.0 - a], [1.0, -a], u, axis=0, zi=u[:1])[0]
+                else:
+                    S[start:stop, i, :] = _uneven_lag(t, rate, u, u[0])
         return S
 
     @staticmethod
@@ -355,8 +381,10 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
                 best = result
         return best
 
-    def fit(self, X: ArrayLike, y: ArrayLike, sample_weight: ArrayLike | None = None) -> GreyBoxRegressor:
-        """Fit on a time-ordered record; ``sample_weight`` (≥ 0) weights the residuals.
+    def fit(self, X: ArrayLike, y: ArrayLike, sample_weight: ArrayLike | None = None,
+            record_starts: Sequence[int] = ()) -> GreyBoxRegressor:
+        """Fit on one time-ordered record, or on several (``record_starts``); ``sample_weight`` (≥ 0) weights
+        the residuals.
 
         A weight of 0 leaves a row's target out of the fit while the model
         still runs through it (its inputs are known): blocked cross-validation
@@ -370,6 +398,10 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
             The target, e.g. a drift in µm.
         sample_weight : array-like, shape (n_samples,), optional
             Non-negative residual weights; default all 1.
+        record_starts : sequence of int, default ()
+            Rows where another record begins (increasing, each record at least 2 rows). Every record
+            starts at rest, in equilibrium with its first row (the time column restarts there, and its
+            temperatures are referenced to it); the records share every parameter.
 
         Returns
         -------
@@ -384,7 +416,8 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         n_parameters = n_outputs * n_linear + n_poles + int(bool(self.fit_exponent))
         require_parameters(int(np.count_nonzero(w)), n_parameters, "GreyBoxRegressor",
                            hint=" Use fewer poles or temperature inputs.")
-        time, speed = self._check_x(X, inputs, allow_nan_in=observed)
+        records = self._records(len(X), record_starts)
+        time, speed = self._check_x(X, inputs, allow_nan_in=observed, records=records)
         outputs = np.column_stack([y, X[:, observed]])
         present = np.isfinite(outputs)   # an observed thermometer may miss readings: they weigh 0
         outputs = np.where(present, outputs, 0.0)
@@ -403,8 +436,8 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
 
         def linear(theta):
             lam, exponent = self._unpack(theta, log_bounds)
-            U = self._inputs(X, speed, inputs, exponent)
-            Phi = self._design(self._states(time, U, lam), U)
+            U = self._inputs(X, speed, inputs, exponent, records)
+            Phi = self._design(self._states(time, U, lam, records), U)
             norm = np.sqrt(np.sum(Phi[used] ** 2, axis=0))
             norm[norm == 0] = 1.0
             design, root = (Phi / norm)[used], np.sqrt(W[used])

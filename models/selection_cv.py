@@ -13,6 +13,9 @@ shuffled rows or on a tail of the same regime:
 * **leave one block out**: train on every other block, test on the block;
 * **rolling origin**: train on blocks ``0..k-1``, test on block ``k``
   (a forecast into the next, unseen regime);
+* **several records** (``record_starts``, e.g. test days that each start at
+  rest): each record's regime blocks are its own (:func:`record_blocks`), so
+  a block never spans two records, and the records keep their order;
 * the score of a candidate is the **geometric mean** of its test RMSEs over
   all folds of both schemes (the mean of log RMSE; the arithmetic mean and
   the worst fold are reported too); the ranking is by that score and a
@@ -47,13 +50,19 @@ How a fold is fitted depends on the kind of model (:func:`model_kind`):
 * ``"weighted"`` (:class:`~models.greybox.GreyBoxRegressor`): run over the
   whole history with the test block's targets weighted 0, so the simulation
   passes through the block on its known inputs (speed, ambient) without
-  seeing its drift, and read off the block.
+  seeing its drift, and read off the block. With several records, every
+  record runs from its own start, and the test block's record is predicted
+  from its start.
+
+A ``"series"`` model trains on one record and cannot be scored across
+several: its folds fail and it ranks last, so a caller leaves it out.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from itertools import pairwise
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -130,6 +139,33 @@ def regime_blocks(speed: ArrayLike, min_rows: int = 2, tolerance: float = SPEED_
     return list(zip(edges, stops))
 
 
+def record_blocks(speed: ArrayLike, record_starts: Sequence[int] = (), min_rows: int = 2,
+                  tolerance: float = SPEED_TOLERANCE) -> list[tuple[int, int]]:
+    """The :func:`regime_blocks` of each record, in rows of the whole ``speed``.
+
+    Parameters
+    ----------
+    speed : array-like, shape (n_samples,)
+        Spindle speed per row of the records one after the other, rpm.
+    record_starts : sequence of int, default ()
+        Rows where another record begins (increasing).
+    min_rows, tolerance
+        As for :func:`regime_blocks`.
+
+    Returns
+    -------
+    blocks : list of (int, int)
+        ``[start, stop)`` row ranges, record by record, covering every row; none spans two records.
+    """
+    speed = np.asarray(speed, float)
+    edges = [0, *(int(s) for s in record_starts), len(speed)]
+    if any(b - a < 2 for a, b in pairwise(edges)):
+        raise ValueError(f"record_blocks: record_starts must be increasing with at least 2 rows per record, got "
+                         f"{list(record_starts)} for {len(speed)} rows.")
+    return [(a + start, a + stop) for a, b in pairwise(edges)
+            for start, stop in regime_blocks(speed[a:b], min_rows, tolerance)]
+
+
 @dataclass(frozen=True)
 class Fold:
     """One held-out block: the rows it tests and the rows that train for it."""
@@ -138,6 +174,12 @@ class Fold:
     test_block: int
     test: tuple[int, int]      #: [start, stop) of the test rows
     train: np.ndarray = field(compare=False)  #: boolean mask of the training rows
+    record_starts: tuple[int, ...] = ()       #: rows where another record begins (each starts at rest)
+
+    @property
+    def record_start(self) -> int:
+        """First row of the record that holds the test block."""
+        return max((s for s in self.record_starts if s <= self.test[0]), default=0)
 
     @property
     def name(self) -> str:
@@ -145,8 +187,10 @@ class Fold:
         return f"{self.scheme} block {self.test_block + 1}"
 
 
-def blocked_folds(blocks: Sequence[tuple[int, int]], schemes: Sequence[str] = SCHEMES) -> list[Fold]:
-    """Folds of leave-one-block-out and rolling origin over ``blocks`` (from :func:`regime_blocks`).
+def blocked_folds(blocks: Sequence[tuple[int, int]], schemes: Sequence[str] = SCHEMES,
+                  record_starts: Sequence[int] = ()) -> list[Fold]:
+    """Folds of leave-one-block-out and rolling origin over ``blocks`` (from :func:`regime_blocks` or
+    :func:`record_blocks`).
 
     Parameters
     ----------
@@ -154,6 +198,8 @@ def blocked_folds(blocks: Sequence[tuple[int, int]], schemes: Sequence[str] = SC
         ``[start, stop)`` row ranges of the regime blocks, in time order.
     schemes : sequence of str, default :data:`SCHEMES`
         Which schemes to make folds of.
+    record_starts : sequence of int, default ()
+        Rows where another record begins (see :func:`record_blocks`).
 
     Returns
     -------
@@ -176,7 +222,7 @@ def blocked_folds(blocks: Sequence[tuple[int, int]], schemes: Sequence[str] = SC
                 train[blocks[b][0]: blocks[b][1]] = False
             else:
                 train[: blocks[b][0]] = True
-            folds.append(Fold(scheme, b, blocks[b], train))
+            folds.append(Fold(scheme, b, blocks[b], train, tuple(int(s) for s in record_starts)))
     return folds
 
 
@@ -226,11 +272,15 @@ def fold_prediction(estimator: BaseEstimator, X: np.ndarray, y: np.ndarray, fold
         model.fit(X[fold.train], y[fold.train])
         return model.predict(X[start:stop])
     if kind == "series":
+        if fold.record_starts:
+            raise ValueError(f"{type(model).__name__} trains on one record, not on several.")
         model.fit(X[fold.train], y[fold.train])
         return model.predict(X[:stop])[start:]
     end = max(stop, int(np.flatnonzero(fold.train)[-1]) + 1)
-    model.fit(X[:end], y[:end], sample_weight=fold.train[:end].astype(float))
-    return model.predict(X[:stop])[start:]
+    model.fit(X[:end], y[:end], sample_weight=fold.train[:end].astype(float),
+              record_starts=[s for s in fold.record_starts if s < end])
+    first = fold.record_start
+    return model.predict(X[first:stop])[start - first:]
 
 
 @dataclass
@@ -383,7 +433,7 @@ def parsimonious_choice(candidates: Mapping[str, tuple[BaseEstimator, Sequence[i
 
 def select_by_blocked_cv(candidates: Mapping[str, tuple[BaseEstimator, Sequence[int]]], X: ArrayLike,
                          y: ArrayLike, speed: ArrayLike, schemes: Sequence[str] = SCHEMES, unit: str = "µm",
-                         min_rows: int = 2) -> Selection:
+                         min_rows: int = 2, record_starts: Sequence[int] = ()) -> Selection:
     """Rank candidate models by blocked cross-validation across the operating regimes of ``speed``.
 
     Parameters
@@ -402,6 +452,9 @@ def select_by_blocked_cv(candidates: Mapping[str, tuple[BaseEstimator, Sequence[
         Unit of ``y`` for the reason text.
     min_rows : int, default 2
         Fewest rows of a regime block (see :func:`regime_blocks`).
+    record_starts : sequence of int, default ()
+        Rows where another record begins, each from rest (:func:`record_blocks`); a ``"series"`` candidate
+        cannot be scored across records and ranks last.
 
     Returns
     -------
@@ -416,7 +469,7 @@ def select_by_blocked_cv(candidates: Mapping[str, tuple[BaseEstimator, Sequence[
         raise ValueError(f"select_by_blocked_cv: speed has {len(np.asarray(speed))} rows, X has {len(X)}.")
     if not candidates:
         raise ValueError("select_by_blocked_cv: no candidate models.")
-    folds = blocked_folds(regime_blocks(speed, min_rows), schemes)
+    folds = blocked_folds(record_blocks(speed, record_starts, min_rows), schemes, record_starts)
     scores = {name: [held_out_rmse(estimator, X[:, list(columns)], y, fold) for fold in folds]
               for name, (estimator, columns) in candidates.items()}
     floor = 1e-6 * max(float(np.std(y)), np.finfo(float).tiny)  # a millionth of the target's spread

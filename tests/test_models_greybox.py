@@ -136,6 +136,48 @@ def test_irregular_sampling_recovers_the_network(training):
     assert np.sqrt(np.mean((model.predict(X_reg) - y_reg) ** 2)) < 0.01 * np.ptp(y_reg)
 
 
+def _day(start_h, level):
+    """A 16 h record from rest at ``start_h`` on the ambient's clock: 4 h stops and 4 h runs at ``level`` rpm."""
+    times = start_h * 3600.0 + np.arange(0.0, 16 * 3600.0, 60.0)
+    speed = duty(times - times[0], [level], 4 * 3600.0)
+    nodes, drift = simulate(times, speed)
+    return np.column_stack([times, speed, ambient(times), nodes[:, 0]]), drift
+
+
+@pytest.fixture(scope="module")
+def days():
+    """Three records apart (a day between them, at rest), one speed each: 1500, 3000 and 4500 rpm."""
+    return [_day(start, level) for start, level in ((0, 1500.0), (30, 3000.0), (60, 4500.0))]
+
+
+def test_several_records_each_from_rest_train_one_network(days):
+    X = np.vstack([x for x, _ in days])
+    y = np.concatenate([d for _, d in days])
+    starts = np.cumsum([len(x) for x, _ in days])[:-1]
+    model = GreyBoxRegressor(n_poles=2, temperature_inputs=(2,)).fit(X, y, record_starts=starts)
+    np.testing.assert_allclose(model.time_constants_, true_time_constants(), rtol=0.02)
+    # one speed per record, three between them: together they identify the exponent
+    assert model.exponent_fitted_ and model.exponent_ == pytest.approx(EXPONENT, rel=0.02)
+    assert not GreyBoxRegressor(n_poles=2, temperature_inputs=(2,)).fit(*days[0]).exponent_fitted_
+    times = np.arange(0.0, 24 * 3600.0, 60.0)
+    X_new, y_new = record(times, [6000.0, 2000.0], period=3 * 3600.0)
+    assert np.sqrt(np.mean((model.predict(X_new) - y_new) ** 2)) < 0.01 * np.ptp(y_new)
+    # each record's clock may restart at 0
+    restarted = np.vstack([np.column_stack([x[:, 0] - x[0, 0], x[:, 1:]]) for x, _ in days])
+    again = GreyBoxRegressor(n_poles=2, temperature_inputs=(2,)).fit(restarted, y, record_starts=starts)
+    np.testing.assert_allclose(again.time_constants_, model.time_constants_, rtol=1e-9)
+    # run on as one record, the model carries the last run's heat over every night and misses
+    joined = GreyBoxRegressor(n_poles=2, temperature_inputs=(2,)).fit(X, y)
+    assert np.max(np.abs(joined.time_constants_ / true_time_constants() - 1.0)) > 0.05
+
+
+@pytest.mark.parametrize("starts, message", [([1], r"got \[1\.0\]"), ([100, 100], "increasing"),
+                                             ([2.5], "row numbers"), ([199], r"2\.\.198 for 200 rows")])
+def test_record_starts_are_checked(starts, message):
+    with pytest.raises(ValueError, match=message):
+        GreyBoxRegressor(n_poles=1).fit(*_small(), record_starts=starts)
+
+
 @pytest.mark.parametrize("time_constant", [30.0, 3600.0, 1e6])
 def test_the_lag_states_at_uneven_times_are_the_zoh_recurrence(time_constant):
     """The closed-form stretches of ``_states`` against the row-by-row recurrence, over jitter and holes

@@ -8,7 +8,7 @@ import re
 
 import numpy as np
 import pytest
-from test_models_greybox import ambient, duty, simulate
+from test_models_greybox import EXPONENT, ambient, duty, simulate, true_time_constants
 from test_models_greybox import record as network_record
 
 from twin.cli import main
@@ -434,8 +434,11 @@ def test_a_record_cut_into_files_trains_as_one(records, caplog):
     whole = train([training], "spindle,air", "Z", model="greybox")
     np.testing.assert_allclose(cut.predict(training), whole.predict(training), rtol=1e-9, atol=1e-9)
     assert [t["label"] for t in cut.training] == ["day 1 + day 2"]
-    with pytest.raises(TwinInputError, match="got 2 datasets that do not continue one another"):
+    with pytest.raises(TwinInputError, match="day 2 continues day 1 .* but is not given right after it: give the "
+                                             "records in time order"):
         train([second, first], "spindle,air", "Z", model="greybox")
+    with pytest.raises(TwinInputError, match="day 2 continues day 1 .* not given right after it"):
+        train([second, first], "spindle,air", "Z", model="mlr")
     # a static model too: one zero reference, at the first start (day 2 alone would start warm)
     static = train([first, second], "spindle,air", "Z", model="mlr")
     np.testing.assert_allclose(static.predict(training), train([training], "spindle,air", "Z", model="mlr")
@@ -449,3 +452,52 @@ def test_a_long_hole_in_a_record_is_named(records, caplog):
     with caplog.at_level("WARNING", logger="thermal_twin"):
         train([holed], "spindle,air", "Z", model="greybox")
     assert "holed: 1 step(s) over 10× the usual 120 s, the longest 3720 s after t = 11880 s" in caplog.text
+
+
+def _day(start_h, levels, label, hours=16):
+    """A record from rest at ``start_h`` (h on the ambient's clock): 4 h stops and 4 h runs at ``levels``."""
+    times = start_h * 3600.0 + np.arange(0.0, hours * 3600.0, 120.0)
+    return _dataset(times, duty(times - times[0], levels, 4 * 3600.0), label)
+
+
+def test_records_days_apart_train_one_greybox_each_from_rest(tmp_path, capsys):
+    """Test days with nights at rest between them: one speed each, the exponent from all three."""
+    second = _day(30, [3000.0], "day 2", hours=22)
+    cut = int(np.searchsorted(second.time_s, second.time_s[0] + 16 * 3600.0))
+    day2, day2_later = _rows(second, slice(0, cut), "day 2"), _rows(second, slice(cut, None), "day 2 later")
+    days = [_day(0, [1500.0], "day 1"), day2, _day(60, [4500.0], "day 3")]
+    cm = train(days, "spindle,air", "Z", model="greybox", out=tmp_path / "days.json")
+    np.testing.assert_allclose(cm.estimator.time_constants_, true_time_constants(), rtol=0.02)
+    assert cm.estimator.exponent_fitted_ and cm.estimator.exponent_ == pytest.approx(EXPONENT, rel=0.02)
+    assert [t["label"] for t in cm.training] == ["day 1", "day 2", "day 3"]
+    unseen = _day(100, [6000.0, 2000.0], "unseen", hours=24)
+    result = evaluate(CompensationModel.load(tmp_path / "days.json"), [unseen])
+    assert result.rows[0]["rmse"] < 0.01 * np.ptp(unseen["Z"])
+    # the evening after day 2 (stopped, still warm) continues day 2, whichever training record it is
+    continued = evaluate(cm, [day2_later], reference="train", history=day2).predictions["day 2 later"]
+    np.testing.assert_allclose(continued[1], day2_later["Z"] - day2["Z"][0])
+    assert np.sqrt(np.mean((continued[2] - continued[1]) ** 2)) < 0.01 * np.ptp(day2["Z"])
+    with pytest.raises(TwinInputError, match="unseen: --history does not start like any of the 3 training records"):
+        evaluate(cm, [day2_later], reference="train", history=unseen)
+    # a record that starts running is no rest, among several too
+    warm = _rows(second, slice(cut - 100, None), "warm")
+    with pytest.raises(TwinInputError, match="warm: the record starts with the spindle running"):
+        train([days[0], warm], "spindle,air", "Z", model="greybox")
+    with pytest.raises(TwinInputError, match="trains on one contiguous record; got 2 datasets .* greybox"):
+        train(days[:2], "spindle,air", "Z", model="gm1n")
+
+
+def test_select_auto_on_days_apart_blocks_each_and_leaves_out_one_record_models(tmp_path, capsys):
+    paths = []
+    for k, (start, levels) in enumerate(((0, [1500.0]), (30, [3000.0, 4500.0]), (60, [2000.0]))):
+        paths.append(tmp_path / f"day{k + 1}.csv")
+        _day(start, levels, f"day {k + 1}").write(paths[-1])
+    code = main(["train", *map(str, paths), "--inputs", "spindle,air", "--target", "Z", "--select", "auto",
+                 "--out", str(tmp_path / "auto.json")])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    selection = CompensationModel.load(tmp_path / "auto.json").metadata["selection"]
+    assert selection["chosen"].startswith("greybox")
+    assert len(selection["folds"]) == 4 + 3   # 1 + 2 + 1 regime blocks, none across two days
+    assert "The 3 records each start at rest and have blocks of their own; none spans two." in out
+    assert "Left out: gm0n, gm1n, gmc (coefficients per sample train on one record; these are 3)." in out

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from test_models_greybox import _day
 
 from models import GM0NRegressor, MLRRegressor
 from models.greybox import GreyBoxRegressor
@@ -14,6 +15,7 @@ from models.selection_cv import (
     nested_lower_orders,
     parsimonious_choice,
     rank_agreement,
+    record_blocks,
     regime_blocks,
     select_by_blocked_cv,
     within_one_standard_error,
@@ -127,6 +129,36 @@ def test_selection_prefers_the_model_of_the_right_structure_and_says_why():
     assert chosen.ranking == sorted(chosen.score, key=chosen.score.get)
     for name, folds in chosen.fold_rmse.items():
         assert chosen.score[name] == pytest.approx(np.exp(np.mean(np.log(folds))))
+
+
+def test_record_blocks_never_span_two_records():
+    speed = np.r_[np.zeros(3), np.full(5, 1000.0), np.zeros(2), np.full(4, 1000.0), np.full(4, 2000.0)]
+    assert record_blocks(speed) == regime_blocks(speed) == [(0, 14), (14, 18)]
+    # the same speeds as two records: the second's 1000 rpm run is a block of its own
+    assert record_blocks(speed, [10]) == [(0, 10), (10, 14), (14, 18)]
+    folds = blocked_folds(record_blocks(speed, [10]), record_starts=[10])
+    assert [f.record_start for f in folds] == [0, 10, 10, 10, 10]
+    with pytest.raises(ValueError, match="at least 2 rows per record"):
+        record_blocks(speed, [17])
+
+
+def test_several_records_are_scored_each_run_from_its_own_start():
+    """Three test days apart, one speed each (the RC network of test_models_greybox, solved by solve_ivp):
+    a held-out day is predicted from its own start at rest, so the right structure scores at the noise-free
+    level; run on from the first day's start over the nights, it would be off by several µm."""
+    days = [_day(start, level) for start, level in ((0, 1500.0), (30, 3000.0), (60, 4500.0))]
+    X = np.vstack([x for x, _ in days])
+    y = np.concatenate([d for _, d in days])
+    starts = np.cumsum([len(x) for x, _ in days])[:-1].tolist()
+    candidates = {"grey-box": (GreyBoxRegressor(n_poles=2, temperature_inputs=(2,)), [0, 1, 2]),
+                  "MLR": (MLRRegressor(), [2, 3]), "GM(0,N)": (GM0NRegressor(), [2, 3])}
+    chosen = select_by_blocked_cv(candidates, X, y, X[:, 1], record_starts=starts)
+    assert chosen.chosen == "grey-box" and len(chosen.folds) == 3 + 2
+    scores = dict(zip(chosen.folds, chosen.fold_rmse["grey-box"]))
+    # rolling origin from the first day alone extrapolates the exponent blind (one speed); every other is exact
+    assert max(v for k, v in scores.items() if k != "rolling-origin block 2") < 1e-3 * np.ptp(y)
+    assert chosen.score["GM(0,N)"] == np.inf   # a series model trains on one record
+    assert "failed or diverged on some block: GM(0,N)" in chosen.reason
 
 
 def test_the_score_is_the_geometric_mean_so_no_one_regime_rules_it():

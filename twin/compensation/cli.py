@@ -121,7 +121,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         The subparsers of the ``twin`` command.
     """
     t = sub.add_parser("train", help="train a compensation model on datasets and save it (JSON, no pickle)")
-    t.add_argument("datasets", nargs="+", help=_datasets_help())
+    t.add_argument("datasets", nargs="+", help=_datasets_help() + "; records in time order that continue one "
+                   "another are one record, the others separate records (each from rest for --model greybox)")
     t.add_argument("--inputs", required=True, action="append", help="input channels, comma-separated")
     t.add_argument("--target", required=True, help="target channel, e.g. Z")
     t.add_argument("--observe", action="append", help="thermometers the model fuses while it runs (its Kalman "
@@ -129,7 +130,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     t.add_argument("--model", default="anfis", help="model name, e.g. mlr, pcr, anfis, gm1n (default anfis = ANFIS-FCM); an unknown name lists "
                    "them all (the registry is read on use: `--help` must not load numpy)")
     t.add_argument("--select", choices=("auto",), help="choose the model by blocked cross-validation across the "
-                   "record's speed regimes (leave one block out, rolling origin; geometric mean of the folds' RMSE), "
+                   "records' speed regimes (leave one block out, rolling origin; geometric mean of the folds' RMSE), "
                    "grey-box orders 1-3 included, and print why; overrides --model")
     t.add_argument("--allow-unstable", action="store_true",
                    help="save an unstable grey fit (a < 0 or diverging on its training data) instead of refusing it")
@@ -151,8 +152,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--reference", choices=("own", "train"), default="own",
                    help="zero reference: each record's own start (default) or the training start, for a record that "
                    "continues the training one (starts warm)")
-    e.add_argument("--history", help="with --reference train: the training record, over which time-series models "
-                   "run before the evaluated ones (records in time order continue one another)")
+    e.add_argument("--history", help="with --reference train: the training record (of several, the one continued), "
+                   "over which time-series models run before the evaluated ones (records in time order continue one "
+                   "another)")
     e.add_argument("--gap", choices=("refuse", "interpolate"), default="refuse",
                    help="with --reference train, a record that starts later than one sampling interval after the "
                    "history ends: refuse it (default), or bridge the missing rows by interpolating the inputs")

@@ -37,7 +37,7 @@ from .records import (
     sampling_interval,
     starts_running,
 )
-from .store import CompensationModel, make_estimator
+from .store import CompensationModel, check_channels, make_estimator
 
 log = logging.getLogger("thermal_twin")
 
@@ -63,7 +63,7 @@ def _speed_channel(dataset, inputs):
 def auto_select(datasets: Iterable[Dataset], inputs: list[str], target: str,
                 candidates: Mapping[str, tuple[str, dict]] = AUTO_CANDIDATES,
                 zero_reference: bool = True) -> tuple[str, dict, Selection]:
-    """The model and hyper-parameters chosen by blocked cross-validation on one training record, and the ranking.
+    """The model and hyper-parameters chosen by blocked cross-validation on the training records, and the ranking.
 
     Each candidate's input contract (:class:`models.registry.ModelTraits`)
     decides whether it can take the record: one whose first input must be the
@@ -76,7 +76,10 @@ def auto_select(datasets: Iterable[Dataset], inputs: list[str], target: str,
     Parameters
     ----------
     datasets : iterable of Dataset
-        Exactly one training record, with a spindle-speed input (rpm).
+        One training record, or several that each start at rest (test days apart), with a spindle-speed
+        input (rpm). Each record has its regime blocks (:func:`models.selection_cv.record_blocks`), and the
+        grey-box candidates run each from its own start; GM(0,N), GM(1,N) and GMC, which train on one
+        record, are left out of several.
     inputs : list of str
         Input channels, the same for every candidate.
     target : str
@@ -98,27 +101,36 @@ def auto_select(datasets: Iterable[Dataset], inputs: list[str], target: str,
     Raises
     ------
     TwinInputError
-        Not one record, no rpm input, or fewer than two operating-regime blocks.
+        No record, no rpm input, channels that differ between records, a missing reading, or fewer than
+        two operating-regime blocks.
     """
     datasets = list(datasets)
-    if len(datasets) != 1:
-        raise TwinInputError(f"--select auto cross-validates across the operating regimes of one contiguous record; "
-                             f"got {len(datasets)} datasets")
-    ds = datasets[0]
-    speed_name = _speed_channel(ds, inputs)
-    check_complete(ds, [*inputs, target])
-    raw = ds.matrix(inputs)
-    X, y = raw, ds[target]
-    if zero_reference:
-        X, y = X - X[:1], y - y[0]
-    pool, left_out = _candidate_pool(ds, inputs, candidates, zero_reference)
-    # [time since the start (s), the inputs as the models see them, the first input as measured]
-    X = np.column_stack([ds.time_s - ds.time_s[0], X, raw[:, 0]])
+    if not datasets:
+        raise TwinInputError("--select auto: no training record given")
+    speed_name = _speed_channel(datasets[0], inputs)
+    units = [datasets[0].info(n).unit for n in inputs]
+    X, y = [], []
+    for ds in datasets:
+        check_channels(ds, inputs, units)
+        check_complete(ds, [*inputs, target])
+        raw, target_values = ds.matrix(inputs), ds[target]
+        seen, change = (raw - raw[:1], target_values - target_values[0]) if zero_reference else (raw, target_values)
+        # [time since the record's start (s), the inputs as the models see them, the first input as measured]
+        X.append(np.column_stack([ds.time_s - ds.time_s[0], seen, raw[:, 0]]))
+        y.append(change)
+    pool, left_out = _candidate_pool(datasets, inputs, candidates, zero_reference)
+    record_starts = np.cumsum([len(ds) for ds in datasets])[:-1].tolist()
     try:
-        selection = select_by_blocked_cv(pool, X, y, ds[speed_name], unit=ds.info(target).unit)
+        selection = select_by_blocked_cv(pool, np.vstack(X), np.concatenate(y),
+                                         np.concatenate([ds[speed_name] for ds in datasets]),
+                                         unit=datasets[0].info(target).unit, record_starts=record_starts)
     except ValueError as exc:     # the record's (one speed regime only); a candidate's failed fit is caught inside
-        raise TwinInputError(f"{dataset_label(ds)}: --select auto cannot cross-validate on this record: {exc}") \
-            from None
+        which = "this record" if len(datasets) == 1 else f"these {len(datasets)} records"
+        raise TwinInputError(f"{', '.join(dataset_label(ds) for ds in datasets)}: --select auto cannot "
+                             f"cross-validate on {which}: {exc}") from None
+    if record_starts:
+        selection.reason += (f" The {len(datasets)} records each start at rest and have blocks of their own; "
+                             "none spans two.")
     if left_out:
         selection.reason += " Left out: " + "; ".join(f"{', '.join(labels)} ({why})"
                                                       for why, labels in left_out.items()) + "."
@@ -126,42 +138,64 @@ def auto_select(datasets: Iterable[Dataset], inputs: list[str], target: str,
     return model, dict(params), selection
 
 
-def _candidate_pool(dataset, inputs, candidates, zero_reference):
+def _candidate_pool(datasets, inputs, candidates, zero_reference):
     """``(pool, left_out)``: label → (estimator, its columns of ``auto_select``'s X) of the candidates that can
-    take this record, and why → labels of those that cannot, by each class's input contract."""
-    even = evenly_sampled(dataset)
-    interval = sampling_interval(dataset) if even else None   # None: the model takes the record's own times
+    take these records, and why → labels of those that cannot, by each class's input contract."""
+    interval = _common_interval(datasets)   # None: a model that takes the time runs on the records' own times
     n = len(inputs)
     pool, left_out = {}, {}
     for label, (name, params) in candidates.items():
         estimator = make_estimator(name, params)
         traits = model_traits(estimator)
-        columns = list(range(1, n + 1))
-        why = None
-        if traits.first_input is not None:
-            why = _first_input_problem(dataset, inputs[0], traits.first_input, zero_reference)
-            columns = [n + 1, *columns[1:]]   # the first input as measured
-        if why is None and traits.takes_time:   # at the record's interval, or on its own times where uneven
-            estimator.set_params(sampling_interval=interval)
-            columns = columns if even else [0, *columns]
-        elif why is None and traits.time_series and not even:
-            steps = np.diff(dataset.time_s)
-            why = (f"coefficients per sample need even sampling; steps here range from {steps.min():.4g} to "
-                   f"{steps.max():.4g} s")
-        if why is None:
-            pool[label] = (estimator, columns)
-        else:
+        why = _left_out_because(traits, datasets, inputs[0], zero_reference, interval)
+        if why is not None:
             left_out.setdefault(why, []).append(label)
+            continue
+        columns = list(range(1, n + 1))
+        if traits.first_input is not None:
+            columns = [n + 1, *columns[1:]]   # the first input as measured
+        if traits.takes_time:   # at the records' interval, or on their own times where uneven
+            estimator.set_params(sampling_interval=interval)
+            columns = columns if interval is not None else [0, *columns]
+        pool[label] = (estimator, columns)
     return pool, left_out
 
 
-def _first_input_problem(dataset, first, required, zero_reference):
+def _common_interval(datasets):
+    """The sampling interval (s) of records all evenly sampled at the same one, else None."""
+    if not evenly_sampled(datasets[0]):
+        return None
+    interval = sampling_interval(datasets[0])
+    same = all(evenly_sampled(ds) and abs(sampling_interval(ds) - interval) <= 1e-6 * interval for ds in datasets)
+    return interval if same else None
+
+
+def _left_out_because(traits, datasets, first, zero_reference, interval):
+    """Why a candidate of these input ``traits`` cannot take the records, or None."""
+    if traits.first_input is not None:
+        why = _first_input_problem(datasets, first, traits.first_input, zero_reference)
+        if why is not None:
+            return why
+    if traits.takes_time or not traits.time_series:
+        return None
+    if len(datasets) > 1:
+        return f"coefficients per sample train on one record; these are {len(datasets)}"
+    if interval is None:
+        steps = np.diff(datasets[0].time_s)
+        return (f"coefficients per sample need even sampling; steps here range from {steps.min():.4g} to "
+                f"{steps.max():.4g} s")
+    return None
+
+
+def _first_input_problem(datasets, first, required, zero_reference):
     """Why ``first`` cannot be a model's declared first input ``required = (what, unit)``, or None."""
     what, unit = required
-    if dataset.info(first).unit != unit:
+    if datasets[0].info(first).unit != unit:
         return f"the first input must be the {what} in {unit}"
-    if zero_reference and starts_running(dataset, first):
-        return "the record starts with the spindle running, and they take its first row as rest"
+    warm = [dataset_label(ds) for ds in datasets if zero_reference and starts_running(ds, first)]
+    if warm:
+        which = "the record starts" if len(datasets) == 1 else f"{', '.join(warm)} start(s)"
+        return f"{which} with the spindle running, and they take its first row as rest"
     return None
 
 
@@ -197,7 +231,8 @@ def stability_problem(cm: CompensationModel, datasets: Iterable[Dataset]) -> str
 def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Dataset | None = None,
                          gap: Literal["refuse", "interpolate"] = "refuse"
                          ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``(measured, predicted)`` change of the target since the *training* start, for a record that continues it.
+    """``(measured, predicted)`` change of the target since the *training* start, for a record that continues it
+    (for a time-series model trained on several records, the start of the one ``history`` is).
 
     Static models map the inputs referenced to the training start. A
     time-series model runs over ``history`` (the training record, from its
@@ -217,7 +252,8 @@ def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Datas
     dataset : Dataset
         The record that continues the training one.
     history : Dataset, optional
-        The training record, required for a time-series model.
+        The training record (for a model trained on several, the one the record continues), required for a
+        time-series model; the change is then since its start.
     gap : {"refuse", "interpolate"}, default "refuse"
         What to do when the record starts more than one interval after the history ends.
 
@@ -241,11 +277,9 @@ def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Datas
                              "reference); retrain it")
     cm.check(dataset)
     zero = cm.preprocessing.get("zero_reference", True)
-    x_ref = cm.input_reference()
-    y_ref = ref["target"] if zero else 0.0
-    measured = dataset[cm.target] - y_ref
     if not cm.is_time_series:
-        return measured, np.asarray(cm.estimator.predict(dataset.matrix(cm.inputs) - x_ref), float)
+        return (dataset[cm.target] - (ref["target"] if zero else 0.0),
+                np.asarray(cm.estimator.predict(dataset.matrix(cm.inputs) - cm.input_reference()), float))
     if history is None:
         raise TwinInputError(f"{cm.model_name} is a time-series model: --reference train needs the training record "
                              "as --history to run over the whole history")
@@ -259,10 +293,10 @@ def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Datas
         if abs(dt - cm.sampling_interval_s) > 1e-6 * dt:
             raise TwinInputError(f"{dataset_label(ds)}: sampled every {dt:g} s, the model was trained at "
                                  f"{cm.sampling_interval_s:g} s; --reference train needs the same interval")
-    start = history.matrix(cm.inputs)[: cm.preprocessing.get("reference_samples", 1)].mean(axis=0)
-    if not np.allclose(start, ref["inputs"], rtol=1e-9, atol=1e-9):
-        raise TwinInputError(f"{dataset_label(history)}: --history does not start like the training record "
-                             f"(inputs {np.round(start, 4).tolist()} against {np.round(ref['inputs'], 4).tolist()})")
+    ref = _history_start(cm, history)
+    x_ref = cm.input_reference(ref)
+    y_ref = ref["target"] if zero else 0.0
+    measured = dataset[cm.target] - y_ref
     bridge_s, bridge, record_s = bridging_inputs(history, dataset, cm.inputs, cm.sampling_interval_s, gap,
                                                  on_grid=not timed)
     X = np.vstack([history.matrix(cm.inputs), bridge, dataset.matrix(cm.inputs)]) - x_ref
@@ -270,6 +304,19 @@ def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Datas
         X = np.column_stack([np.r_[history.time_s, bridge_s, record_s] - history.time_s[0], X])
     predicted = np.asarray(cm.estimator.predict(X), float)[len(history) + len(bridge):]
     return measured, predicted - (cm.estimator.y_reference_ if zero else 0.0)
+
+
+def _history_start(cm, history):
+    """The start (raw inputs and target) of the training record that ``history`` is, found by its inputs."""
+    start = history.matrix(cm.inputs)[: cm.preprocessing.get("reference_samples", 1)].mean(axis=0)
+    starts = [t["reference"] for t in cm.training if "reference" in t] or [cm.preprocessing["training_reference"]]
+    for ref in starts:
+        if np.allclose(start, ref["inputs"], rtol=1e-9, atol=1e-9):
+            return ref
+    which = "the training record" if len(starts) == 1 else f"any of the {len(starts)} training records"
+    theirs = " or ".join(str(np.round(ref["inputs"], 4).tolist()) for ref in starts)
+    raise TwinInputError(f"{dataset_label(history)}: --history does not start like {which} "
+                         f"(inputs {np.round(start, 4).tolist()} against {theirs})")
 
 
 def bridging_inputs(history: Dataset, dataset: Dataset, inputs: list[str], interval_s: float,

@@ -210,6 +210,12 @@ def joined_when_contiguous(datasets: Sequence[Dataset], names: Sequence[str]) ->
     -------
     list of Dataset
         As many as there are runs of contiguous records.
+
+    Raises
+    ------
+    TwinInputError
+        A record continues one that is not given right before it (files out of time order): each would be
+        taken to start afresh, the later one warm.
     """
     joined: list[Dataset] = []
     for ds in datasets:
@@ -218,6 +224,12 @@ def joined_when_contiguous(datasets: Sequence[Dataset], names: Sequence[str]) ->
             joined[-1] = continued_record(joined[-1], ds, names)
         else:
             joined.append(ds)
+    for first in joined:
+        for later in joined:
+            if later is not first and _continues(first, later, names):
+                raise TwinInputError(f"{dataset_label(later)} continues {dataset_label(first)} (it starts one "
+                                     "sampling interval after it ends) but is not given right after it: give "
+                                     "the records in time order")
     return joined
 
 

@@ -219,7 +219,8 @@ class CompensationModel:
         (inputs taken as measured: the grey-box model's speed), ``observed`` (thermometers the model fuses
         while it runs) and, once fitted, the raw ``training_reference``.
     training : list of dict
-        Label, rows, source, scenario, kind and duration (h) of each training record.
+        Label, rows, source, scenario, kind, duration (h) and ``reference`` (raw inputs and target at its
+        start) of each training record.
     sampling_interval_s : float or None
         The training interval, s (time-series models only; the median step when the model takes the time).
     metadata : dict
@@ -248,16 +249,23 @@ class CompensationModel:
         absolute = self.preprocessing.get("absolute_inputs", [])
         return [i for i, name in enumerate(self.inputs) if name in absolute]
 
-    def input_reference(self) -> NDArray[np.float64]:
-        """What is subtracted from the inputs of a record that continues the training one: the training
+    def input_reference(self, start: dict | None = None) -> NDArray[np.float64]:
+        """What is subtracted from the inputs of a record that continues a training one: that record's
         start's raw inputs (0 for those taken as measured), or zeros without zero-referencing.
+
+        Parameters
+        ----------
+        start : dict, optional
+            The raw ``inputs`` and ``target`` at a training record's start (an entry's ``reference`` in
+            :attr:`training`); default the first record's (``preprocessing["training_reference"]``).
 
         Returns
         -------
         ndarray, shape (n_inputs,)
             In the inputs' units.
         """
-        reference = np.array(self.preprocessing["training_reference"]["inputs"], float)
+        start = self.preprocessing["training_reference"] if start is None else start
+        reference = np.array(start["inputs"], float)
         reference[self.absolute_columns] = 0.0
         return reference if self.preprocessing.get("zero_reference", True) else np.zeros_like(reference)
 
@@ -522,20 +530,31 @@ def _with_observed(estimator, model, inputs, observe, params):
 
 
 def _time_series_interval(cm, datasets, params):
-    """The training interval of a time-series model (s), after setting up how it takes the time."""
-    if len(datasets) > 1:
+    """The training interval of a time-series model (s, the median of the records'), after setting up how it
+    takes the time."""
+    takes_time = model_traits(cm.estimator).takes_time
+    if len(datasets) > 1 and not takes_time:
         raise TwinInputError(f"model {cm.model_name!r} is a grey time-series model and trains on one contiguous "
                              f"record; got {len(datasets)} datasets that do not continue one another (each "
                              "must start one sampling interval after the one before it ends, in time order; or "
-                             "use a static model: mlr, pcr, ann, anfis)")
-    if model_traits(cm.estimator).takes_time and "sampling_interval" not in (params or {}):
+                             "use a model that trains on several records, each from rest: greybox, or a static "
+                             "model: mlr, pcr, ann, anfis)")
+    timed = takes_time and "sampling_interval" not in (params or {})
+    if timed:
         # a model that takes the time (the grey-box model) steps exactly over every interval, so a record
         # with jitter or missing rows needs no resampling; its time constants are in s
         cm.estimator.set_params(sampling_interval=None)
         cm.preprocessing["time_column"] = True
-        note_long_steps(datasets[0])
-        return sampling_interval(datasets[0], strict=False)
-    return sampling_interval(datasets[0], strict=True)
+    intervals = []
+    for ds in datasets:
+        if timed:
+            note_long_steps(ds)
+        intervals.append(sampling_interval(ds, strict=not timed))
+        if not timed and abs(intervals[-1] - intervals[0]) > 1e-6 * intervals[0]:
+            raise TwinInputError(f"{dataset_label(ds)}: sampled every {intervals[-1]:g} s, "
+                                 f"{dataset_label(datasets[0])} every {intervals[0]:g} s; with a fixed "
+                                 "sampling_interval every record needs it")
+    return float(np.median(intervals))
 
 
 def fit_compensation_model(datasets: list, inputs: list[str], target: str, model: str = "anfis",
@@ -544,8 +563,10 @@ def fit_compensation_model(datasets: list, inputs: list[str], target: str, model
     """Fit a :class:`CompensationModel` on one or more datasets.
 
     Static models (MLR, PCR, ANN, ANFIS) are fitted on the rows of all
-    datasets, each referenced to its own start; grey time-series models take
-    one evenly sampled dataset.
+    datasets, each referenced to its own start; the grey-box model on all
+    of them too, each run from rest at its own start (``record_starts`` of
+    its fit); the other grey time-series models take one evenly sampled
+    dataset.
 
     Parameters
     ----------
@@ -595,19 +616,23 @@ def fit_compensation_model(datasets: list, inputs: list[str], target: str, model
         estimator.set_params(observed=tuple(range(first_observed, first_observed + len(observe))))
     X = np.vstack([cm.features(ds) for ds in datasets])
     y = np.concatenate([cm.target_values(ds) for ds in datasets])
+    several = {"record_starts": np.cumsum([len(ds) for ds in datasets])[:-1].tolist()} \
+        if cm.is_time_series and len(datasets) > 1 else {}
     try:
-        estimator.fit(X, y)
+        estimator.fit(X, y, **several)
     except ValueError as exc:
         hint = " (in `twin train`, --model anfis-fcm is the FCM-initialised ANFIS)" \
             if getattr(estimator, "init", None) == "grid" else ""
         raise TwinInputError(f"cannot fit {model!r} on {X.shape[0]} rows × {len(inputs)} inputs: {exc}{hint}") \
             from None
     cm.sampling_interval_s = dt
-    # raw values at the training start: `twin evaluate --reference train` continues from them
+    # raw values at each training start: `twin evaluate --reference train` continues from them
     k = int(reference_samples)
-    cm.preprocessing["training_reference"] = {"inputs": datasets[0].matrix(channels)[:k].mean(axis=0).tolist(),
-                                              "target": float(np.mean(datasets[0][target][:k]))}
+    starts = [{"inputs": ds.matrix(channels)[:k].mean(axis=0).tolist(), "target": float(np.mean(ds[target][:k]))}
+              for ds in datasets]
+    cm.preprocessing["training_reference"] = starts[0]
     cm.training = [{"label": dataset_label(ds), "rows": len(ds), "source": ds.metadata.get("source"),
                     "scenario": ds.metadata.get("scenario"), "kind": ds.metadata.get("kind"),
-                    "duration_h": float((ds.time_s[-1] - ds.time_s[0]) / 3600.0)} for ds in datasets]
+                    "duration_h": float((ds.time_s[-1] - ds.time_s[0]) / 3600.0), "reference": start}
+                   for ds, start in zip(datasets, starts)]
     return cm
