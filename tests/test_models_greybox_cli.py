@@ -485,6 +485,12 @@ def test_records_days_apart_train_one_greybox_each_from_rest(tmp_path, capsys):
         train([days[0], warm], "spindle,air", "Z", model="greybox")
     with pytest.raises(TwinInputError, match="trains on one contiguous record; got 2 datasets .* greybox"):
         train(days[:2], "spindle,air", "Z", model="gm1n")
+    # records sampled apart: each on its own times; the model's interval is the median step of them all
+    coarse = _rows(days[2], slice(0, None, 3), "day 3 every 6 min")
+    assert train([days[0], coarse], "spindle,air", "Z", model="greybox").sampling_interval_s == 120.0
+    with pytest.raises(TwinInputError, match="day 3 every 6 min: sampled every 360 s, day 1 every 120 s; with a "
+                                             "fixed sampling_interval every record needs it"):
+        train([days[0], coarse], "spindle,air", "Z", model="greybox", params={"sampling_interval": 120.0})
 
 
 def test_select_auto_on_days_apart_blocks_each_and_leaves_out_one_record_models(tmp_path, capsys):

@@ -530,8 +530,8 @@ def _with_observed(estimator, model, inputs, observe, params):
 
 
 def _time_series_interval(cm, datasets, params):
-    """The training interval of a time-series model (s, the median of the records'), after setting up how it
-    takes the time."""
+    """The training interval of a time-series model (s, the median step of the records), after setting up how
+    it takes the time."""
     takes_time = model_traits(cm.estimator).takes_time
     if len(datasets) > 1 and not takes_time:
         raise TwinInputError(f"model {cm.model_name!r} is a grey time-series model and trains on one contiguous "
@@ -545,16 +545,15 @@ def _time_series_interval(cm, datasets, params):
         # with jitter or missing rows needs no resampling; its time constants are in s
         cm.estimator.set_params(sampling_interval=None)
         cm.preprocessing["time_column"] = True
-    intervals = []
+    first = sampling_interval(datasets[0], strict=not timed)
     for ds in datasets:
         if timed:
             note_long_steps(ds)
-        intervals.append(sampling_interval(ds, strict=not timed))
-        if not timed and abs(intervals[-1] - intervals[0]) > 1e-6 * intervals[0]:
-            raise TwinInputError(f"{dataset_label(ds)}: sampled every {intervals[-1]:g} s, "
-                                 f"{dataset_label(datasets[0])} every {intervals[0]:g} s; with a fixed "
-                                 "sampling_interval every record needs it")
-    return float(np.median(intervals))
+        interval = sampling_interval(ds, strict=not timed)
+        if not timed and abs(interval - first) > 1e-6 * first:
+            raise TwinInputError(f"{dataset_label(ds)}: sampled every {interval:g} s, {dataset_label(datasets[0])} "
+                                 f"every {first:g} s; with a fixed sampling_interval every record needs it")
+    return float(np.median(np.concatenate([np.diff(ds.time_s) for ds in datasets])))
 
 
 def fit_compensation_model(datasets: list, inputs: list[str], target: str, model: str = "anfis",
