@@ -491,6 +491,9 @@ def test_records_days_apart_train_one_greybox_each_from_rest(tmp_path, capsys):
     with pytest.raises(TwinInputError, match="day 3 every 6 min: sampled every 360 s, day 1 every 120 s; with a "
                                              "fixed sampling_interval every record needs it"):
         train([days[0], coarse], "spindle,air", "Z", model="greybox", params={"sampling_interval": 120.0})
+    with pytest.raises(TwinInputError, match="'greybox' shares its offset between records, so several records need "
+                                             "the zero reference .*: drop --no-zero-reference"):
+        train(days[:2], "spindle,air", "Z", model="greybox", zero_reference=False)
 
 
 def test_select_auto_on_days_apart_blocks_each_and_leaves_out_one_record_models(tmp_path, capsys):

@@ -545,14 +545,16 @@ def _time_series_interval(cm, datasets, params):
         # with jitter or missing rows needs no resampling; its time constants are in s
         cm.estimator.set_params(sampling_interval=None)
         cm.preprocessing["time_column"] = True
-    first = sampling_interval(datasets[0], strict=not timed)
-    for ds in datasets:
+    if len(datasets) > 1 and not cm.preprocessing.get("zero_reference", True):
+        raise TwinInputError(f"model {cm.model_name!r} shares its offset between records, so several records need "
+                             "the zero reference (each record's change since its start): drop --no-zero-reference")
+    intervals = [sampling_interval(ds, strict=not timed) for ds in datasets]
+    for ds, interval in zip(datasets, intervals):
         if timed:
             note_long_steps(ds)
-        interval = sampling_interval(ds, strict=not timed)
-        if not timed and abs(interval - first) > 1e-6 * first:
+        elif abs(interval - intervals[0]) > 1e-6 * intervals[0]:
             raise TwinInputError(f"{dataset_label(ds)}: sampled every {interval:g} s, {dataset_label(datasets[0])} "
-                                 f"every {first:g} s; with a fixed sampling_interval every record needs it")
+                                 f"every {intervals[0]:g} s; with a fixed sampling_interval every record needs it")
     return float(np.median(np.concatenate([np.diff(ds.time_s) for ds in datasets])))
 
 
