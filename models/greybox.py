@@ -331,10 +331,10 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         """Regressors ``[1, x_ij…, ΔT_j…]`` for the linear parameters."""
         return np.column_stack([np.ones(len(U)), S.reshape(len(U), -1), U[:, 1:]])
 
-    def _unpack(self, theta, log_bounds):
+    def _unpack(self, theta, log_bounds, fit_exponent):
+        """``(1/τ per pole, b)`` from the fitted parameters (stick fractions, then b when it is fitted)."""
         lam = 1.0 / _time_constants(theta[: self.n_poles], *log_bounds)
-        exponent = theta[self.n_poles] if len(theta) > self.n_poles else float(self.exponent)
-        return lam, exponent
+        return lam, theta[self.n_poles] if fit_exponent else float(self.exponent)
 
     # ------------------------------------------------------------ fit
     @one_blas_thread
@@ -435,7 +435,7 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         log_bounds = (np.log(lo), np.log(hi))
 
         def linear(theta):
-            lam, exponent = self._unpack(theta, log_bounds)
+            lam, exponent = self._unpack(theta, log_bounds, fit_exponent)
             U = self._inputs(X, speed, inputs, exponent, records)
             Phi = self._design(self._states(time, U, lam, records), U)
             norm = np.sqrt(np.sum(Phi[used] ** 2, axis=0))
@@ -454,7 +454,7 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
 
         best = self._least_squares(residuals, n_poles, log_bounds, fit_exponent)
         coef, Phi, U = linear(best.x)
-        lam, exponent = self._unpack(best.x, log_bounds)
+        lam, exponent = self._unpack(best.x, log_bounds, fit_exponent)
 
         self.time_constants_ = 1.0 / lam
         self.poles_ = -lam
