@@ -470,6 +470,9 @@ def test_records_days_apart_train_one_greybox_each_from_rest(tmp_path, capsys):
     np.testing.assert_allclose(cm.estimator.time_constants_, true_time_constants(), rtol=0.02)
     assert cm.estimator.exponent_fitted_ and cm.estimator.exponent_ == pytest.approx(EXPONENT, rel=0.02)
     assert [t["label"] for t in cm.training] == ["day 1", "day 2", "day 3"]
+    # two records of one name (files of one name in two folders) keep a label each
+    twins = train([_day(0, [1500.0], "day"), _day(30, [3000.0], "day")], "spindle,air", "Z", model="greybox")
+    assert [t["label"] for t in twins.training] == list(twins.metadata["training_metrics"]) == ["day", "day_2"]
     unseen = _day(100, [6000.0, 2000.0], "unseen", hours=24)
     result = evaluate(CompensationModel.load(tmp_path / "days.json"), [unseen])
     assert result.rows[0]["rmse"] < 0.01 * np.ptp(unseen["Z"])

@@ -52,6 +52,28 @@ def dataset_label(dataset: Dataset) -> str:
 EVEN_STEP_TOLERANCE = 1e-6
 
 
+def distinct_labels(datasets: Sequence[Dataset]) -> list[str]:
+    """Each record's :func:`dataset_label`, a repeated one followed by ``_2``, ``_3`` … (files of one name
+    in two folders).
+
+    Parameters
+    ----------
+    datasets : sequence of Dataset
+        Records in the order given.
+
+    Returns
+    -------
+    list of str
+    """
+    seen: dict[str, int] = {}
+    labels = []
+    for ds in datasets:
+        label = dataset_label(ds)
+        seen[label] = seen.get(label, 0) + 1
+        labels.append(label if seen[label] == 1 else f"{label}_{seen[label]}")
+    return labels
+
+
 def evenly_sampled(dataset: Dataset) -> bool:
     """Whether every time step of a record is within :data:`EVEN_STEP_TOLERANCE` of their median.
 

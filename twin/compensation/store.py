@@ -48,6 +48,7 @@ from .records import (
     check_complete,
     check_starts_at_rest,
     dataset_label,
+    distinct_labels,
     note_long_steps,
     sampling_interval,
 )
@@ -632,8 +633,8 @@ def fit_compensation_model(datasets: list, inputs: list[str], target: str, model
     starts = [{"inputs": ds.matrix(channels)[:k].mean(axis=0).tolist(), "target": float(np.mean(ds[target][:k]))}
               for ds in datasets]
     cm.preprocessing["training_reference"] = starts[0]
-    cm.training = [{"label": dataset_label(ds), "rows": len(ds), "source": ds.metadata.get("source"),
+    cm.training = [{"label": label, "rows": len(ds), "source": ds.metadata.get("source"),
                     "scenario": ds.metadata.get("scenario"), "kind": ds.metadata.get("kind"),
                     "duration_h": float((ds.time_s[-1] - ds.time_s[0]) / 3600.0), "reference": start}
-                   for ds, start in zip(datasets, starts)]
+                   for ds, label, start in zip(datasets, distinct_labels(datasets), starts)]
     return cm

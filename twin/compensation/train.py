@@ -42,6 +42,7 @@ from .protocol import auto_select, continued_prediction, stability_problem
 from .records import (
     continued_record,
     dataset_label,
+    distinct_labels,
     joined_when_contiguous,
     note_long_steps,
 )
@@ -287,8 +288,8 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
                                     "ranking": selection.ranking,
                                     "geometric_mean_rmse": selection.score, "mean_rmse": selection.mean_rmse,
                                     "folds": selection.folds, "fold_rmse": selection.fold_rmse}
-    cm.metadata["training_metrics"] = {dataset_label(ds): score(cm.target_values(ds), cm.predict(ds))
-                                       for ds in loaded}
+    cm.metadata["training_metrics"] = {label: score(cm.target_values(ds), cm.predict(ds))
+                                       for ds, label in zip(loaded, distinct_labels(loaded))}
     problem = stability_problem(cm, loaded)
     if problem is not None:
         if not allow_unstable:
@@ -362,12 +363,7 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
         cm.check(ds)
         cm.check_readings(ds)
     rows, predictions = [], {}
-    seen = {}
-    for ds in loaded:
-        label = dataset_label(ds)
-        seen[label] = seen.get(label, 0) + 1
-        if seen[label] > 1:
-            label = f"{label}_{seen[label]}"
+    for ds, label in zip(loaded, distinct_labels(loaded)):
         y, p = _measured_and_predicted(cm, ds, label, reference, past, gap)
         rows.append({"dataset": label, **score(y, p)})
         predictions[label] = (ds.time_s, y, p)
