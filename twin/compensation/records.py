@@ -12,6 +12,7 @@ first row as rest needs it to start with the spindle stopped
 from __future__ import annotations
 
 import logging
+from bisect import bisect_left
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -246,13 +247,27 @@ def joined_when_contiguous(datasets: Sequence[Dataset], names: Sequence[str]) ->
             joined[-1] = continued_record(joined[-1], ds, names)
         else:
             joined.append(ds)
-    for first in joined:
-        for later in joined:
+    _check_time_order(joined, names)
+    return joined
+
+
+def _check_time_order(records, names):
+    """Refuse a record that continues another one that it does not follow (found by start time, so that a
+    year of daily files costs a sort, not every pair)."""
+    starts = sorted((float(ds.time_s[0]), k) for k, ds in enumerate(records))
+    for k, first in enumerate(records):
+        if len(first) < 2:
+            continue
+        dt = sampling_interval(first, strict=False)
+        expected = float(first.time_s[-1]) + dt
+        at = bisect_left(starts, (expected - 1e-6 * dt, -1))
+        while at < len(starts) and starts[at][0] <= expected + 1e-6 * dt:
+            later = records[starts[at][1]]
             if later is not first and _continues(first, later, names):
                 raise TwinInputError(f"{dataset_label(later)} continues {dataset_label(first)} (it starts one "
                                      "sampling interval after it ends) but is not given right after it: give "
                                      "the records in time order")
-    return joined
+            at += 1
 
 
 def _continues(first, later, names):
