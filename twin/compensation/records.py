@@ -255,7 +255,7 @@ def _check_time_order(records, names):
     """Refuse a record that continues another one that it does not follow (found by start time, so that a
     year of daily files costs a sort, not every pair)."""
     starts = sorted((float(ds.time_s[0]), k) for k, ds in enumerate(records))
-    for k, first in enumerate(records):
+    for first in records:
         if len(first) < 2:
             continue
         dt = sampling_interval(first, strict=False)
