@@ -480,6 +480,9 @@ def test_records_days_apart_train_one_greybox_each_from_rest(tmp_path, capsys):
     continued = evaluate(cm, [day2_later], reference="train", history=day2).predictions["day 2 later"]
     np.testing.assert_allclose(continued[1], day2_later["Z"] - day2["Z"][0])
     assert np.sqrt(np.mean((continued[2] - continued[1]) ** 2)) < 0.01 * np.ptp(day2["Z"])
+    with pytest.raises(TwinInputError, match=r"needs the training record it continues \(one of day 1, day 2, day 3\) "
+                                             "as --history"):
+        evaluate(cm, [day2_later], reference="train")
     with pytest.raises(TwinInputError, match="unseen: --history does not start like any of the 3 training records"):
         evaluate(cm, [day2_later], reference="train", history=unseen)
     # a record that starts running is no rest, among several too

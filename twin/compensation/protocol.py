@@ -281,8 +281,10 @@ def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Datas
         return (dataset[cm.target] - (ref["target"] if zero else 0.0),
                 np.asarray(cm.estimator.predict(dataset.matrix(cm.inputs) - cm.input_reference()), float))
     if history is None:
-        raise TwinInputError(f"{cm.model_name} is a time-series model: --reference train needs the training record "
-                             "as --history to run over the whole history")
+        which = "the training record" if len(cm.training) < 2 else \
+            f"the training record it continues (one of {', '.join(t['label'] for t in cm.training)})"
+        raise TwinInputError(f"{cm.model_name} is a time-series model: --reference train needs {which} as --history "
+                             "to run over the whole history")
     cm.check(history)
     timed = bool(cm.preprocessing.get("time_column"))
     for ds in (history, dataset):
