@@ -163,11 +163,10 @@ def _candidate_pool(datasets, inputs, candidates, zero_reference):
 
 def _common_interval(datasets):
     """The sampling interval (s) of records all evenly sampled at the same one, else None."""
-    if not evenly_sampled(datasets[0]):
-        return None
-    interval = sampling_interval(datasets[0])
-    same = all(evenly_sampled(ds) and abs(sampling_interval(ds) - interval) <= 1e-6 * interval for ds in datasets)
-    return interval if same else None
+    intervals = [sampling_interval(ds) if evenly_sampled(ds) else None for ds in datasets]
+    first = intervals[0]
+    same = first is not None and all(i is not None and abs(i - first) <= 1e-6 * first for i in intervals)
+    return first if same else None
 
 
 def _left_out_because(traits, datasets, first, zero_reference, interval):
@@ -276,9 +275,8 @@ def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Datas
         raise TwinInputError("--reference train needs a model trained by this version (its file holds no training "
                              "reference); retrain it")
     cm.check(dataset)
-    zero = cm.preprocessing.get("zero_reference", True)
     if not cm.is_time_series:
-        return (dataset[cm.target] - (ref["target"] if zero else 0.0),
+        return (dataset[cm.target] - cm.target_reference(),
                 np.asarray(cm.estimator.predict(dataset.matrix(cm.inputs) - cm.input_reference()), float))
     if history is None:
         which = "the training record" if len(cm.training) < 2 else \
@@ -295,16 +293,15 @@ def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Datas
         if abs(dt - cm.sampling_interval_s) > 1e-6 * dt:
             raise TwinInputError(f"{dataset_label(ds)}: sampled every {dt:g} s, the model was trained at "
                                  f"{cm.sampling_interval_s:g} s; --reference train needs the same interval")
-    ref = _history_start(cm, history)
-    x_ref = cm.input_reference(ref)
-    y_ref = ref["target"] if zero else 0.0
-    measured = dataset[cm.target] - y_ref
+    start = _history_start(cm, history)
+    measured = dataset[cm.target] - cm.target_reference(start)
     bridge_s, bridge, record_s = bridging_inputs(history, dataset, cm.inputs, cm.sampling_interval_s, gap,
                                                  on_grid=not timed)
-    X = np.vstack([history.matrix(cm.inputs), bridge, dataset.matrix(cm.inputs)]) - x_ref
+    X = np.vstack([history.matrix(cm.inputs), bridge, dataset.matrix(cm.inputs)]) - cm.input_reference(start)
     if timed:
         X = np.column_stack([np.r_[history.time_s, bridge_s, record_s] - history.time_s[0], X])
     predicted = np.asarray(cm.estimator.predict(X), float)[len(history) + len(bridge):]
+    zero = cm.preprocessing.get("zero_reference", True)   # the estimator predicts y_reference_ + the change
     return measured, predicted - (cm.estimator.y_reference_ if zero else 0.0)
 
 

@@ -270,6 +270,23 @@ class CompensationModel:
         reference[self.absolute_columns] = 0.0
         return reference if self.preprocessing.get("zero_reference", True) else np.zeros_like(reference)
 
+    def target_reference(self, start: dict | None = None) -> float:
+        """What is subtracted from the target of a record that continues a training one: that record's
+        start's raw target, or 0 without zero-referencing.
+
+        Parameters
+        ----------
+        start : dict, optional
+            As for :meth:`input_reference`.
+
+        Returns
+        -------
+        float
+            In the target's unit.
+        """
+        start = self.preprocessing["training_reference"] if start is None else start
+        return float(start["target"]) if self.preprocessing.get("zero_reference", True) else 0.0
+
     def describe(self) -> str:
         """One line: name, class, kind, inputs → target [unit].
 
