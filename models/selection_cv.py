@@ -12,7 +12,10 @@ shuffled rows or on a tail of the same regime:
   cycle at one speed is one regime);
 * **leave one block out**: train on every other block, test on the block;
 * **rolling origin**: train on blocks ``0..k-1``, test on block ``k``
-  (a forecast into the next, unseen regime);
+  (a forecast into the next, unseen regime). For the last block this is
+  the leave-one-block-out fold, and it is counted once: every fold is
+  distinct, so each block weighs alike and the paired folds of the
+  one-standard-error rule are not counted twice;
 * **several records** (``record_starts``, e.g. test days that each start at
   rest): each record's regime blocks are its own (:func:`record_blocks`), so
   a block never spans two records, and the records keep their order;
@@ -204,7 +207,9 @@ def blocked_folds(blocks: Sequence[tuple[int, int]], schemes: Sequence[str] = SC
     Returns
     -------
     folds : list of Fold
-        Leave-one-block-out folds (one per block), then rolling-origin folds (one per block but the first).
+        Leave-one-block-out folds (one per block), then rolling-origin folds (one per block but the first
+        and, with both schemes, the last: leaving out the last block trains on every block before it, so it
+        is already there, named as leave-one-block-out). Every fold is distinct.
     """
     unknown = sorted(set(schemes) - set(SCHEMES))
     if unknown:
@@ -222,7 +227,11 @@ def blocked_folds(blocks: Sequence[tuple[int, int]], schemes: Sequence[str] = SC
                 train[blocks[b][0]: blocks[b][1]] = False
             else:
                 train[: blocks[b][0]] = True
-            folds.append(Fold(scheme, b, blocks[b], train, tuple(int(s) for s in record_starts)))
+            # leaving out the last block is rolling origin into it: the same fold twice would weigh its block
+            # double and shrink the standard error of the paired folds (one-standard-error rule) as if it were
+            # new evidence
+            if not any(f.test == blocks[b] and np.array_equal(f.train, train) for f in folds):
+                folds.append(Fold(scheme, b, blocks[b], train, tuple(int(s) for s in record_starts)))
     return folds
 
 
@@ -527,9 +536,13 @@ def _margin(ranking, chosen, fold_rmse, floor) -> str:
 
 def _reason(ranking, chosen, score, worst, folds, unit) -> str:
     n_lobo = sum(f.scheme == "leave-one-block-out" for f in folds)
+    n_rolling = len(folds) - n_lobo
+    if not n_lobo or not n_rolling:
+        kinds = f"{n_lobo} leave-one-block-out" if n_lobo else f"{n_rolling} rolling-origin"
+    else:
+        kinds = f"{n_lobo} leave-one-block-out, {n_rolling} more rolling-origin; the last block's fold is both"
     best = ranking[0]
-    over = (f"over {len(folds)} folds ({n_lobo} leave-one-block-out, {len(folds) - n_lobo} rolling-origin), "
-            f"worst fold {worst[chosen]:.2f} {unit}")
+    over = f"over {len(folds)} folds ({kinds}), worst fold {worst[chosen]:.2f} {unit}"
     if chosen == best:
         text = (f"chose {best}: lowest geometric-mean RMSE on operating-regime blocks it did not see, "
                 f"{score[best]:.2f} {unit} {over}")

@@ -513,6 +513,6 @@ def test_select_auto_on_days_apart_blocks_each_and_leaves_out_one_record_models(
     assert code == 0, out
     selection = CompensationModel.load(tmp_path / "auto.json").metadata["selection"]
     assert selection["chosen"].startswith("greybox")
-    assert len(selection["folds"]) == 4 + 3   # 1 + 2 + 1 regime blocks, none across two days
+    assert len(selection["folds"]) == 4 + 2   # 1 + 2 + 1 regime blocks, none across two days
     assert "The 3 records each start at rest and have blocks of their own; none spans two." in out
     assert "Left out: gm0n, gm1n, gmc (coefficients per sample train on one record; these are 3)." in out
