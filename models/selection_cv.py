@@ -488,7 +488,8 @@ def select_by_blocked_cv(candidates: Mapping[str, tuple[BaseEstimator, Sequence[
     ranking = sorted(scores, key=lambda k: (score[k], worst[k], k))
     chosen = parsimonious_choice(candidates, scores, ranking[0], floor)
     return Selection(ranking, chosen, score, mean, worst, scores, [f.name for f in folds],
-                     _reason(ranking, chosen, score, worst, folds, unit) + _margin(ranking, chosen, scores, floor))
+                     _reason(ranking, chosen, score, worst, folds, schemes, unit)
+                     + _margin(ranking, chosen, scores, floor))
 
 
 def margin(ranking: Sequence[str], chosen: str, fold_rmse: Mapping[str, Sequence[float]], floor: float
@@ -534,13 +535,13 @@ def _margin(ranking, chosen, fold_rmse, floor) -> str:
     return text + "."
 
 
-def _reason(ranking, chosen, score, worst, folds, unit) -> str:
+def _reason(ranking, chosen, score, worst, folds, schemes, unit) -> str:
     n_lobo = sum(f.scheme == "leave-one-block-out" for f in folds)
     n_rolling = len(folds) - n_lobo
-    if not n_lobo or not n_rolling:
-        kinds = f"{n_lobo} leave-one-block-out" if n_lobo else f"{n_rolling} rolling-origin"
-    else:
-        kinds = f"{n_lobo} leave-one-block-out, {n_rolling} more rolling-origin; the last block's fold is both"
+    kinds = f"{n_lobo} leave-one-block-out" if n_lobo else f"{n_rolling} rolling-origin"
+    if n_lobo and "rolling-origin" in schemes:
+        kinds += (f", {n_rolling} more rolling-origin" if n_rolling else "") + \
+            "; the last block's fold is rolling-origin too"
     best = ranking[0]
     over = f"over {len(folds)} folds ({kinds}), worst fold {worst[chosen]:.2f} {unit}"
     if chosen == best:

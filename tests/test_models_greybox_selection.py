@@ -131,7 +131,7 @@ def test_selection_prefers_the_model_of_the_right_structure_and_says_why():
     assert scores["rolling-origin block 2"] > 0.5
     assert len(chosen.folds) == 4 + 2
     assert chosen.reason.startswith("chose grey-box: lowest geometric-mean RMSE on operating-regime blocks it did not see")
-    assert ("6 folds (4 leave-one-block-out, 2 more rolling-origin; the last block's fold is both)"
+    assert ("6 folds (4 leave-one-block-out, 2 more rolling-origin; the last block's fold is rolling-origin too)"
             in chosen.reason)
     rival = chosen.ranking[1]
     ahead = sum(a < b for a, b in zip(chosen.fold_rmse["grey-box"], chosen.fold_rmse[rival]))
@@ -139,6 +139,18 @@ def test_selection_prefers_the_model_of_the_right_structure_and_says_why():
     assert chosen.ranking == sorted(chosen.score, key=chosen.score.get)
     for name, folds in chosen.fold_rmse.items():
         assert chosen.score[name] == pytest.approx(np.exp(np.mean(np.log(folds))))
+
+
+def test_the_reason_counts_each_fold_once_and_names_its_schemes():
+    X, y, speed = _record()
+    candidates = {"MLR on ambient": (MLRRegressor(), [2]), "MLR on noise": (MLRRegressor(), [3])}
+    counts = {("leave-one-block-out",): "over 4 folds (4 leave-one-block-out), worst",
+              ("rolling-origin",): "over 3 folds (3 rolling-origin), worst"}
+    for schemes, text in counts.items():
+        assert text in select_by_blocked_cv(candidates, X, y, speed, schemes=schemes).reason
+    two = regime_blocks(speed)[2][0]   # the first two regime blocks only
+    reason = select_by_blocked_cv(candidates, X[:two], y[:two], speed[:two]).reason
+    assert "over 2 folds (2 leave-one-block-out; the last block's fold is rolling-origin too), worst" in reason
 
 
 def test_record_blocks_never_span_two_records():
