@@ -31,8 +31,9 @@ Layout of ``X`` (one row per sample, time-ordered):
   on the structure): they are fitted jointly with ``y`` (sharing the poles and
   the exponent), and ``predict`` then runs the observer form
   (:meth:`GreyBoxRegressor.predict_filtered`, a :class:`~models.kalman.KalmanFilter`)
-  that fuses them while the model runs. They may hold NaN (a missing reading)
-  at prediction.
+  that fuses them while the model runs. Like the inputs, they count as changes
+  since their record's first row, where they must be read; elsewhere they may
+  hold NaN (a missing reading).
 
 ``predict(X)`` assumes the machine is in thermal equilibrium with the first
 row of ``X`` (every lag state equals its input there; a spindle running at
@@ -112,7 +113,11 @@ def _uneven_lag(time, rate, U, start):
     first = 0
     while first < len(time) - 1:
         stop = int(np.searchsorted(decays, decays[first] + _STRETCH_DECAYS, side="right"))
-        stop = max(stop, first + 2)   # a single step longer than a stretch is one exact term
+        if stop <= first + 1:   # one step longer than a stretch (a logging gap): e^{E} would overflow
+            a = np.exp(-rate * (time[first + 1] - time[first]))
+            out[first + 1] = a * out[first] + (1.0 - a) * U[first]
+            first += 1
+            continue
         grow = np.exp(rate * (time[first + 1: stop] - time[first]))[:, None]   # e^{E_k}, k = first+1 … stop-1
         gain = -np.expm1(-rate * np.diff(time[first:stop]))[:, None]          # 1 − a_j
         out[first + 1: stop] = (out[first] + np.cumsum(gain * U[first: stop - 1] * grow, axis=0)) / grow
@@ -260,7 +265,7 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
     def _records(n_rows, record_starts):
         """``[start, stop)`` rows of each record, from the rows where the records after the first start."""
         starts = np.asarray(record_starts if record_starts is not None else (), dtype=float).ravel()
-        if starts.size and (not np.all(starts == np.round(starts)) or np.any(np.diff(starts) <= 0)
+        if starts.size and (not np.all(starts == np.round(starts)) or np.any(np.diff(starts) < 2)
                             or starts[0] < 2 or starts[-1] > n_rows - 2):
             raise ValueError(f"GreyBoxRegressor: record_starts must be increasing row numbers with at least 2 rows "
                              f"in every record (2..{n_rows - 2} for {n_rows} rows), got {starts.tolist()}.")
@@ -304,9 +309,27 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         """``u = [P, ΔT…]`` (n, 1 + q): heat from the speed, temperatures referenced to their record's first
         row."""
         heat = (speed / self.speed_reference) ** exponent
-        records = records or [(0, len(X))]
+        return np.column_stack([heat, self._since_start(X[:, list(inputs)], records)])
+
+    @staticmethod
+    def _since_start(values, records=None):
+        """``values`` (n, q) less their record's first row: the change since each record's start."""
+        records = records or [(0, len(values))]
         first = np.repeat([start for start, _ in records], [stop - start for start, stop in records])
-        return np.column_stack([heat, X[:, inputs] - X[first][:, inputs]])
+        return values - values[first]
+
+    def _observed_since_start(self, X, observed, records=None):
+        """The observed thermometers as changes since each record's first row (K), which must be read: at rest
+        there the network's outputs are its inputs' (an absolute offset shared by records that start at other
+        temperatures would bias the fit and the observer)."""
+        values = X[:, list(observed)]
+        for start, _ in records or [(0, len(X))]:
+            missing = np.flatnonzero(~np.isfinite(values[start]))
+            if missing.size:
+                raise ValueError(f"GreyBoxRegressor: observed column {observed[missing[0]]} is "
+                                 f"{values[start, missing[0]]} at row {start}, a record's first row; its change is "
+                                 "counted from there, so that reading is needed.")
+        return self._since_start(values, records)
 
     # ------------------------------------------------------------ simulation
     @staticmethod
@@ -337,7 +360,6 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         return lam, theta[self.n_poles] if fit_exponent else float(self.exponent)
 
     # ------------------------------------------------------------ fit
-    @one_blas_thread
     def _checked_settings(self):
         """``(n_poles, (τ low, τ high) s)``, each checked."""
         n_poles = check_positive_int(self.n_poles, "n_poles")
@@ -346,6 +368,13 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         lo, hi = (float(v) for v in self.time_constant_bounds)
         if not 0 < lo < hi < np.inf:
             raise ValueError(f"GreyBoxRegressor: time_constant_bounds must be 0 < low < high s, got {self.time_constant_bounds!r}.")
+        if not 0 < float(self.speed_reference) < np.inf:
+            raise ValueError(f"GreyBoxRegressor: speed_reference must be a positive speed in rpm, got {self.speed_reference!r}.")
+        b_low, b_high = (float(v) for v in self.exponent_bounds)
+        if not b_low < b_high:
+            raise ValueError(f"GreyBoxRegressor: exponent_bounds must be low < high, got {self.exponent_bounds!r}.")
+        if not 0 <= float(self.process_noise) < np.inf:
+            raise ValueError(f"GreyBoxRegressor: process_noise must be finite and >= 0, got {self.process_noise!r}.")
         return n_poles, (lo, hi)
 
     @staticmethod
@@ -381,6 +410,7 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
                 best = result
         return best
 
+    @one_blas_thread
     def fit(self, X: ArrayLike, y: ArrayLike, sample_weight: ArrayLike | None = None,
             record_starts: Sequence[int] = ()) -> GreyBoxRegressor:
         """Fit on one time-ordered record, or on several (``record_starts``); ``sample_weight`` (≥ 0) weights
@@ -418,7 +448,7 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
                            hint=" Use fewer poles or temperature inputs.")
         records = self._records(len(X), record_starts)
         time, speed = self._check_x(X, inputs, allow_nan_in=observed, records=records)
-        outputs = np.column_stack([y, X[:, observed]])
+        outputs = np.column_stack([y, self._observed_since_start(X, observed, records)])
         present = np.isfinite(outputs)   # an observed thermometer may miss readings: they weigh 0
         outputs = np.where(present, outputs, 0.0)
         used = w > 0
@@ -481,7 +511,7 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         return X, time, observed, self._inputs(X, speed, inputs, self.exponent_)
 
     def predict_outputs(self, X: ArrayLike) -> np.ndarray:
-        """Simulated outputs (n, 1 + n_observed): y, then the observed thermometers (°C).
+        """Simulated outputs (n, 1 + n_observed): y, then the observed thermometers' changes since the first row (K).
 
         Parameters
         ----------
@@ -491,7 +521,7 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         Returns
         -------
         outputs : ndarray, shape (n_samples, 1 + n_observed)
-            y (its unit) and the simulated observed thermometers, °C.
+            y (its unit) and the simulated changes of the observed thermometers since the first row, K.
         """
         _, time, _, U = self._fitted_inputs(X, allow_nan_observed=True)
         S = self._states(time, U, -self.poles_)
@@ -572,6 +602,7 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
             The filtered estimate of y (its unit, e.g. µm).
         """
         X, time, observed, U = self._fitted_inputs(X, allow_nan_observed=True)
+        readings = self._observed_since_start(X, observed)
         A, B, C, D = self.state_space()
         _, n_poles, m = self.gains_.shape
         lam = np.repeat(-self.poles_, m)
@@ -586,7 +617,7 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         mean = np.empty(len(X))
         for k in range(len(X)):
             if observed:
-                kf.update(X[k, list(observed)], U1[k])
+                kf.update(readings[k], U1[k])
             mean[k] = kf.estimate(C[:1], D[:1], U1[k])[0][0]
             if k + 1 < len(X):
                 dt = float(steps[k])

@@ -17,6 +17,7 @@ from scipy.integrate import solve_ivp
 from sklearn.exceptions import NotFittedError
 
 from models.greybox import GreyBoxRegressor
+from models.registry import estimator_classes
 
 # two-node network: spindle node (C1) and structure node (C2), both losing heat to the ambient
 C1, C2 = 4.0e5, 2.0e6          # J/K
@@ -172,6 +173,7 @@ def test_several_records_each_from_rest_train_one_network(days):
 
 
 @pytest.mark.parametrize("starts, message", [([1], r"got \[1\.0\]"), ([100, 100], "increasing"),
+                                             ([100, 101], "at least 2 rows in every record"),
                                              ([2.5], "row numbers"), ([199], r"2\.\.198 for 200 rows")])
 def test_record_starts_are_checked(starts, message):
     with pytest.raises(ValueError, match=message):
@@ -181,10 +183,11 @@ def test_record_starts_are_checked(starts, message):
 @pytest.mark.parametrize("time_constant", [30.0, 3600.0, 1e6])
 def test_the_lag_states_at_uneven_times_are_the_zoh_recurrence(time_constant):
     """The closed-form stretches of ``_states`` against the row-by-row recurrence, over jitter and holes
-    longer than a stretch (300 time constants), to the recurrence's own rounding."""
+    longer than a stretch (300 time constants), to the recurrence's own rounding; a three-day hole is
+    e^{8640} for τ = 30 s, past the floats, so such a step is the recurrence itself."""
     rng = np.random.default_rng(5)
     steps = 15.0 + rng.uniform(-5.0, 5.0, 4000)
-    steps[[1000, 2500]] = [400 * 30.0, 5 * 3600.0]
+    steps[[1000, 2500, 3500]] = [400 * 30.0, 5 * 3600.0, 3 * 86400.0]
     times = np.cumsum(np.r_[7.0e4, steps])
     U = rng.normal(0.0, 10.0, (len(times), 3))
     rate = 1.0 / time_constant
@@ -246,6 +249,31 @@ def test_observer_fuses_a_thermometer_to_follow_an_unmodelled_heat():
     # without observed columns the observer is the simulation itself
     plain = GreyBoxRegressor(n_poles=2, temperature_inputs=(2,)).fit(X, y)
     np.testing.assert_allclose(plain.predict_filtered(X_test), plain.predict(X_test), atol=1e-8)
+
+
+def test_observed_thermometers_count_from_each_records_start(days):
+    """Two days, each from rest; the second 5 K warmer throughout (room and machine alike). The thermometer's
+    change since its record's start is the network's output; its absolute reading is not, and a fit or an
+    observer taking it absolute would see 5 K of heat that is not there."""
+    (X1, y1), (X2, y2) = days[0], days[2]
+    X2 = X2 + np.r_[0.0, 0.0, 5.0, 5.0]
+    X = np.vstack([X1, X2])
+    model = GreyBoxRegressor(n_poles=2, temperature_inputs=(2,), observed=(3,)).fit(
+        X, np.r_[y1, y2], record_starts=[len(X1)])
+    np.testing.assert_allclose(model.time_constants_, true_time_constants(), rtol=0.02)
+    assert model.output_std_[1] < 0.01
+    filtered = model.predict(X2)
+    assert np.sqrt(np.mean((filtered - y2) ** 2)) < 0.01 * np.ptp(y2)
+    np.testing.assert_allclose(model.predict_outputs(X2)[0], 0.0, atol=1e-3)   # at rest at the start: no change
+    with pytest.raises(ValueError, match="observed column 3 is nan at row 0, a record's first row"):
+        model.predict(np.where(np.arange(len(X2))[:, None] == 0, [X2[0, 0], 0.0, X2[0, 2], np.nan], X2))
+
+
+def test_every_fit_runs_with_one_blas_thread():
+    """A multi-threaded BLAS rounds long sums differently per thread count (models._threads): every fit is
+    wrapped, not a helper it calls."""
+    for name, cls in estimator_classes().items():
+        assert hasattr(cls.fit, "__wrapped__"), f"{name}.fit is not wrapped by one_blas_thread"
 
 
 def test_missing_readings_of_an_observed_thermometer_are_left_out_of_the_fit():
@@ -315,6 +343,9 @@ def test_bad_input_is_refused_with_a_clear_message(change, message):
         ({"temperature_inputs": (1,)}, "temperature_inputs has column 1"),
         ({"temperature_inputs": (2,), "observed": (2,)}, "both inputs and observed"),
         ({"time_constant_bounds": (100.0, 150.0), "n_poles": 2}, "too narrow"),
+        ({"speed_reference": -1000.0}, "speed_reference must be a positive speed"),
+        ({"process_noise": -0.5}, "process_noise must be finite and >= 0"),
+        ({"exponent_bounds": (3.0, 0.5)}, "exponent_bounds must be low < high"),
     ],
 )
 def test_bad_hyperparameters_are_refused(params, message):
