@@ -50,7 +50,10 @@ How a fold is fitted depends on the kind of model (:func:`model_kind`):
 * ``"static"`` (MLR, PCR, ANN, ANFIS): fit on the training rows, predict the test rows;
 * ``"series"`` (the grey GM/GMC/GNNMCI/AGO models): fit on the training rows
   joined in time order (a left-out middle block leaves a seam), then run over
-  the whole history up to the end of the test block and read off the block;
+  the whole history up to the end of the test block and read off the block,
+  as the change since the history's first row added to the target there
+  (not to the first *training* target, which is another block's start when
+  the first block is left out);
 * ``"weighted"`` (:class:`~models.greybox.GreyBoxRegressor`): run over the
   whole history with the test block's targets weighted 0, so the simulation
   passes through the block on its known inputs (speed, ambient) without
@@ -285,7 +288,9 @@ def fold_prediction(estimator: BaseEstimator, X: np.ndarray, y: np.ndarray, fold
         if fold.record_starts:
             raise ValueError(f"{type(model).__name__} trains on one record, not on several.")
         model.fit(X[fold.train], y[fold.train])
-        return model.predict(X[:stop])[start:]
+        # it predicts its first training target plus the change since row 0 of what it runs over; leaving out
+        # the first block, that target is another block's start, so the run's own start level replaces it
+        return model.predict(X[:stop])[start:] - model.y_reference_ + y[0]
     end = max(stop, int(np.flatnonzero(fold.train)[-1]) + 1)
     model.fit(X[:end], y[:end], sample_weight=fold.train[:end].astype(float),
               record_starts=[s for s in fold.record_starts if s < end])

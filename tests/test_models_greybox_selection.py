@@ -114,6 +114,17 @@ def test_held_out_targets_never_reach_the_fit():
         "weighted", "series", "static"]
 
 
+def test_a_series_model_left_without_the_first_block_predicts_from_the_runs_start():
+    """A target that is a fixed mix of the inputs, 7 µm off zero: GM(0,N) trained on blocks 2-4 predicts the
+    change since row 0 added to the target there, not to block 2's start (1.6 µm away)."""
+    X, _, speed = _record()
+    y = 3.0 * (X[:, 2] - X[0, 2]) + 0.5 * X[:, 3] + 7.0
+    first = blocked_folds(regime_blocks(speed))[0]
+    assert first.name == "leave-one-block-out block 1" and abs(y[first.test[1]] - y[0]) > 1.0
+    start, stop = first.test
+    assert np.max(np.abs(fold_prediction(GM0NRegressor(), X[:, [2, 3]], y, first) - y[start:stop])) < 0.1
+
+
 def test_selection_prefers_the_model_of_the_right_structure_and_says_why():
     X, y, speed = _record()
     candidates = {
