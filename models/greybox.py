@@ -153,7 +153,7 @@ def _stick_fractions(taus, log_low, log_high):
 
 
 @register_model({"greybox": {"sampling_interval": 1.0}}, time_series=True, takes_time=True,
-                first_input=("spindle speed", "rpm"), observer=True)
+                first_input=("spindle speed", "rpm"), observer=True, predicts_level=True)
 class GreyBoxRegressor(RegressorMixin, BaseEstimator):
     """Grey-box RC-network thermal-drift model, fitted by output-error minimisation.
 

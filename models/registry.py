@@ -50,7 +50,7 @@ class ModelTraits:
     ----------
     time_series : bool
         A grey time-series model: it runs over the record's history; ``predict`` returns ``y_reference_`` +
-        the predicted change. Without ``takes_time`` its coefficients are per sample, so it trains on one
+        the predicted change (unless ``predicts_level``). Without ``takes_time`` its coefficients are per sample, so it trains on one
         contiguous, evenly sampled record; with it, on several, each from rest (``record_starts`` of its fit).
     takes_time : bool
         The class has a ``sampling_interval`` parameter (s); set to None, column 0 of ``X`` is the time
@@ -60,12 +60,16 @@ class ModelTraits:
     observer : bool
         The class has an ``observed`` parameter: columns of ``X`` modelled as outputs (thermometers on the
         structure) and fused while it runs (a Kalman filter).
+    predicts_level : bool
+        A time-series model whose ``predict`` is the target itself, in the frame it was trained in (its
+        offset is fitted), not ``y_reference_`` + a change: nothing is to be taken off it.
     """
 
     time_series: bool = False
     takes_time: bool = False
     first_input: tuple[str, str] | None = None
     observer: bool = False
+    predicts_level: bool = False
 
 
 @dataclass(frozen=True)
@@ -111,7 +115,8 @@ _TRAITS: dict[str, ModelTraits] = {}
 
 
 def register_model(names: dict[str, dict] | None = None, time_series: bool = False, takes_time: bool = False,
-                   first_input: tuple[str, str] | None = None, observer: bool = False) -> Callable[[T], T]:
+                   first_input: tuple[str, str] | None = None, observer: bool = False,
+                   predicts_level: bool = False) -> Callable[[T], T]:
     """Class decorator: register an estimator for persistence and, with ``names``, for ``twin train``.
 
     Parameters
@@ -119,7 +124,7 @@ def register_model(names: dict[str, dict] | None = None, time_series: bool = Fal
     names : dict of str to dict, optional
         Command-line name → default hyperparameters (several names may share a class, e.g. the ANFIS
         initialisations).  None: persisted only.
-    time_series, takes_time, first_input, observer
+    time_series, takes_time, first_input, observer, predicts_level
         The class's input contract (see :class:`ModelTraits`).
 
     Returns
@@ -135,7 +140,8 @@ def register_model(names: dict[str, dict] | None = None, time_series: bool = Fal
     def decorate(cls):
         if _CLASSES.get(cls.__name__, cls) is not cls:
             raise ValueError(f"estimator class name {cls.__name__!r} is registered twice")
-        traits = ModelTraits(time_series, takes_time, None if first_input is None else tuple(first_input), observer)
+        traits = ModelTraits(time_series, takes_time, None if first_input is None else tuple(first_input), observer,
+                             predicts_level)
         entries = [ModelEntry(name.lower(), cls, dict(defaults), traits) for name, defaults in (names or {}).items()]
         for e in entries:                    # checked before anything is registered: a refusal leaves no trace
             if e.name in _MODELS and _MODELS[e.name].cls is not cls:

@@ -502,6 +502,43 @@ def test_records_days_apart_train_one_greybox_each_from_rest(tmp_path, capsys):
         train(days[:2], "spindle,air", "Z", model="greybox", zero_reference=False)
 
 
+def _target_shifted(ds, shift, label):
+    """``ds`` with its target read ``shift`` µm higher throughout (a probe not re-zeroed between days)."""
+    values = ds.matrix(ds.names)
+    values[:, ds.names.index("Z")] += shift
+    return Dataset(ds.time_s, values, CHANNELS, {"kind": "synthetic", "scenario": label})
+
+
+@pytest.mark.parametrize("model", ["greybox", "mlr"])
+def test_the_history_names_the_training_record_a_continuation_is_referenced_to(model):
+    """Two days a day apart start at rest in the same room air, so their inputs start alike; day 2's probe
+    reads 30 µm higher. A continuation of day 2 counts its change from day 2's start, for a time-series
+    model and for a static one alike."""
+    second = _target_shifted(_day(24, [3000.0], "day 2", hours=22), 30.0, "day 2")
+    cut = int(np.searchsorted(second.time_s, second.time_s[0] + 16 * 3600.0))
+    day1, day2, later = _day(0, [4500.0], "day 1"), _rows(second, slice(0, cut), "day 2"), \
+        _rows(second, slice(cut, None), "day 2 later")
+    np.testing.assert_allclose(day1["air"][0], day2["air"][0], atol=1e-9)
+    cm = train([day1, day2], "spindle,air", "Z", model=model)
+    measured, predicted = evaluate(cm, [later], reference="train", history=day2).predictions["day 2 later"][1:]
+    np.testing.assert_allclose(measured, later["Z"] - day2["Z"][0])
+    if model == "greybox":
+        assert np.sqrt(np.mean((predicted - measured) ** 2)) < 0.01 * np.ptp(second["Z"])
+
+
+def test_a_greybox_referenced_to_several_rows_is_not_shifted_by_the_first():
+    """With --reference-samples 10 the reference is the mean of the first 10 rows; a glitch of 5 µm on the
+    first one must not shift what the grey-box model predicts (its offset is fitted, not its first target)."""
+    day = _day(0, [3000.0], "day")
+    glitch = day.matrix(day.names)
+    glitch[0, day.names.index("Z")] += 5.0
+    glitchy = Dataset(day.time_s, glitch, CHANNELS, {"kind": "synthetic", "scenario": "glitch"})
+    cm = train([glitchy], "spindle,air", "Z", model="greybox", reference_samples=10)
+    assert cm.estimator.y_reference_ > 4.0   # the first row, 4.5 µm above the mean of the ten
+    residual = (cm.target_values(glitchy) - cm.predict(glitchy))[1:]
+    assert abs(np.mean(residual)) < 0.05 and cm.metadata["training_metrics"]["glitch"]["rmse"] < 0.5
+
+
 def test_select_auto_on_days_apart_blocks_each_and_leaves_out_one_record_models(tmp_path, capsys):
     paths = []
     for k, (start, levels) in enumerate(((0, [1500.0]), (30, [3000.0, 4500.0]), (60, [2000.0]))):

@@ -275,9 +275,12 @@ def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Datas
         raise TwinInputError("--reference train needs a model trained by this version (its file holds no training "
                              "reference); retrain it")
     cm.check(dataset)
-    if not cm.is_time_series:
-        return (dataset[cm.target] - cm.target_reference(),
-                np.asarray(cm.estimator.predict(dataset.matrix(cm.inputs) - cm.input_reference()), float))
+    if not cm.is_time_series:   # the reference is the start of the training record it continues, if named
+        if history is not None:
+            cm.check(history)
+        start = None if history is None else _history_start(cm, history)
+        return (dataset[cm.target] - cm.target_reference(start),
+                np.asarray(cm.estimator.predict(dataset.matrix(cm.inputs) - cm.input_reference(start)), float))
     if history is None:
         which = "the training record" if len(cm.training) < 2 else \
             f"the training record it continues (one of {', '.join(t['label'] for t in cm.training)})"
@@ -301,21 +304,23 @@ def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Datas
     if timed:
         X = np.column_stack([np.r_[history.time_s, bridge_s, record_s] - history.time_s[0], X])
     predicted = np.asarray(cm.estimator.predict(X), float)[len(history) + len(bridge):]
-    zero = cm.preprocessing.get("zero_reference", True)   # the estimator predicts y_reference_ + the change
-    return measured, predicted - (cm.estimator.y_reference_ if zero else 0.0)
+    return measured, cm.series_change(predicted)
 
 
 def _history_start(cm, history):
-    """The start (raw inputs and target) of the training record that ``history`` is, found by its inputs."""
-    start = history.matrix(cm.inputs)[: cm.preprocessing.get("reference_samples", 1)].mean(axis=0)
+    """The start (raw inputs and target) of the training record that ``history`` is, found by its inputs and
+    target (records that start at rest often share their inputs there; the target tells them apart, and where
+    it does not, their references are the same)."""
+    rows = slice(0, cm.preprocessing.get("reference_samples", 1))
+    start = np.r_[history.matrix(cm.inputs)[rows].mean(axis=0), history[cm.target][rows].mean()]
     starts = [t["reference"] for t in cm.training if "reference" in t] or [cm.preprocessing["training_reference"]]
     for ref in starts:
-        if np.allclose(start, ref["inputs"], rtol=1e-9, atol=1e-9):
+        if np.allclose(start, np.r_[ref["inputs"], ref["target"]], rtol=1e-9, atol=1e-9):
             return ref
     which = "the training record" if len(starts) == 1 else f"any of the {len(starts)} training records"
-    theirs = " or ".join(str(np.round(ref["inputs"], 4).tolist()) for ref in starts)
+    theirs = " or ".join(str(np.round(np.r_[ref["inputs"], ref["target"]], 4).tolist()) for ref in starts)
     raise TwinInputError(f"{dataset_label(history)}: --history does not start like {which} "
-                         f"(inputs {np.round(start, 4).tolist()} against {theirs})")
+                         f"(inputs and {cm.target} {np.round(start, 4).tolist()} against {theirs})")
 
 
 def bridging_inputs(history: Dataset, dataset: Dataset, inputs: list[str], interval_s: float,

@@ -396,9 +396,30 @@ class CompensationModel:
         return np.interp(t, grid, self._predict_series(Xg))
 
     def _predict_series(self, X):
-        # the estimator returns y_reference_ + Δŷ; we want Δŷ in the referenced frame of the data
-        y = np.asarray(self.estimator.predict(X), float)
-        return y - float(self.estimator.y_reference_) if self.preprocessing.get("zero_reference", True) else y
+        return self.series_change(np.asarray(self.estimator.predict(X), float))
+
+    def series_change(self, predicted: np.ndarray) -> np.ndarray:
+        """A time-series estimator's prediction in the referenced frame of the data.
+
+        A grey series model predicts ``y_reference_`` (its first training target) + the change since
+        the first row it runs over; with the zero reference that target is taken off. A model that
+        predicts the level itself (``ModelTraits.predicts_level``, the grey-box model: its offset is
+        fitted) is left as it is; taking ``y_reference_`` off it would shift it by the first training
+        row's noise whenever the reference is a mean of several rows.
+
+        Parameters
+        ----------
+        predicted : ndarray, shape (n_rows,)
+            ``estimator.predict`` of a record, in the target's unit.
+
+        Returns
+        -------
+        ndarray, shape (n_rows,)
+            The same, in the target's referenced frame.
+        """
+        if model_traits(self.estimator).predicts_level or not self.preprocessing.get("zero_reference", True):
+            return predicted
+        return predicted - float(self.estimator.y_reference_)
 
     # ------------------------------------------------------------------ files
     def to_document(self) -> dict:
