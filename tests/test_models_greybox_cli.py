@@ -446,6 +446,42 @@ def test_a_record_cut_into_files_trains_as_one(records, caplog):
     assert static.metadata["training_metrics"]["day 1 + day 2"]["rows"] == len(training)
 
 
+def test_a_jittered_record_cut_into_files_trains_as_one_and_a_repeated_row_is_refused(records, caplog):
+    """A logger's stamps wander: the second file starts one interval after the first ends to within ±2 s of
+    120 s. It continues the first, as with exact stamps; a row in both files, or a file given twice, would
+    otherwise be a record of its own that starts at rest."""
+    training, _, _ = records
+    jitter = np.random.default_rng(3).uniform(-2.0, 2.0, len(training))
+    stamped = Dataset(training.time_s + jitter, training.matrix(training.names), CHANNELS,
+                      {"kind": "synthetic", "scenario": "stamped"})
+    first, second = _rows(stamped, slice(0, 300), "day 1"), _rows(stamped, slice(300, None), "day 2")
+    with caplog.at_level("INFO", logger="thermal_twin"):
+        cut = train([first, second], "spindle,air", "Z", model="greybox")
+    assert "day 2 continues day 1: trained on as one record" in caplog.text
+    np.testing.assert_allclose(cut.predict(stamped), train([stamped], "spindle,air", "Z", model="greybox")
+                               .predict(stamped), rtol=1e-9, atol=1e-9)
+    with pytest.raises(TwinInputError, match="day 2 continues day 1 .* not given right after it"):
+        train([second, first], "spindle,air", "Z", model="greybox")
+    overlapping = _rows(stamped, slice(299, None), "day 2")
+    with pytest.raises(TwinInputError, match=r"day 2 starts with a row of day 1 again \(t = .* the same readings\)"):
+        train([first, overlapping], "spindle,air", "Z", model="greybox")
+    with pytest.raises(TwinInputError, match="starts with a row of day 1 again"):
+        train([first, first], "spindle,air", "Z", model="mlr")
+
+
+def test_a_quiet_record_among_the_training_ones_is_no_divergence(records):
+    """A record at rest does not change; a model that is off it by a trifle, by the other record's scale, has
+    not diverged (the check once scaled each record by its own change)."""
+    training, _, _ = records
+    times = 1e6 + np.arange(0.0, 3600.0, 120.0)
+    quiet = Dataset(times, np.column_stack([np.zeros(30), np.full(30, 20.0), np.zeros(30)]),
+                    CHANNELS, {"kind": "synthetic", "scenario": "quiet"})
+    for model in ("greybox", "mlr"):
+        cm = train([training, quiet], "spindle,air", "Z", model=model)
+        assert stability_problem(cm, [training, quiet]) is None
+        assert np.max(np.abs(cm.predict(quiet))) > 0.0   # off its own change (none), a trifle by the other's
+
+
 def test_a_long_hole_in_a_record_is_named(records, caplog):
     training, _, _ = records
     holed = _rows(training, np.r_[0:100, 130:len(training)], "holed")

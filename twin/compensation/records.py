@@ -51,6 +51,9 @@ def dataset_label(dataset: Dataset) -> str:
 
 #: steps within this fraction of their median count as even sampling
 EVEN_STEP_TOLERANCE = 1e-6
+#: a record that starts one sampling interval after another ends, to within this fraction of it (a logger's
+#: jitter), continues it
+CONTINUES_WITHIN = 0.5
 
 
 def distinct_labels(datasets: Sequence[Dataset]) -> list[str]:
@@ -260,8 +263,8 @@ def _check_time_order(records, names):
             continue
         dt = sampling_interval(first, strict=False)
         expected = float(first.time_s[-1]) + dt
-        at = bisect_left(starts, (expected - 1e-6 * dt, -1))
-        while at < len(starts) and starts[at][0] <= expected + 1e-6 * dt:
+        at = bisect_left(starts, (expected - CONTINUES_WITHIN * dt, -1))
+        while at < len(starts) and starts[at][0] <= expected + CONTINUES_WITHIN * dt:
             later = records[starts[at][1]]
             if later is not first and _continues(first, later, names):
                 raise TwinInputError(f"{dataset_label(later)} continues {dataset_label(first)} (it starts one "
@@ -274,8 +277,22 @@ def _continues(first, later, names):
     if len(first) < 2 or not all(n in first and n in later and first.info(n).unit == later.info(n).unit
                                  for n in names):
         return False
+    _check_not_repeated(first, later, names)
     dt = sampling_interval(first, strict=False)
-    return abs(later.time_s[0] - first.time_s[-1] - dt) <= 1e-6 * dt
+    return abs(later.time_s[0] - first.time_s[-1] - dt) <= CONTINUES_WITHIN * dt
+
+
+def _check_not_repeated(first, later, names):
+    """Refuse ``later`` if its rows up to ``first``'s end are rows of ``first`` again (same times, same
+    readings): a file given twice, or files cut with rows in both, would be taken as a record of its own that
+    starts at rest. (A record whose clock restarts shares times with another, not readings.)"""
+    inside = later.time_s <= first.time_s[-1]
+    at = np.minimum(np.searchsorted(first.time_s, later.time_s[inside]), len(first) - 1)
+    if inside[0] and np.array_equal(first.time_s[at], later.time_s[inside]) and np.array_equal(
+            first.matrix(list(names))[at], later.matrix(list(names))[inside], equal_nan=True):
+        raise TwinInputError(f"{dataset_label(later)} starts with a row of {dataset_label(first)} again (t = "
+                             f"{later.time_s[0]:g} s, the same readings): the same file twice, or files that "
+                             "overlap; give each row once")
 
 
 def starts_running(dataset: Dataset, speed: str) -> bool:
