@@ -227,6 +227,21 @@ def test_cli_train_on_measured_csv_and_evaluate(tmp_path, capsys):
     assert (tmp_path / "ev" / "evaluation.md").exists() and (tmp_path / "ev" / "rec1_Z.png").stat().st_size > 5000
     rows = json.loads((tmp_path / "ev" / "evaluation.json").read_text())["rows"]
     assert rows[0]["improvement_percent"] > 90
+    # labels whose file names would be one ("rec 1", "rec_1") keep a plot each; a flat record's undefined
+    # correlation is null in the JSON files (NaN is not JSON)
+    flat = Dataset(b.time_s, np.column_stack([b.values[:, :-1], np.zeros(len(b))]), b.channels,
+                   {"scenario": "rec_1"})
+    Dataset(b.time_s, b.values, b.channels, {"scenario": "rec 1"}).write(tmp_path / "rec 1.csv")
+    flat.write(tmp_path / "rec_1.csv")
+    flat_model = tmp_path / "flat.json"
+    assert main(["train", str(tmp_path / "rec_1.csv"), "--inputs", "T1", "--target", "Z", "--model", "mlr",
+                 "--out", str(flat_model)]) == 0
+    assert main(["evaluate", str(model), str(tmp_path / "rec 1.csv"), str(tmp_path / "rec_1.csv"),
+                 "--out", str(tmp_path / "ev2")]) == 0
+    assert sorted(p.name for p in (tmp_path / "ev2").glob("*.png")) == ["rec_1_2_Z.png", "rec_1_Z.png"]
+    strict = {"parse_constant": lambda word: pytest.fail(f"{word} in a JSON file")}
+    assert json.loads(flat_model.read_text(), **strict)["metadata"]["training_metrics"]["rec_1"]["r"] is None
+    assert json.loads((tmp_path / "ev2" / "evaluation.json").read_text(), **strict)["rows"][1]["r"] is None
     # errors are one line and exit code 2
     assert main(["train", str(tmp_path / "rec1.csv"), "--inputs", "T7", "--target", "Z", "--out",
                  str(tmp_path / "x.json")]) == 2

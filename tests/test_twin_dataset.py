@@ -94,6 +94,14 @@ def test_measured_bad_input(tmp_path, text, message):
         Dataset.from_measured_csv(_write(tmp_path, text))
 
 
+def test_a_csv_that_is_not_utf8_is_named(tmp_path):
+    path = tmp_path / "ansi.csv"
+    path.write_bytes("time_s,T01_degC\n0,20\n15,21 °C\n".encode("cp1252"))
+    with pytest.raises(TwinInputError, match=r"ansi.csv: not UTF-8 text \(byte 0xb0 at offset 27\); save the CSV "
+                                             "as UTF-8"):
+        Dataset.from_measured_csv(path)
+
+
 def test_real_recording_imports(fl_thermal_csv):
     ds = Dataset.from_measured_csv(fl_thermal_csv)
     assert len(ds) == 7711 and ds.info("t1").kind == "temperature" and ds.info("ch3").unit == "um"

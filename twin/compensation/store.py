@@ -41,7 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 from models.persistence import model_from_document, model_to_document
 from models.registry import model_traits, registered_models
 
-from ..core.dataset import Dataset, json_default, project_version
+from ..core.dataset import Dataset, finite_or_none, json_default, project_version
 from ..core.files import write_text_atomic
 from ..errors import TwinInputError
 from .records import (
@@ -435,7 +435,7 @@ class CompensationModel:
             "target": self.target, "target_unit": self.target_unit,
             "preprocessing": dict(self.preprocessing), "sampling_interval_s": self.sampling_interval_s,
             "training": list(self.training), "project_version": project_version(),
-            "metadata": dict(self.metadata), "estimator": model_to_document(self.estimator),
+            "metadata": finite_or_none(dict(self.metadata)), "estimator": model_to_document(self.estimator),
         }
 
     def save(self, path: Path | str) -> Path:

@@ -30,7 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 import fea
 from models import metrics
 
-from ..core.dataset import Dataset, sidecar_path
+from ..core.dataset import Dataset, finite_or_none, sidecar_path
 from ..core.scenario import available_scenarios
 from ..core.simulate import simulate
 from ..errors import TwinInputError
@@ -416,17 +416,26 @@ def _write_evaluation(cm, result, folder, plots):
     pd.DataFrame(result.rows).to_csv(folder / "evaluation.csv", index=False)
     (folder / "evaluation.json").write_text(json.dumps({"model": cm.to_document()["model_name"],
                                                         "inputs": cm.inputs, "target": cm.target,
-                                                        "rows": result.rows}, indent=1))
+                                                        "rows": finite_or_none(result.rows)}, indent=1))
     if plots:
+        names = _file_names(result.predictions)
         for label, (t, y, p) in result.predictions.items():
             row = next(r for r in result.rows if r["dataset"] == label)
             title = (f"{cm.target} on {label}: {cm.model_name}, RMSE {row['rmse']:.2f}, "
                      f"max residual {row['max_residual']:.2f} {cm.target_unit}")
-            plot_measured_vs_predicted(t, y, p, cm.target_unit, title, folder / f"{_safe(label)}_{cm.target}.png")
+            plot_measured_vs_predicted(t, y, p, cm.target_unit, title, folder / f"{names[label]}_{cm.target}.png")
 
 
-def _safe(text):
-    return "".join(c if c.isalnum() or c in "-_." else "_" for c in str(text))
+def _file_names(labels):
+    """A file-name-safe stem per label, distinct ("run 1" and "run_1" would both be "run_1")."""
+    names = {}
+    for label in labels:
+        stem = "".join(c if c.isalnum() or c in "-_." else "_" for c in str(label))
+        name, k = stem, 2
+        while name in names.values():
+            name, k = f"{stem}_{k}", k + 1
+        names[label] = name
+    return names
 
 
 # ----------------------------------------------------------------------------- the twin as a predictor

@@ -346,7 +346,7 @@ class Dataset:
         path = Path(path)
         if nan_policy not in NAN_POLICIES:
             raise TwinInputError(f"nan_policy must be one of {NAN_POLICIES}, got {nan_policy!r}")
-        header, data = _parse_csv(path, path.read_text(encoding="utf-8"))
+        header, data = _parse_csv(path, _read_utf8(path))
         column_map = dict(column_map or {})
         unknown_map = sorted(set(column_map) - set(header))
         if unknown_map:
@@ -445,6 +445,29 @@ def sidecar_path(path: str | Path) -> Path:
     return path.with_name(path.name + ".json")
 
 
+def finite_or_none(value: object) -> object:
+    """``value`` with every float that is NaN or infinite (e.g. a correlation of a constant series) as None,
+    through dicts, lists and tuples: ``json`` would write it as ``NaN``, which is not JSON.
+
+    Parameters
+    ----------
+    value : object
+        A JSON-ready document.
+
+    Returns
+    -------
+    object
+        The same document, its non-finite floats None.
+    """
+    if isinstance(value, dict):
+        return {k: finite_or_none(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [finite_or_none(v) for v in value]
+    if isinstance(value, float | np.floating) and not np.isfinite(value):
+        return None
+    return value
+
+
 def json_default(value: object) -> object:
     """``json.dumps`` fallback for numpy arrays and scalars (as lists and Python numbers) and paths (as text).
 
@@ -468,6 +491,15 @@ def json_default(value: object) -> object:
     if isinstance(value, Path):
         return str(value)
     raise TypeError(f"not JSON serialisable: {value!r}")
+
+
+def _read_utf8(path):
+    """The file's text; one that is not UTF-8 (a spreadsheet's "ANSI" export) is refused by name."""
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise TwinInputError(f"{path}: not UTF-8 text (byte {exc.object[exc.start]:#04x} at offset {exc.start}); "
+                             "save the CSV as UTF-8") from None
 
 
 def _parse_csv(path, text):
