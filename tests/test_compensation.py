@@ -203,6 +203,19 @@ def test_incompatible_model_files_are_refused(tmp_path):
         CompensationModel.load(tmp_path / "junk.json")
 
 
+def test_a_dead_thermometer_the_model_does_not_read_leaves_every_row(tmp_path):
+    a = _record(0)
+    values = np.column_stack([a.time_s, a.values, np.full(len(a), np.nan)])
+    header = "time_s," + ",".join(c.column for c in a.channels) + ",dead_degC"
+    csv = tmp_path / "dead.csv"
+    csv.write_text(header + "\n" + "\n".join(",".join("" if np.isnan(v) else f"{v:.6f}" for v in row)
+                                              for row in values) + "\n")
+    for policy in ("error", "drop", "interpolate"):
+        cm = train([csv], "T1,T2", "Z", model="mlr", nan_policy=policy)
+        assert cm.metadata["training_metrics"]["dead"]["rows"] == len(a)
+    assert evaluate(cm, [csv], nan_policy="drop").rows[0]["rows"] == len(a)
+
+
 def test_cli_train_on_measured_csv_and_evaluate(tmp_path, capsys):
     a, b = _record(0), _record(1)
     # a measured CSV with foreign column names, imported through a column map

@@ -94,6 +94,19 @@ def test_measured_bad_input(tmp_path, text, message):
         Dataset.from_measured_csv(_write(tmp_path, text))
 
 
+def test_the_nan_policy_is_about_the_channels_a_model_reads(tmp_path):
+    """A dead thermometer that nothing reads drops no row and needs no policy; one that is read is refused or
+    dropped as before, and dropping every row is named."""
+    path = _write(tmp_path, "time_s,T01_degC,T02_degC,Z_um\n0,20,,0\n15,21,,1\n30,,,2\n45,23,,3\n")
+    kept = Dataset.from_measured_csv(path, nan_policy="drop", nan_channels=["T01", "Z"])
+    assert len(kept) == 3 and np.isnan(kept["T02"]).all()
+    assert len(Dataset.from_measured_csv(path, nan_channels=["Z"])) == 4   # "error", and nothing read is missing
+    with pytest.raises(TwinInputError, match=r"column 'T01_degC' is NaN/empty at t = 30.0 s .* 1 NaNs in 1 column"):
+        Dataset.from_measured_csv(path, nan_channels=["T01", "Z"])
+    with pytest.raises(TwinInputError, match="every row has a NaN in T02; nan_policy='drop' leaves none"):
+        Dataset.from_measured_csv(path, nan_policy="drop", nan_channels=["T02", "Z"])
+
+
 def test_a_csv_that_is_not_utf8_is_named(tmp_path):
     path = tmp_path / "ansi.csv"
     path.write_bytes("time_s,T01_degC\n0,20\n15,21 °C\n".encode("cp1252"))

@@ -107,7 +107,8 @@ def cmd_study(args: argparse.Namespace) -> None:
 def _add_data_options(p):
     p.add_argument("--column-map", help="JSON file or inline JSON mapping measured CSV columns to <name>_<unit>")
     p.add_argument("--nan-policy", default="error", choices=("error", "interpolate", "drop", "keep"),
-                   help="NaNs in a measured CSV (default: error); keep: missing readings of the thermometers the "
+                   help="NaNs in the channels the model reads from a measured CSV (default: error; NaNs in "
+                   "other columns are kept and harm nothing); keep: missing readings of the thermometers the "
                    "model observes (--observe), left out of its fit and skipped by its filter (anywhere else "
                    "they are refused)")
 

@@ -57,7 +57,7 @@ METRIC_COLUMNS = ("rmse", "nse", "r", "max_residual", "improvement_percent", "un
 # ----------------------------------------------------------------------------- datasets
 def load_dataset(spec: Dataset | Path | str, column_map: dict[str, str] | None = None,
                  nan_policy: Literal["error", "interpolate", "drop", "keep"] = "error", machine: Machine | None = None,
-                 noise: bool = True, label: str | None = None) -> Dataset:
+                 noise: bool = True, label: str | None = None, channels: Sequence[str] | None = None) -> Dataset:
     """A :class:`Dataset` from a path or a scenario name.
 
     ``spec`` may be a :class:`Dataset` (returned as is), a CSV path (read with
@@ -80,6 +80,8 @@ def load_dataset(spec: Dataset | Path | str, column_map: dict[str, str] | None =
         Add the scenario's sensor noise (seeded).
     label : str, optional
         Stored as ``metadata["label"]``, the name the dataset goes by in tables.
+    channels : sequence of str, optional
+        The channels a model reads: ``nan_policy`` is about them (default every channel of a measured CSV).
 
     Returns
     -------
@@ -103,7 +105,8 @@ def load_dataset(spec: Dataset | Path | str, column_map: dict[str, str] | None =
             for k in time_cols:
                 del column_map[k]
             ds = Dataset.from_measured_csv(path, column_map=column_map, nan_policy=nan_policy,
-                                           time_column=time_cols[0] if time_cols else "time_s")
+                                           time_column=time_cols[0] if time_cols else "time_s",
+                                           nan_channels=channels)
     else:
         names = available_scenarios()
         if str(spec) not in names:
@@ -269,8 +272,9 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
     if out is not None:
         check_output_file(out, overwrite, inputs=_input_files(datasets))
     observe = split_names(observe)
-    loaded = joined_when_contiguous([load_dataset(d, column_map, nan_policy, machine) for d in datasets],
-                                    [*split_names(inputs), *observe, target])
+    channels = [*split_names(inputs), *observe, target]
+    loaded = joined_when_contiguous([load_dataset(d, column_map, nan_policy, machine, channels=channels)
+                                     for d in datasets], channels)
     selection = None
     if select is not None:
         if select != "auto":
@@ -357,8 +361,9 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
     _check_reference(reference, history, gap)
     check_output_folder(out_dir, overwrite, inputs=_input_files([model, *datasets]))
     cm = model if isinstance(model, CompensationModel) else CompensationModel.load(model)
-    loaded = [load_dataset(d, column_map, nan_policy, machine) for d in datasets]
-    past = load_dataset(history, column_map, nan_policy, machine) if history is not None else None
+    channels = [*cm.inputs, *cm.preprocessing.get("observed", []), cm.target]
+    loaded = [load_dataset(d, column_map, nan_policy, machine, channels=channels) for d in datasets]
+    past = load_dataset(history, column_map, nan_policy, machine, channels=channels) if history is not None else None
     for ds in loaded + ([past] if past is not None else []):
         cm.check(ds)
         cm.check_readings(ds)

@@ -17,6 +17,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
@@ -313,7 +314,8 @@ class Dataset:
     @classmethod
     def from_measured_csv(cls, path: str | Path, column_map: dict[str, str] | None = None,
                           time_column: str = "time_s", nan_policy: str = "error",
-                          channel_kinds: dict[str, str] | None = None) -> Dataset:
+                          channel_kinds: dict[str, str] | None = None,
+                          nan_channels: Sequence[str] | None = None) -> Dataset:
         """Import measured data from a CSV, validating it.
 
         Parameters
@@ -332,6 +334,9 @@ class Dataset:
             ``keep`` (leave them; the caller masks them, as the gap diagnosis does).
         channel_kinds : dict of str to str, optional
             Channel name → kind, overriding the unit-based default.
+        nan_channels : sequence of str, optional
+            The channels ``nan_policy`` is about (those a model reads); default every channel. NaNs in the
+            others are kept (a dead thermometer that nothing reads drops no row).
 
         Returns
         -------
@@ -365,8 +370,9 @@ class Dataset:
         report = {"file": str(path), "rows": int(len(time_s)), "nan_policy": nan_policy}
         nan_counts = {c.name: int(np.isnan(values[:, k]).sum()) for k, c in enumerate(channels)}
         report["nan_counts"] = {k: v for k, v in nan_counts.items() if v}
-        if report["nan_counts"]:
-            time_s, values = _apply_nan_policy(path, time_s, values, channels, nan_policy, report)
+        about = [k for k, c in enumerate(channels) if nan_channels is None or c.name in set(nan_channels)]
+        if any(channels[k].name in report["nan_counts"] for k in about):
+            time_s, values = _apply_nan_policy(path, time_s, values, channels, nan_policy, report, about)
         report.update(_sampling_report(time_s))
         return cls(time_s, values, channels, {"source": str(path), "kind": "measured", "import": report})
 
@@ -392,22 +398,26 @@ def _measured_channels(path, header, t_index, column_map, channel_kinds):
     return channels, cols
 
 
-def _apply_nan_policy(path, time_s, values, channels, nan_policy, report):
-    """(time_s, values) after the NaN policy (``values`` is changed in place by ``interpolate``); notes it in ``report``."""
+def _apply_nan_policy(path, time_s, values, channels, nan_policy, report, about):
+    """(time_s, values) after the NaN policy on the columns ``about`` (``values`` is changed in place by
+    ``interpolate``); notes it in ``report``."""
+    counts = {channels[k].name: report["nan_counts"].get(channels[k].name, 0) for k in about}
     if nan_policy == "error":
-        first = next(iter(report["nan_counts"]))
-        k = [c.name for c in channels].index(first)
+        k = next(k for k in about if counts[channels[k].name])
         row = int(np.flatnonzero(np.isnan(values[:, k]))[0])
         raise TwinInputError(
             f"{path}: column {channels[k].column!r} is NaN/empty at t = {time_s[row]} s (data row "
-            f"{row + 1}); {sum(report['nan_counts'].values())} NaNs in {len(report['nan_counts'])} "
+            f"{row + 1}); {sum(counts.values())} NaNs in {sum(v > 0 for v in counts.values())} "
             "column(s); choose nan_policy='interpolate' or 'drop'")
     if nan_policy == "drop":
-        keep = ~np.isnan(values).any(axis=1)
+        keep = ~np.isnan(values[:, about]).any(axis=1)
+        if not keep.any():
+            raise TwinInputError(f"{path}: every row has a NaN in {', '.join(c for c, n in counts.items() if n)}; "
+                                 "nan_policy='drop' leaves none")
         report["dropped_rows"] = int((~keep).sum())
         return time_s[keep], values[keep]
     if nan_policy == "interpolate":
-        for k in range(values.shape[1]):
+        for k in about:
             bad = np.isnan(values[:, k])
             if bad.all():
                 raise TwinInputError(f"{path}: column {channels[k].column!r} holds no value at all")
