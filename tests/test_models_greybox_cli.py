@@ -417,6 +417,10 @@ def test_records_in_time_order_continue_one_another(records):
     np.testing.assert_allclose(np.r_[chained["first"][2], chained["second"][2]], whole, rtol=1e-12, atol=1e-9)
     with pytest.raises(TwinInputError, match=r"second: time_s starts at .* 100 rows of spindle, air are missing"):
         evaluate(cm, [second, first], reference="train", history=training)
+    # files whose clocks each restart at 0 follow one another as they are given
+    restarted = [_rows(part, slice(None), part.metadata["scenario"], shift=-part.time_s[0]) for part in (first, second)]
+    chained = evaluate(cm, restarted, reference="train", history=training).predictions
+    np.testing.assert_allclose(np.r_[chained["first"][2], chained["second"][2]], whole, rtol=1e-12, atol=1e-9)
     # after a bridged gap the chain holds the bridge: the third record runs on from it
     late, last = _rows(later, slice(130, 200), "late"), _rows(later, slice(200, None), "last")
     bridged = evaluate(cm, [first, late, last], reference="train", history=training, gap="interpolate").predictions

@@ -375,6 +375,10 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
         if past is not None and cm.is_time_series and ds.time_s[0] > past.time_s[-1]:
             # a later record continues this one (and the bridge, where --gap interpolate made one)
             past = continued_record(past, ds, [*cm.inputs, cm.target], cm.sampling_interval_s)
+        elif past is not None and cm.is_time_series:   # its clock restarts: it followed directly, on the history's
+            shifted = Dataset(ds.time_s - ds.time_s[0] + past.time_s[-1] + cm.sampling_interval_s, ds.values,
+                              ds.channels, ds.metadata)
+            past = continued_record(past, shifted, [*cm.inputs, cm.target])
     out_dir = Path(out_dir) if out_dir is not None else None
     result = Evaluation(rows, out_dir, predictions)
     if out_dir is not None:
