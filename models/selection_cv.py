@@ -32,8 +32,8 @@ shuffled rows or on a tail of the same regime:
   Breiman et al. 1984, on paired folds).  A higher order that wins by less
   than the folds' scatter is fitting slow modes the record cannot pin down:
   on the FE records of ``bench/selection_synthetic.py`` the simpler order
-  did better on a continuation with new duty (13 of 14 changed choices) and
-  worse on a later block at a speed next to those trained (34 of 35).
+  did better on a continuation with new duty (17 of 18 changed choices) and
+  worse on a later block at a speed next to those trained (27 of 30).
 
 Why the geometric mean: the regimes differ in how large their drift is, so
 an arithmetic mean of RMSEs is ruled by the regime with the largest drift
@@ -41,9 +41,9 @@ an arithmetic mean of RMSEs is ruled by the regime with the largest drift
 weighs a candidate's *relative* error on every regime alike.  Chosen on
 full-FE records with a known continuation, before it was judged on others
 (``bench/selection_synthetic.py``, ``docs/models.md``): on the last held-out
-cases ("test 4", judged once with distinct folds) its median rank agreement
-was 0.80 with a later block and 0.69 with the continuation, against 0.67 and
-0.65 for the arithmetic mean.
+cases ("test 5", judged once) its median rank agreement was 0.85 with a
+later block and 0.74 with the continuation, against 0.82 and 0.67 for the
+arithmetic mean.
 
 How a fold is fitted depends on the kind of model (:func:`model_kind`):
 
