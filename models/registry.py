@@ -50,8 +50,9 @@ class ModelTraits:
     ----------
     time_series : bool
         A grey time-series model: it runs over the record's history; ``predict`` returns ``y_reference_`` +
-        the predicted change (unless ``predicts_level``). Without ``takes_time`` its coefficients are per sample, so it trains on one
-        contiguous, evenly sampled record; with it, on several, each from rest (``record_starts`` of its fit).
+        the predicted change (unless ``predicts_level``). Without ``takes_time`` its coefficients are per
+        sample, so it trains on one contiguous, evenly sampled record; with it, on several, each from rest
+        (``record_starts`` of its fit).
     takes_time : bool
         The class has a ``sampling_interval`` parameter (s); set to None, column 0 of ``X`` is the time
         (s) and any sampling (jitter, missing rows) is taken as it is.
