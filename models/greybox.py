@@ -272,7 +272,7 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         edges = [0, *starts.astype(int).tolist(), n_rows]
         return list(pairwise(edges))
 
-    def _check_x(self, X, inputs, allow_nan_in=(), records=None):
+    def _check_x(self, X, inputs, records, allow_nan_in=()):
         """``(time s, speed rpm)`` with finite time/speed/inputs, time strictly increasing in each record,
         speed >= 0."""
         time_col, speed_col, _ = self._layout()
@@ -292,7 +292,7 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         else:
             time = X[:, time_col]
             steps = np.diff(time)
-            restarts = [start - 1 for start, _ in (records or [(0, len(X))])[1:]]   # a record's clock restarts
+            restarts = [start - 1 for start, _ in records[1:]]   # a record's clock restarts
             steps[restarts] = 1.0
             if np.any(steps <= 0):
                 k = int(np.argmax(steps <= 0))
@@ -305,25 +305,24 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
                              f"{speed[k]:g}.")
         return time, speed
 
-    def _inputs(self, X, speed, inputs, exponent, records=None):
+    def _inputs(self, X, speed, inputs, exponent, records):
         """``u = [P, ΔT…]`` (n, 1 + q): heat from the speed, temperatures referenced to their record's first
         row."""
         heat = (speed / self.speed_reference) ** exponent
         return np.column_stack([heat, self._since_start(X[:, list(inputs)], records)])
 
     @staticmethod
-    def _since_start(values, records=None):
+    def _since_start(values, records):
         """``values`` (n, q) less their record's first row: the change since each record's start."""
-        records = records or [(0, len(values))]
         first = np.repeat([start for start, _ in records], [stop - start for start, stop in records])
         return values - values[first]
 
-    def _observed_since_start(self, X, observed, records=None):
+    def _observed_since_start(self, X, observed, records):
         """The observed thermometers as changes since each record's first row (K), which must be read: at rest
         there the network's outputs are its inputs' (an absolute offset shared by records that start at other
         temperatures would bias the fit and the observer)."""
         values = X[:, list(observed)]
-        for start, _ in records or [(0, len(X))]:
+        for start, _ in records:
             missing = np.flatnonzero(~np.isfinite(values[start]))
             if missing.size:
                 raise ValueError(f"GreyBoxRegressor: observed column {observed[missing[0]]} is "
@@ -333,11 +332,11 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
 
     # ------------------------------------------------------------ simulation
     @staticmethod
-    def _states(time, U, lam, records=None):
+    def _states(time, U, lam, records):
         """Lag states x_ij (n, n_poles, m) with ZOH inputs, each record starting in equilibrium
         x_ij(t₀) = u_j(t₀)."""
         S = np.empty((len(U), len(lam), U.shape[1]))
-        for start, stop in records or [(0, len(U))]:
+        for start, stop in records:
             t, u = time[start:stop], U[start:stop]
             steps = np.diff(t)
             uniform = np.ptp(steps) <= _UNIFORM_STEP * steps[0]
@@ -447,7 +446,7 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         require_parameters(int(np.count_nonzero(w)), n_parameters, "GreyBoxRegressor",
                            hint=" Use fewer poles or temperature inputs.")
         records = self._records(len(X), record_starts)
-        time, speed = self._check_x(X, inputs, allow_nan_in=observed, records=records)
+        time, speed = self._check_x(X, inputs, records, allow_nan_in=observed)
         outputs = np.column_stack([y, self._observed_since_start(X, observed, records)])
         present = np.isfinite(outputs)   # an observed thermometer may miss readings: they weigh 0
         outputs = np.where(present, outputs, 0.0)
@@ -507,8 +506,9 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         X = check_array(X, dtype=np.float64, ensure_all_finite=False, ensure_min_samples=2)
         check_n_features(self, X)
         inputs, observed = self._columns(X.shape[1])
-        time, speed = self._check_x(X, inputs, allow_nan_in=observed if allow_nan_observed else ())
-        return X, time, observed, self._inputs(X, speed, inputs, self.exponent_)
+        whole = self._records(len(X), ())   # a record to predict is one, from rest at its first row
+        time, speed = self._check_x(X, inputs, whole, allow_nan_in=observed if allow_nan_observed else ())
+        return X, time, observed, self._inputs(X, speed, inputs, self.exponent_, whole), whole
 
     def predict_outputs(self, X: ArrayLike) -> np.ndarray:
         """Simulated outputs (n, 1 + n_observed): y, then the observed thermometers' changes since the first row (K).
@@ -523,8 +523,8 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         outputs : ndarray, shape (n_samples, 1 + n_observed)
             y (its unit) and the simulated changes of the observed thermometers since the first row, K.
         """
-        _, time, _, U = self._fitted_inputs(X, allow_nan_observed=True)
-        S = self._states(time, U, -self.poles_)
+        _, time, _, U, whole = self._fitted_inputs(X, allow_nan_observed=True)
+        S = self._states(time, U, -self.poles_, whole)
         return (self.offset_ + np.einsum("kij,nij->nk", self.gains_, S) + U[:, 1:] @ self.feedthrough_.T)
 
     def predict(self, X: ArrayLike) -> np.ndarray:
@@ -601,8 +601,8 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         y : ndarray, shape (n_samples,)
             The filtered estimate of y (its unit, e.g. µm).
         """
-        X, time, observed, U = self._fitted_inputs(X, allow_nan_observed=True)
-        readings = self._observed_since_start(X, observed)
+        X, time, observed, U, whole = self._fitted_inputs(X, allow_nan_observed=True)
+        readings = self._observed_since_start(X, observed, whole)
         A, B, C, D = self.state_space()
         _, n_poles, m = self.gains_.shape
         lam = np.repeat(-self.poles_, m)

@@ -196,7 +196,7 @@ def test_the_lag_states_at_uneven_times_are_the_zoh_recurrence(time_constant):
     for k, step in enumerate(steps):
         decay = np.exp(-rate * step)
         expected[k + 1] = decay * expected[k] + (1.0 - decay) * U[k]
-    states = GreyBoxRegressor._states(times, U, np.array([rate]))[:, 0, :]
+    states = GreyBoxRegressor._states(times, U, np.array([rate]), [(0, len(times))])[:, 0, :]
     np.testing.assert_allclose(states, expected, rtol=0, atol=1e-12 * np.abs(U).max())
 
 
