@@ -16,7 +16,7 @@
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Literal
 
 import numpy as np
@@ -198,15 +198,19 @@ def _first_input_problem(datasets, first, required, zero_reference):
     return None
 
 
-def stability_problem(cm: CompensationModel, datasets: Iterable[Dataset]) -> str | None:
+def stability_problem(cm: CompensationModel, datasets: Sequence[Dataset],
+                      predictions: Sequence[np.ndarray] | None = None) -> str | None:
     """Why the fitted model is unstable, or None: a < 0, or a diverging prediction on the training data.
 
     Parameters
     ----------
     cm : CompensationModel
         The fitted model.
-    datasets : iterable of Dataset
+    datasets : sequence of Dataset
         Its training records.
+    predictions : sequence of ndarray, optional
+        ``cm.predict`` of each record, where the caller has made them already (a grey-box observer runs a
+        Kalman filter over every row).
 
     Returns
     -------
@@ -219,7 +223,9 @@ def stability_problem(cm: CompensationModel, datasets: Iterable[Dataset]) -> str
                 "grows without bound")
     # against the largest change of any training record: a quiet record (a day at rest) changes little, and
     # a model that is right there by the others' scale is no divergence
-    runs = [(ds, cm.target_values(ds), cm.predict(ds)) for ds in datasets]
+    if predictions is None:
+        predictions = [cm.predict(ds) for ds in datasets]
+    runs = [(ds, cm.target_values(ds), predicted) for ds, predicted in zip(datasets, predictions)]
     scale = max(max((float(np.max(np.abs(measured))) for _, measured, _ in runs), default=0.0), 1e-12)
     for ds, _, predicted in runs:
         if not np.all(np.isfinite(predicted)) or np.max(np.abs(predicted)) > DIVERGENCE_FACTOR * scale:

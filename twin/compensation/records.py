@@ -69,13 +69,31 @@ def distinct_labels(datasets: Sequence[Dataset]) -> list[str]:
     -------
     list of str
     """
-    seen: dict[str, int] = {}
-    labels = []
-    for ds in datasets:
-        label = dataset_label(ds)
-        seen[label] = seen.get(label, 0) + 1
-        labels.append(label if seen[label] == 1 else f"{label}_{seen[label]}")
-    return labels
+    return distinct([dataset_label(ds) for ds in datasets])
+
+
+def distinct(names: Sequence[str]) -> list[str]:
+    """``names`` with a repeated one followed by ``_2``, ``_3`` … until it is unlike every name before it.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Names in order.
+
+    Returns
+    -------
+    list of str
+        As many, all different.
+    """
+    taken: set[str] = set()
+    out = []
+    for name in names:
+        unique, k = name, 2
+        while unique in taken:
+            unique, k = f"{name}_{k}", k + 1
+        taken.add(unique)
+        out.append(unique)
+    return out
 
 
 def evenly_sampled(dataset: Dataset) -> bool:

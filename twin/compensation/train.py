@@ -42,6 +42,7 @@ from .protocol import auto_select, continued_prediction, stability_problem
 from .records import (
     continued_record,
     dataset_label,
+    distinct,
     distinct_labels,
     joined_when_contiguous,
     note_long_steps,
@@ -292,9 +293,10 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
                                     "ranking": selection.ranking,
                                     "geometric_mean_rmse": selection.score, "mean_rmse": selection.mean_rmse,
                                     "folds": selection.folds, "fold_rmse": selection.fold_rmse}
-    cm.metadata["training_metrics"] = {label: score(cm.target_values(ds), cm.predict(ds))
-                                       for ds, label in zip(loaded, distinct_labels(loaded))}
-    problem = stability_problem(cm, loaded)
+    predictions = [cm.predict(ds) for ds in loaded]
+    cm.metadata["training_metrics"] = {label: score(cm.target_values(ds), predicted)
+                                       for ds, label, predicted in zip(loaded, distinct_labels(loaded), predictions)}
+    problem = stability_problem(cm, loaded, predictions)
     if problem is not None:
         if not allow_unstable:
             raise TwinInputError(f"UNSTABLE MODEL REFUSED (not saved): {problem}; pass --allow-unstable to save it "
@@ -361,7 +363,7 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
     _check_reference(reference, history, gap)
     check_output_folder(out_dir, overwrite, inputs=_input_files([model, *datasets]))
     cm = model if isinstance(model, CompensationModel) else CompensationModel.load(model)
-    channels = [*cm.inputs, *cm.preprocessing.get("observed", []), cm.target]
+    channels = [*cm.inputs, cm.target]   # the observed thermometers are among the inputs
     loaded = [load_dataset(d, column_map, nan_policy, machine, channels=channels) for d in datasets]
     past = load_dataset(history, column_map, nan_policy, machine, channels=channels) if history is not None else None
     for ds in loaded + ([past] if past is not None else []):
@@ -374,11 +376,11 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
         predictions[label] = (ds.time_s, y, p)
         if past is not None and cm.is_time_series and ds.time_s[0] > past.time_s[-1]:
             # a later record continues this one (and the bridge, where --gap interpolate made one)
-            past = continued_record(past, ds, [*cm.inputs, cm.target], cm.sampling_interval_s)
+            past = continued_record(past, ds, channels, cm.sampling_interval_s)
         elif past is not None and cm.is_time_series:   # its clock restarts: it followed directly, on the history's
             shifted = Dataset(ds.time_s - ds.time_s[0] + past.time_s[-1] + cm.sampling_interval_s, ds.values,
                               ds.channels, ds.metadata)
-            past = continued_record(past, shifted, [*cm.inputs, cm.target])
+            past = continued_record(past, shifted, channels)
     out_dir = Path(out_dir) if out_dir is not None else None
     result = Evaluation(rows, out_dir, predictions)
     if out_dir is not None:
@@ -427,24 +429,14 @@ def _write_evaluation(cm, result, folder, plots):
                                                         "inputs": cm.inputs, "target": cm.target,
                                                         "rows": finite_or_none(result.rows)}, indent=1))
     if plots:
-        names = _file_names(result.predictions)
-        for label, (t, y, p) in result.predictions.items():
+        # file names of distinct labels may still meet ("run 1" and "run_1" are both "run_1")
+        stems = distinct(["".join(c if c.isalnum() or c in "-_." else "_" for c in label)
+                          for label in result.predictions])
+        for (label, (t, y, p)), stem in zip(result.predictions.items(), stems):
             row = next(r for r in result.rows if r["dataset"] == label)
             title = (f"{cm.target} on {label}: {cm.model_name}, RMSE {row['rmse']:.2f}, "
                      f"max residual {row['max_residual']:.2f} {cm.target_unit}")
-            plot_measured_vs_predicted(t, y, p, cm.target_unit, title, folder / f"{names[label]}_{cm.target}.png")
-
-
-def _file_names(labels):
-    """A file-name-safe stem per label, distinct ("run 1" and "run_1" would both be "run_1")."""
-    names = {}
-    for label in labels:
-        stem = "".join(c if c.isalnum() or c in "-_." else "_" for c in str(label))
-        name, k = stem, 2
-        while name in names.values():
-            name, k = f"{stem}_{k}", k + 1
-        names[label] = name
-    return names
+            plot_measured_vs_predicted(t, y, p, cm.target_unit, title, folder / f"{stem}_{cm.target}.png")
 
 
 # ----------------------------------------------------------------------------- the twin as a predictor
