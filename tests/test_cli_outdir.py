@@ -239,3 +239,44 @@ def test_studies_refuse_a_folder_holding_their_machine_file(tmp_path, monkeypatc
             study(machine=str(machine), out_dir=tmp_path, overwrite=True)
     monkeypatch.chdir(tmp_path)                      # a machine *name* is no input file, even here
     assert outdir.check_output_folder(".", overwrite=True, inputs=("vmc_ram", None)) == tmp_path.resolve()
+
+
+@pytest.fixture
+def disk_events(monkeypatch):
+    """``[("fsync", path) | ("replace", destination)]`` in the order they happen (Linux: fd → path by /proc)."""
+    if not os.path.isdir("/proc/self/fd"):
+        pytest.skip("needs /proc to name a file descriptor")
+    events, real_fsync, real_replace = [], os.fsync, os.replace
+
+    def fsync(descriptor):
+        events.append(("fsync", os.readlink(f"/proc/self/fd/{descriptor}")))
+        return real_fsync(descriptor)
+
+    def replace(source, destination):
+        events.append(("replace", str(destination)))
+        return real_replace(source, destination)
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    monkeypatch.setattr(os, "replace", replace)
+    return events
+
+
+def test_the_marker_is_written_only_after_every_file_is_on_disk(tmp_path, disk_events):
+    out = tmp_path / "res"
+    with atomic_directory(out) as staging:
+        (staging / "a.txt").write_text("a")
+        (staging / "fields").mkdir()
+        (staging / "fields" / "b.txt").write_text("b")
+    marker_moved = disk_events.index(("replace", str(out / MARKER)))
+    synced_before = {path for kind, path in disk_events[:marker_moved] if kind == "fsync"}
+    assert {str(staging / "a.txt"), str(staging / "fields" / "b.txt"), str(out), str(out / "fields")} <= synced_before
+    assert ("fsync", str(out)) in disk_events[marker_moved:]       # the marker's own rename is durable too
+
+
+def test_an_atomic_text_file_is_on_disk_before_its_name_says_so(tmp_path, disk_events):
+    from twin.core.files import write_text_atomic
+
+    path = write_text_atomic(tmp_path / "model.json", "{}")
+    assert disk_events == [("fsync", str(tmp_path / ".model.json.partial")), ("replace", str(path)),
+                           ("fsync", str(tmp_path))]
+    assert path.read_text() == "{}" and not (tmp_path / ".model.json.partial").exists()

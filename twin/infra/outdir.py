@@ -34,6 +34,7 @@ from contextlib import contextmanager
 from datetime import datetime, timezone
 from pathlib import Path, PurePosixPath
 
+from ..core.files import sync_file, sync_folder, write_text_atomic
 from ..errors import TwinInputError
 
 MARKER = ".thermal-twin-output.json"
@@ -170,9 +171,7 @@ def _owned_files(folder):
 
 
 def _write_json(path, document):
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(document, indent=1) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
+    write_text_atomic(path, json.dumps(document, indent=1) + "\n")
 
 
 def _staged_files(staging):
@@ -231,9 +230,12 @@ def _commit(staging, out, command):
     for rel in sorted(owned - set(files)):
         _remove_file(out, rel)
     for rel in files:
+        sync_file(staging / rel)    # the marker below must never list a file whose content is not yet on disk
         target = out / rel
         target.parent.mkdir(parents=True, exist_ok=True)
         os.replace(staging / rel, target)
+    for folder in {(out / rel).parent for rel in files}:
+        sync_folder(folder)
     written = datetime.now(timezone.utc).isoformat(timespec="seconds")
     _write_json(out / MARKER, {**head, "written_utc": written, "files": files})   # the commit point
     (out / JOURNAL).unlink()
