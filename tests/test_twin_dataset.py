@@ -1,5 +1,6 @@
 """Dataset contract: exact round trip, atomic sidecar, measured-data import and its validation."""
 import json
+import re
 
 import numpy as np
 import pytest
@@ -92,6 +93,24 @@ def test_measured_nan_policies(tmp_path):
 def test_measured_bad_input(tmp_path, text, message):
     with pytest.raises(TwinInputError, match=message):
         Dataset.from_measured_csv(_write(tmp_path, text))
+
+
+def test_a_date_time_stamp_is_named_with_a_conversion_that_works(tmp_path):
+    """A logger's date-time column is refused with a pandas line that makes the seconds the file needs."""
+    import pandas as pd
+
+    path = _write(tmp_path, "stamp,T01_degC\n2026-11-23 23:59:50,20\n2026-11-24 00:00:05,21\n")
+    with pytest.raises(TwinInputError, match=r"'stamp', data row 1: '2026-11-23 23:59:50' is not a number but "
+                                             r"a date-time; the time column is in seconds") as refused:
+        Dataset.from_measured_csv(path, time_column="stamp")
+    conversion = re.search(r"with pandas: (.*?) \(files", str(refused.value)).group(1)
+    frame = pd.read_csv(path)
+    exec(conversion, {"pd": pd, "f": frame})  # noqa: S102 - the message's own line is what is checked
+    frame.drop(columns="stamp").to_csv(path, index=False)
+    assert list(Dataset.from_measured_csv(path).time_s) == [0.0, 15.0]
+    with pytest.raises(TwinInputError) as not_a_date:
+        Dataset.from_measured_csv(_write(tmp_path, "time_s,T01_degC\n0,20\n1,abc\n"))
+    assert "date-time" not in str(not_a_date.value)
 
 
 def test_the_nan_policy_is_about_the_channels_a_model_reads(tmp_path):

@@ -533,13 +533,26 @@ def _parse_csv(path, text):
         if bad.any():
             i = int(np.flatnonzero(bad.to_numpy())[0])
             raise TwinInputError(f"{path}: column {header[j]!r}, data row {i + 1}: "
-                                 f"{frame[column].iloc[i]!r} is not a number")
+                                 f"{frame[column].iloc[i]!r} is not a number{_date_time_hint(frame[column].iloc[i], header[j])}")
         frame[column] = numeric
     data = frame.to_numpy(dtype=float)
     if np.isinf(data).any():
         i, j = np.argwhere(np.isinf(data))[0]
         raise TwinInputError(f"{path}: column {header[j]!r}, data row {i + 1} is infinite")
     return header, data
+
+
+def _date_time_hint(cell, column):
+    """What to do with a logger's date-time stamp where seconds are wanted; empty for any other text."""
+    import pandas as pd
+
+    try:
+        pd.Timestamp(str(cell).strip())
+    except ValueError:
+        return ""
+    return (" but a date-time; the time column is in seconds. Convert it first, e.g. with pandas: "
+            f"t = pd.to_datetime(f[{column!r}]); f['time_s'] = (t - t.iloc[0]).dt.total_seconds() "
+            "(files of one record: subtract the first file's first stamp from all of them, so they still join)")
 
 
 def _check_time(time_s, source, column="time_s"):
