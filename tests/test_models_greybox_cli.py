@@ -593,3 +593,44 @@ def test_select_auto_on_days_apart_blocks_each_and_leaves_out_one_record_models(
     assert len(selection["folds"]) == 4 + 2   # 1 + 2 + 1 regime blocks, none across two days
     assert "The 3 records each start at rest and have blocks of their own; none spans two." in out
     assert "Left out: gm0n, gm1n, gmc (coefficients per sample train on one record; these are 3)." in out
+
+
+def _stamped_csv(path, ds, start_utc):
+    """``ds`` as a logger's CSV: local stamps of Central Europe with their UTC offset (+02:00 in summer time,
+    +01:00 after 2026-10-25 01:00 UTC), written here with ``datetime``, not by the twin."""
+    from datetime import datetime, timedelta, timezone
+
+    summer_ends = datetime(2026, 10, 25, 1, tzinfo=timezone.utc)
+    lines = ["stamp,spindle_rpm,air_degC,Z_um"]
+    for t, row in zip(ds.time_s, ds.matrix(ds.names)):
+        utc = start_utc + timedelta(seconds=float(t))
+        local = utc.astimezone(timezone(timedelta(hours=2 if utc < summer_ends else 1)))
+        lines.append(",".join([local.isoformat(), *map(repr, map(float, row))]))
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_date_time_files_of_one_record_train_and_continue_as_seconds_do(records, tmp_path):
+    """A record logged in two files with local stamps that cross the end of summer time (an hour repeated on
+    the wall clock) trains as the same record in s does, and its continuation evaluates the same."""
+    from datetime import datetime, timezone
+
+    training, later, _ = records
+    start = datetime(2026, 10, 24, 18, tzinfo=timezone.utc)               # 20:00 local, summer time
+    first = _stamped_csv(tmp_path / "day1.csv", _rows(training, slice(0, 300), "day 1"), start)
+    second = _stamped_csv(tmp_path / "day2.csv", _rows(training, slice(300, None), "day 2"), start)
+    continuation = _stamped_csv(tmp_path / "later.csv", later, start)
+    history = _stamped_csv(tmp_path / "training.csv", training, start)
+    stamps = {"stamp": "time_s"}
+    assert "+02:00" in first.read_text() and "+01:00" in second.read_text()
+    from_stamps = train([first, second], "spindle,air", "Z", model="greybox", column_map=stamps)
+    in_seconds = train([training], "spindle,air", "Z", model="greybox")
+    np.testing.assert_allclose(from_stamps.predict(training), in_seconds.predict(training), rtol=1e-9, atol=1e-9)
+    assert [t["label"] for t in from_stamps.training] == ["day1 + day2"]
+    stamped = evaluate(from_stamps, [continuation], reference="train", history=history, column_map=stamps)
+    plain = evaluate(in_seconds, [later], reference="train", history=training)
+    np.testing.assert_allclose(stamped.rows[0]["rmse"], plain.rows[0]["rmse"], rtol=1e-6)
+    with pytest.raises(TwinInputError, match="day1.csv has date-time stamps with a UTC offset and .*day2.csv "
+                                             "without one"):
+        second.write_text(re.sub(r"\+0[12]:00,", ",", second.read_text()))
+        train([first, second], "spindle,air", "Z", model="greybox", column_map=stamps)

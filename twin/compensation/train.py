@@ -30,6 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 import fea
 from models import metrics
 
+from ..core.clock import on_one_clock
 from ..core.dataset import Dataset, finite_or_none, sidecar_path
 from ..core.scenario import available_scenarios
 from ..core.simulate import simulate
@@ -274,8 +275,8 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
         check_output_file(out, overwrite, inputs=_input_files(datasets))
     observe = split_names(observe)
     channels = [*split_names(inputs), *observe, target]
-    loaded = joined_when_contiguous([load_dataset(d, column_map, nan_policy, machine, channels=channels)
-                                     for d in datasets], channels)
+    loaded = joined_when_contiguous(on_one_clock([load_dataset(d, column_map, nan_policy, machine, channels=channels)
+                                                  for d in datasets]), channels)
     selection = None
     if select is not None:
         if select != "auto":
@@ -364,8 +365,9 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
     check_output_folder(out_dir, overwrite, inputs=_input_files([model, *datasets]))
     cm = model if isinstance(model, CompensationModel) else CompensationModel.load(model)
     channels = [*cm.inputs, cm.target]   # the observed thermometers are among the inputs
-    loaded = [load_dataset(d, column_map, nan_policy, machine, channels=channels) for d in datasets]
-    past = load_dataset(history, column_map, nan_policy, machine, channels=channels) if history is not None else None
+    loaded = on_one_clock([load_dataset(d, column_map, nan_policy, machine, channels=channels)
+                           for d in [*datasets, *([] if history is None else [history])]])
+    past = None if history is None else loaded.pop()
     for ds in loaded + ([past] if past is not None else []):
         cm.check(ds)
         cm.check_readings(ds)

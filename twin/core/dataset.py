@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import TwinInputError
+from .clock import seconds_since_first_stamp, stamp
 from .files import write_text_atomic
 
 FORMAT = "thermal-twin-dataset"
@@ -305,7 +306,7 @@ class Dataset:
                                  "incompletely written)")
         channels = [ChannelInfo(c["name"], c["unit"], c["kind"], c.get("label", ""),
                                 tuple(c["position"]) if c.get("position") else None) for c in meta["channels"]]
-        header, data = _parse_csv(path, text)
+        header, data, _ = _parse_csv(path, text)
         expected = ["time_s"] + [c.column for c in channels]
         if header != expected:
             raise TwinInputError(f"{path}: columns {header} do not match the sidecar's {expected}")
@@ -327,7 +328,9 @@ class Dataset:
             unmapped columns must already be named ``<name>_<unit>`` with a
             unit from :data:`UNITS`.
         time_column : str
-            Name of the time column, in s.
+            Name of the time column: s, or ISO 8601 date-times (``2026-11-23 14:05:00``, with or without a
+            UTC offset), which become s since the first stamp, kept as ``metadata["import"]["time_origin"]``
+            (see :mod:`twin.core.clock`).
         nan_policy : str
             ``error`` (default), ``interpolate`` (linear in time, per channel;
             leading/trailing NaNs are held), ``drop`` (rows with any NaN) or
@@ -351,7 +354,7 @@ class Dataset:
         path = Path(path)
         if nan_policy not in NAN_POLICIES:
             raise TwinInputError(f"nan_policy must be one of {NAN_POLICIES}, got {nan_policy!r}")
-        header, data = _parse_csv(path, _read_utf8(path))
+        header, data, origin = _parse_csv(path, _read_utf8(path), time_column)
         column_map = dict(column_map or {})
         unknown_map = sorted(set(column_map) - set(header))
         if unknown_map:
@@ -366,8 +369,10 @@ class Dataset:
         if np.isnan(time_s).any():
             row = int(np.flatnonzero(np.isnan(time_s))[0])
             raise TwinInputError(f"{path}: {time_column} is empty or NaN at data row {row + 1}")
-        _check_time(time_s, str(path), time_column)
+        _check_time(time_s, str(path), time_column, origin)
         report = {"file": str(path), "rows": int(len(time_s)), "nan_policy": nan_policy}
+        if origin:
+            report["time_origin"] = origin
         nan_counts = {c.name: int(np.isnan(values[:, k]).sum()) for k, c in enumerate(channels)}
         report["nan_counts"] = {k: v for k, v in nan_counts.items() if v}
         about = [k for k, c in enumerate(channels) if nan_channels is None or c.name in set(nan_channels)]
@@ -512,8 +517,12 @@ def _read_utf8(path):
                              "save the CSV as UTF-8") from None
 
 
-def _parse_csv(path, text):
-    """Header and float matrix of a CSV; empty cells and NaN/NA become NaN."""
+def _parse_csv(path, text, time_column=None):
+    """Header, float matrix and time origin of a CSV; empty cells and NaN/NA become NaN.
+
+    A ``time_column`` of ISO 8601 date-times becomes s since its first stamp, the origin returned
+    (:mod:`twin.core.clock`); it is ``""`` when the time column is in s.
+    """
     import pandas as pd
 
     # pandas ≥ 3 parses floats exactly by default; older versions need round_trip.
@@ -527,39 +536,36 @@ def _parse_csv(path, text):
     header = [str(h).strip() for h in frame.columns]
     if len(frame) == 0:
         raise TwinInputError(f"{path}: the file has a header but no data rows")
+    origin = ""
     for j, column in enumerate(frame.columns):
         numeric = pd.to_numeric(frame[column], errors="coerce")
         bad = numeric.isna() & frame[column].notna()
-        if bad.any():
+        given = frame[column].dropna()
+        if header[j] == time_column and len(given) and bad[given.index[0]]:   # the first stamp is no number
+            numeric, origin = seconds_since_first_stamp(path, header[j], frame[column].astype(object))
+        elif bad.any():
             i = int(np.flatnonzero(bad.to_numpy())[0])
             raise TwinInputError(f"{path}: column {header[j]!r}, data row {i + 1}: "
-                                 f"{frame[column].iloc[i]!r} is not a number{_date_time_hint(frame[column].iloc[i], header[j])}")
+                                 f"{frame[column].iloc[i]!r} is not a number")
         frame[column] = numeric
     data = frame.to_numpy(dtype=float)
     if np.isinf(data).any():
         i, j = np.argwhere(np.isinf(data))[0]
         raise TwinInputError(f"{path}: column {header[j]!r}, data row {i + 1} is infinite")
-    return header, data
+    return header, data, origin
 
 
-def _date_time_hint(cell, column):
-    """What to do with a logger's date-time stamp where seconds are wanted; empty for any other text."""
-    import pandas as pd
-
-    try:
-        pd.Timestamp(str(cell).strip())
-    except ValueError:
-        return ""
-    return (" but a date-time; the time column is in seconds. Convert it first, e.g. with pandas: "
-            f"t = pd.to_datetime(f[{column!r}]); f['time_s'] = (t - t.iloc[0]).dt.total_seconds() "
-            "(files of one record: subtract the first file's first stamp from all of them, so they still join)")
-
-
-def _check_time(time_s, source, column="time_s"):
+def _check_time(time_s, source, column="time_s", origin=""):
+    """Refuse time that does not increase strictly, by row (as stamps when it was read from ``origin``)."""
     if time_s.ndim != 1:
         raise TwinInputError(f"{source}: time must be one-dimensional")
     steps = np.diff(time_s)
     if np.any(steps <= 0):
         k = int(np.flatnonzero(steps <= 0)[0])
+        if origin:
+            raise TwinInputError(f"{source}: {column} must increase strictly, but row {k + 2} has "
+                                 f"{stamp(origin, time_s[k + 1])} after {stamp(origin, time_s[k])} (a clock set "
+                                 "back, such as a daylight-saving change? stamps with their UTC offset are read "
+                                 "in UTC)")
         raise TwinInputError(f"{source}: {column} must increase strictly, but row {k + 2} has {time_s[k + 1]} s "
                              f"after {time_s[k]} s")
