@@ -125,6 +125,26 @@ def _uneven_lag(time, rate, U, start):
     return out
 
 
+def _pair(value, name):
+    """``(low, high)`` floats of a two-number setting, or a ValueError that shows the form wanted."""
+    try:
+        low, high = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise ValueError(f"GreyBoxRegressor: {name} must be two numbers [low, high], got {value!r}.") from None
+    return low, high
+
+
+def _column_numbers(value, name):
+    """Column indices of a setting (a list of whole numbers), or a ValueError that shows the form wanted."""
+    try:
+        columns = tuple(int(c) for c in value)
+    except (TypeError, ValueError):
+        columns = None
+    if columns is None or any(c != v for c, v in zip(columns, value)):
+        raise ValueError(f"GreyBoxRegressor: {name} must be a list of column numbers, got {value!r}.")
+    return columns
+
+
 def _time_constants(fractions, log_low, log_high):
     """Time constants τ₁ < … < τ_n (s) inside ``[exp(log_low), exp(log_high)]``, each at least :data:`_MIN_RATIO`
     times the one before, from stick-breaking fractions in [0, 1]: τ_i is placed at ``fractions[i]`` of the room
@@ -247,11 +267,11 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         if n_features < first:
             raise ValueError(f"GreyBoxRegressor: X needs at least {first} columns ({names}, then temperatures), "
                              f"got {n_features}.")
-        observed = tuple(int(c) for c in self.observed)
+        observed = _column_numbers(self.observed, "observed")
         if self.temperature_inputs is None:
             inputs = tuple(c for c in range(first, n_features) if c not in observed)
         else:
-            inputs = tuple(int(c) for c in self.temperature_inputs)
+            inputs = _column_numbers(self.temperature_inputs, "temperature_inputs")
         for name, cols in (("temperature_inputs", inputs), ("observed", observed)):
             bad = [c for c in cols if not first <= c < n_features]
             if bad:
@@ -364,12 +384,12 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         n_poles = check_positive_int(self.n_poles, "n_poles")
         if n_poles > 4:
             raise ValueError(f"GreyBoxRegressor: n_poles must be 1-4, got {n_poles}.")
-        lo, hi = (float(v) for v in self.time_constant_bounds)
+        lo, hi = _pair(self.time_constant_bounds, "time_constant_bounds")
         if not 0 < lo < hi < np.inf:
             raise ValueError(f"GreyBoxRegressor: time_constant_bounds must be 0 < low < high s, got {self.time_constant_bounds!r}.")
         if not 0 < float(self.speed_reference) < np.inf:
             raise ValueError(f"GreyBoxRegressor: speed_reference must be a positive speed in rpm, got {self.speed_reference!r}.")
-        b_low, b_high = (float(v) for v in self.exponent_bounds)
+        b_low, b_high = _pair(self.exponent_bounds, "exponent_bounds")
         if not b_low < b_high:
             raise ValueError(f"GreyBoxRegressor: exponent_bounds must be low < high, got {self.exponent_bounds!r}.")
         if not 0 <= float(self.process_noise) < np.inf:
@@ -395,7 +415,7 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
                              f"for {n_poles} poles {_MIN_RATIO:g}x apart.")
         lower, upper = np.zeros(n_poles), np.ones(n_poles)
         if fit_exponent:
-            b_lo, b_hi = (float(v) for v in self.exponent_bounds)
+            b_lo, b_hi = _pair(self.exponent_bounds, "exponent_bounds")
             lower, upper = np.r_[lower, b_lo], np.r_[upper, b_hi]
         budget = check_positive_int(self.max_nfev, "max_nfev")
         best = None

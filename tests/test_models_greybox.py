@@ -346,6 +346,12 @@ def test_bad_input_is_refused_with_a_clear_message(change, message):
         ({"speed_reference": -1000.0}, "speed_reference must be a positive speed"),
         ({"process_noise": -0.5}, "process_noise must be finite and >= 0"),
         ({"exponent_bounds": (3.0, 0.5)}, "exponent_bounds must be low < high"),
+        # as `--param` gives them: a number or a text where a list is wanted
+        ({"time_constant_bounds": 60}, r"time_constant_bounds must be two numbers \[low, high\], got 60"),
+        ({"exponent_bounds": "3,0.5"}, r"exponent_bounds must be two numbers \[low, high\], got '3,0.5'"),
+        ({"exponent_bounds": [1, 2, 3]}, r"exponent_bounds must be two numbers"),
+        ({"observed": 3}, "observed must be a list of column numbers, got 3"),
+        ({"temperature_inputs": [2.5]}, r"temperature_inputs must be a list of column numbers, got \[2.5\]"),
     ],
 )
 def test_bad_hyperparameters_are_refused(params, message):

@@ -406,6 +406,9 @@ def test_observe_is_refused_where_no_observer_takes_it(args, message, tmp_path, 
     assert re.search(message, capsys.readouterr().err)
     with pytest.raises(TwinInputError, match=r"--observe 'air' is also in --inputs"):
         train([_observed_record([1500.0, 3000.0], "training")], "spindle,air", "Z", model="greybox", observe="air")
+    with pytest.raises(TwinInputError, match=r"name the observed thermometers with --observe"):   # without one too
+        train([_observed_record([1500.0, 3000.0], "training")], "spindle,air", "Z", model="greybox",
+              params={"observed": 3})
 
 
 def test_records_in_time_order_continue_one_another(records):

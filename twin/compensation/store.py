@@ -554,13 +554,13 @@ def _preprocessing(estimator, model, inputs, units, zero_reference, reference_sa
 def _with_observed(estimator, model, inputs, observe, params):
     """The model's channels: ``inputs``, then the thermometers it observes (checked against its contract)."""
     observe = list(observe)
+    if "observed" in (params or {}):
+        raise TwinInputError("name the observed thermometers with --observe, not --param observed=")
     if not observe:
         return inputs
     if not model_traits(estimator).observer:
         raise TwinInputError(f"--observe {','.join(observe)}: {model} has no observer that fuses thermometers (the "
                              "grey-box model has one: --model greybox)")
-    if "observed" in (params or {}):
-        raise TwinInputError("name the observed thermometers with --observe, not --param observed=")
     both = [n for n in observe if n in inputs]
     if both:
         raise TwinInputError(f"--observe {both[0]!r} is also in --inputs: an observed thermometer is an output of "
