@@ -637,3 +637,28 @@ def test_date_time_files_of_one_record_train_and_continue_as_seconds_do(records,
                                              "without one"):
         second.write_text(re.sub(r"\+0[12]:00,", ",", second.read_text()))
         train([first, second], "spindle,air", "Z", model="greybox", column_map=stamps)
+
+
+def test_an_input_that_never_moves_in_training_is_refused_by_name(records):
+    """A gain fitted to an input that never moved is zero or arbitrary, and silently wrong where it moves."""
+    training, _, _ = records
+    values = training.matrix(training.names)
+    at_rest, still_air = values.copy(), values.copy()
+    at_rest[:, 0] = 0.0
+    still_air[:, 1] = 20.0
+    for changed, name, level in ((at_rest, "spindle", "0 rpm"), (still_air, "air", "20 °C")):
+        record = Dataset(training.time_s, changed, CHANNELS, {"scenario": "still"})
+        for model in ("greybox", "mlr"):
+            with pytest.raises(TwinInputError, match=rf"input '{name}' never changes in the training records "
+                                                     rf"\({level} throughout\)"):
+                train([record], "spindle,air", "Z", model=model)
+    # two records, each at its own constant room temperature: referenced to their starts, the model sees none
+    half = len(training) // 2
+    warmer = still_air.copy()
+    warmer[:, 1] = 22.0
+    days = [Dataset(training.time_s[:half], still_air[:half], CHANNELS, {"scenario": "day 1"}),
+            Dataset(training.time_s[:half], warmer[:half], CHANNELS, {"scenario": "day 2"})]
+    with pytest.raises(TwinInputError, match=r"'air' never changes .* \(20, 22 °C throughout, each record "
+                                             r"referenced to its start\)"):
+        train(days, "spindle,air", "Z", model="mlr")
+    assert train(days, "spindle,air", "Z", model="mlr", zero_reference=False).inputs == ["spindle", "air"]

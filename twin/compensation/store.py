@@ -41,7 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 from models.persistence import model_from_document, model_to_document
 from models.registry import model_traits, registered_models
 
-from ..core.dataset import Dataset, finite_or_none, json_default, project_version
+from ..core.dataset import UNITS, Dataset, finite_or_none, json_default, project_version
 from ..core.files import write_text_atomic
 from ..errors import TwinInputError
 from .records import (
@@ -551,6 +551,22 @@ def _preprocessing(estimator, model, inputs, units, zero_reference, reference_sa
     return prep
 
 
+def _check_inputs_move(datasets, inputs, units, zero_reference):
+    """Refuse an input that the model sees constant in every training record: any model fits it a zero (or an
+    arbitrary) effect, which is then silently wrong wherever it does move (a log of a night at rest, a
+    climate chamber at one temperature)."""
+    for name, unit in zip(inputs, units):
+        values = [ds[name][np.isfinite(ds[name])] for ds in datasets]
+        seen = values if zero_reference else [np.concatenate(values)]   # referenced, each record starts at 0
+        if all(np.ptp(v) == 0 for v in seen):
+            level = ", ".join(sorted({f"{v[0]:g}" for v in values}))
+            raise TwinInputError(
+                f"input {name!r} never changes in the training records ({level} {UNITS.get(unit, unit)} throughout"
+                f"{', each record referenced to its start' if zero_reference and len(values) > 1 else ''}): "
+                "no model can learn what it does, and it would be ignored wherever it moves; train on records "
+                "where it changes, or leave it out of --inputs")
+
+
 def _with_observed(estimator, model, inputs, observe, params):
     """The model's channels: ``inputs``, then the thermometers it observes (checked against its contract)."""
     observe = list(observe)
@@ -650,6 +666,7 @@ def fit_compensation_model(datasets: list, inputs: list[str], target: str, model
     cm = CompensationModel(estimator, str(model).lower(), channels, target, units, target_unit, prep)
     for ds in datasets:
         cm.check_readings(ds)
+    _check_inputs_move(datasets, inputs, units, zero_reference)
     dt = _time_series_interval(cm, datasets, params) if cm.is_time_series else None
     if observe:   # the observed columns, after the inputs and the time column the model may take
         first_observed = len(inputs) + int(bool(cm.preprocessing.get("time_column")))
