@@ -179,9 +179,12 @@ def test_a_continuation_on_its_own_clock_follows_directly_and_an_overlap_is_refu
         result = evaluate(cm, [restarted], reference="train", history=training)
     np.testing.assert_array_equal(result.predictions["restarted"][2], full)
     assert "restarted: its time starts at 0 s, not after --history train ends (75480 s)" in caplog.text
-    with pytest.raises(TwinInputError, match=r"inside: time_s starts at 36000 s, inside --history train "
-                                             r"\(0..75480 s\)"):
+    with pytest.raises(TwinInputError, match=r"inside starts with the rows of --history train \(t = 36000 s"):
         evaluate(cm, [_rows(training, slice(300, None), "inside")], reference="train", history=training)
+    other = Dataset(training.time_s[300:], training.matrix(training.names)[300:] + 0.5, CHANNELS, {"scenario": "other"})
+    with pytest.raises(TwinInputError, match=r"other: time_s starts at 36000 s, inside --history train "
+                                             r"\(0..75480 s\)"):
+        evaluate(cm, [other], reference="train", history=training)
     off_grid = _rows(later, slice(None), "off grid", shift=50.0)
     gridded = train([training], "spindle,air", "Z", model="greybox", params={"sampling_interval": 120.0})
     with pytest.raises(TwinInputError, match="not a whole number of the model's 120 s steps"):
@@ -662,3 +665,20 @@ def test_an_input_that_never_moves_in_training_is_refused_by_name(records):
                                              r"referenced to its start\)"):
         train(days, "spindle,air", "Z", model="mlr")
     assert train(days, "spindle,air", "Z", model="mlr", zero_reference=False).inputs == ["spindle", "air"]
+
+
+def test_a_continuation_runs_at_its_historys_interval_and_is_not_its_own_history(records):
+    """Trained on a 30 s record and a 120 s one, the model continues the 120 s one at 120 s (the model file's
+    interval is the first record's): the continuation is the whole record's run, row for row. A record given as
+    its own --history is refused."""
+    training, later, whole = records
+    times = np.arange(0.0, 12 * 3600.0, 30.0)
+    fast = _dataset(times, duty(times, [2000.0, 5000.0], 3 * 3600.0), "fast")
+    cm = train([fast, training], "spindle,air", "Z", model="greybox")
+    assert cm.sampling_interval_s == 30.0
+    continued = evaluate(cm, [later], reference="train", history=training).predictions["later"][2]
+    from_rest = evaluate(cm, [whole]).predictions["whole"][2]
+    np.testing.assert_allclose(continued, from_rest[len(training):], rtol=1e-9, atol=1e-9)
+    with pytest.raises(TwinInputError, match=r"train starts with the rows of --history train \(t = 0 s, the same "
+                                             r"readings\): a record cannot continue itself"):
+        evaluate(cm, [training], reference="train", history=training)

@@ -34,6 +34,7 @@ from .records import (
     evenly_sampled,
     linear_bridge,
     note_long_steps,
+    repeats,
     sampling_interval,
     starts_running,
 )
@@ -306,8 +307,10 @@ def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Datas
                                  f"{cm.sampling_interval_s:g} s; --reference train needs the same interval")
     start = _history_start(cm, history)
     measured = dataset[cm.target] - cm.target_reference(start)
-    bridge_s, bridge, record_s = bridging_inputs(history, dataset, cm.inputs, cm.sampling_interval_s, gap,
-                                                 on_grid=not timed)
+    # a model that takes the time was trained on records of any interval: the history's own is the one to
+    # continue at (the model file's is its first training record's)
+    interval_s = sampling_interval(history, strict=False) if timed else cm.sampling_interval_s
+    bridge_s, bridge, record_s = bridging_inputs(history, dataset, cm.inputs, interval_s, gap, on_grid=not timed)
     X = np.vstack([history.matrix(cm.inputs), bridge, dataset.matrix(cm.inputs)]) - cm.input_reference(start)
     if timed:
         X = np.column_stack([np.r_[history.time_s, bridge_s, record_s] - history.time_s[0], X])
@@ -351,7 +354,7 @@ def bridging_inputs(history: Dataset, dataset: Dataset, inputs: list[str], inter
     inputs : list of str
         The model's input channels.
     interval_s : float
-        The model's sampling interval, s.
+        The interval of the rows, s: the model's, or the history's own for a model that takes the time.
     gap : {"refuse", "interpolate"}, default "refuse"
         A gap is an error, or bridged by linear interpolation of every input
         between the history's last row and the record's first (the spindle
@@ -373,11 +376,15 @@ def bridging_inputs(history: Dataset, dataset: Dataset, inputs: list[str], inter
     Raises
     ------
     TwinInputError
-        The record overlaps the history, starts off the model's time grid, or leaves a gap and
+        The record is the history again, overlaps it, starts off the model's time grid, or leaves a gap and
         ``gap="refuse"``.
     """
     end, start = float(history.time_s[-1]), float(dataset.time_s[0])
     label, source = dataset_label(dataset), dataset_label(history)
+    if repeats(history, dataset, inputs):
+        raise TwinInputError(f"{label} starts with the rows of --history {source} (t = {start:g} s, the same "
+                             "readings): a record cannot continue itself; evaluate it without --reference train, "
+                             "or pass as --history the record it continues")
     no_bridge = np.empty(0), np.empty((0, len(inputs)))
     if start <= float(history.time_s[0]):
         log.warning("%s: its time starts at %g s, not after --history %s ends (%g s): taken to follow it directly",

@@ -295,22 +295,34 @@ def _continues(first, later, names):
     if len(first) < 2 or not all(n in first and n in later and first.info(n).unit == later.info(n).unit
                                  for n in names):
         return False
-    _check_not_repeated(first, later, names)
+    if repeats(first, later, names):
+        raise TwinInputError(f"{dataset_label(later)} starts with a row of {dataset_label(first)} again (t = "
+                             f"{later.time_s[0]:g} s, the same readings): the same file twice, or files that "
+                             "overlap; give each row once")
     dt = sampling_interval(first, strict=False)
     return abs(later.time_s[0] - first.time_s[-1] - dt) <= CONTINUES_WITHIN * dt
 
 
-def _check_not_repeated(first, later, names):
-    """Refuse ``later`` if its rows up to ``first``'s end are rows of ``first`` again (same times, same
-    readings): a file given twice, or files cut with rows in both, would be taken as a record of its own that
-    starts at rest. (A record whose clock restarts shares times with another, not readings.)"""
+def repeats(first: Dataset, later: Dataset, names: Sequence[str]) -> bool:
+    """Whether ``later``'s rows up to ``first``'s end are rows of ``first`` again (same times, same readings of
+    ``names``): a file given twice, or files cut with rows in both. A record whose clock restarts shares times
+    with another, not readings.
+
+    Parameters
+    ----------
+    first, later : Dataset
+        Two records, ``later`` given after ``first``.
+    names : sequence of str
+        The channels compared.
+
+    Returns
+    -------
+    bool
+    """
     inside = later.time_s <= first.time_s[-1]
     at = np.minimum(np.searchsorted(first.time_s, later.time_s[inside]), len(first) - 1)
-    if inside[0] and np.array_equal(first.time_s[at], later.time_s[inside]) and np.array_equal(
-            first.matrix(list(names))[at], later.matrix(list(names))[inside], equal_nan=True):
-        raise TwinInputError(f"{dataset_label(later)} starts with a row of {dataset_label(first)} again (t = "
-                             f"{later.time_s[0]:g} s, the same readings): the same file twice, or files that "
-                             "overlap; give each row once")
+    return bool(inside[0] and np.array_equal(first.time_s[at], later.time_s[inside]) and np.array_equal(
+        first.matrix(list(names))[at], later.matrix(list(names))[inside], equal_nan=True))
 
 
 def starts_running(dataset: Dataset, speed: str) -> bool:
