@@ -120,7 +120,7 @@ def test_unstable_grey_fit_is_refused_unless_allowed(tmp_path, capsys):
     assert main(common) == 2
     assert "UNSTABLE MODEL REFUSED" in capsys.readouterr().err
     assert main(common + ["--allow-unstable"]) == 0
-    assert "WARNING: UNSTABLE MODEL SAVED" in capsys.readouterr().err
+    assert "WARNING: MODEL SAVED DESPITE ITS CHECK (--allow-unstable): UNSTABLE: gm1n" in capsys.readouterr().err
 
 
 def test_a_prediction_that_diverges_on_a_training_record_is_named():
@@ -682,3 +682,32 @@ def test_a_continuation_runs_at_its_historys_interval_and_is_not_its_own_history
     with pytest.raises(TwinInputError, match=r"train starts with the rows of --history train \(t = 0 s, the same "
                                              r"readings\): a record cannot continue itself"):
         evaluate(cm, [training], reference="train", history=training)
+
+
+def test_a_pole_its_records_do_not_determine_is_refused(records, tmp_path, capsys):
+    """A 4 h warm-up (noise 0.2 µm) against a network whose slow time constant is 10.7 h: three poles fit it
+    with time constants of days, which the record shows only the start of. Refused unless --allow-unstable;
+    saved, it is much worse on the 44 h record than the single pole the record does determine."""
+    _, _, whole = records
+    times = np.arange(0.0, 4 * 3600.0, 60.0)
+    speed = np.where(times < 600.0, 0.0, np.where(times < 2 * 3600.0, 3000.0, 5000.0))
+    values = _dataset(times, speed, "warm-up").matrix(["spindle", "air", "Z"])
+    values[:, 2] += np.random.default_rng(0).normal(0.0, 0.2, len(times))
+    warm_up = Dataset(times, values, CHANNELS, {"scenario": "warm-up"})
+    with pytest.raises(TwinInputError, match=r"UNIDENTIFIED MODEL REFUSED \(not saved\): greybox: its slowest time "
+                                             r"constant is \d+ h, longer than the longest training record \(3.98 h\).*"
+                                             r"or with fewer poles \(--param n_poles=2\); pass --allow-unstable"):
+        train([warm_up], "spindle,air", "Z", model="greybox", params={"n_poles": 3})
+    saved = train([warm_up], "spindle,air", "Z", model="greybox", params={"n_poles": 3}, allow_unstable=True)
+    assert saved.metadata["unstable"].startswith("UNIDENTIFIED: greybox: its slowest time constant")
+    determined = train([warm_up], "spindle,air", "Z", model="greybox", params={"n_poles": 1})
+    assert "unstable" not in determined.metadata
+    errors = [evaluate(cm, [whole]).rows[0]["rmse"] for cm in (saved, determined)]
+    assert errors[0] > 3 * errors[1]
+    path = tmp_path / "warm_up.csv"
+    warm_up.write(path)
+    common = ["train", str(path), "--inputs", "spindle,air", "--target", "Z", "--model", "greybox", "--param",
+              "n_poles=3", "--out", str(tmp_path / "m.json")]
+    assert main(common) == 2 and "UNIDENTIFIED MODEL REFUSED" in capsys.readouterr().err
+    assert main([*common, "--allow-unstable"]) == 0
+    assert "WARNING: MODEL SAVED DESPITE ITS CHECK (--allow-unstable): UNIDENTIFIED" in capsys.readouterr().err

@@ -42,7 +42,7 @@ def cmd_train(args: argparse.Namespace) -> None:
     if "selection" in cm.metadata:
         print(f"--select auto {cm.metadata['selection']['reason']}")
     if "unstable" in cm.metadata:
-        print(f"WARNING: UNSTABLE MODEL SAVED (--allow-unstable): {cm.metadata['unstable']}", file=sys.stderr)
+        print(f"WARNING: MODEL SAVED DESPITE ITS CHECK (--allow-unstable): {cm.metadata['unstable']}", file=sys.stderr)
     print(f"trained {cm.describe()}")
     print(f"on {', '.join(t['label'] for t in cm.training)}"
           f"{' (zero-referenced per dataset)' if cm.preprocessing['zero_reference'] else ''}")
@@ -134,7 +134,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "records' speed regimes (leave one block out, rolling origin; geometric mean of the folds' RMSE), "
                    "grey-box orders 1-3 included, and print why; overrides --model")
     t.add_argument("--allow-unstable", action="store_true",
-                   help="save an unstable grey fit (a < 0 or diverging on its training data) instead of refusing it")
+                   help="save an unstable grey fit (a < 0 or diverging on its training data), or a grey-box fit "
+                        "whose slowest time constant its records do not determine, instead of refusing it")
     t.add_argument("--param", action="append", metavar="NAME=VALUE", help="model hyperparameter (repeatable)")
     t.add_argument("--out", required=True, help="model file to write (.json)")
     add_overwrite(t, "file")

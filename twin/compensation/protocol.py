@@ -236,6 +236,46 @@ def stability_problem(cm: CompensationModel, datasets: Sequence[Dataset],
     return None
 
 
+def identification_problem(cm: CompensationModel, datasets: Sequence[Dataset]) -> str | None:
+    """Why the training records do not determine the fitted grey-box model, or None.
+
+    A pole whose time constant is longer than the longest training record,
+    or on the upper bound of ``time_constant_bounds``, is seen only at its
+    start: there its response is nearly a ramp, which a slower pole with a
+    larger gain, or two such poles with gains of opposite sign, fit as well.
+    Such a model can fit its record to the noise and be off by tens of times
+    the drift on the next (a 4 h warm-up: time constants 23 h and 46 h with
+    gains that cancel, against 0.6 h and 4.3 h in truth).
+
+    Parameters
+    ----------
+    cm : CompensationModel
+        The fitted model.
+    datasets : sequence of Dataset
+        Its training records.
+
+    Returns
+    -------
+    str or None
+        The reason, or None for a model without time constants or one whose records cover them.
+    """
+    taus = getattr(cm.estimator, "time_constants_", None)
+    if taus is None:
+        return None
+    slowest, bound = float(np.max(taus)), float(cm.estimator.time_constant_bounds[1])
+    span = max(float(ds.time_s[-1] - ds.time_s[0]) for ds in datasets)
+    if slowest < span and slowest < bound * (1.0 - 1e-6):
+        return None
+    n_poles = len(taus)
+    where = (f"sits on its upper bound, {bound / 3600:.3g} h (time_constant_bounds)"
+             if slowest >= bound * (1.0 - 1e-6) else
+             f"is {slowest / 3600:.3g} h, longer than the longest training record ({span / 3600:.3g} h)")
+    fewer = f", or with fewer poles (--param n_poles={n_poles - 1})" if n_poles > 1 else ""
+    return (f"{cm.model_name}: its slowest time constant {where}: the records show only the start of that "
+            "response, so they do not determine its gain, and the model can be far off on another record; train "
+            f"on a record that lasts longer than its slow response{fewer}")
+
+
 def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Dataset | None = None,
                          gap: Literal["refuse", "interpolate"] = "refuse"
                          ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

@@ -39,7 +39,7 @@ from ..infra.cli_common import split_names
 from ..infra.outdir import atomic_directory, check_output_file, check_output_folder
 from ..infra.tables import markdown_table
 from ..rom.reduction import cached_rom
-from .protocol import auto_select, continued_prediction, stability_problem
+from .protocol import auto_select, continued_prediction, identification_problem, stability_problem
 from .records import (
     continued_record,
     dataset_label,
@@ -223,9 +223,11 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
     ``select="auto"`` chooses the model by blocked cross-validation across the
     record's operating regimes (:func:`~twin.compensation.protocol.auto_select`;
     the reason is in ``model.metadata["selection"]``). An unstable fit
-    (:func:`~twin.compensation.protocol.stability_problem`) is refused with a
-    :class:`TwinInputError` unless ``allow_unstable`` (then it is saved and the
-    problem kept in ``model.metadata["unstable"]``).
+    (:func:`~twin.compensation.protocol.stability_problem`), or a grey-box fit
+    whose records do not determine its slowest pole
+    (:func:`~twin.compensation.protocol.identification_problem`), is refused
+    with a :class:`TwinInputError` unless ``allow_unstable`` (then it is saved
+    and the problem kept in ``model.metadata["unstable"]``).
 
     Returns the :class:`CompensationModel`; its training metrics are in
     ``model.metadata["training_metrics"]``.
@@ -256,7 +258,7 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
         Choose the model (and the grey-box order) by blocked cross-validation; ``params`` then override the
         chosen candidate's.
     allow_unstable : bool, default False
-        Save an unstable grey fit instead of refusing it.
+        Save an unstable or unidentified fit instead of refusing it.
     observe : str or list of str, optional
         Thermometers the model fuses while it runs (``--observe``; a model with an observer, the
         grey-box model): outputs of the model, corrected by their readings, not inputs. With
@@ -297,12 +299,14 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
     predictions = [cm.predict(ds) for ds in loaded]
     cm.metadata["training_metrics"] = {label: score(cm.target_values(ds), predicted)
                                        for ds, label, predicted in zip(loaded, distinct_labels(loaded), predictions)}
-    problem = stability_problem(cm, loaded, predictions)
+    problem, kind = stability_problem(cm, loaded, predictions), "UNSTABLE"
+    if problem is None:
+        problem, kind = identification_problem(cm, loaded), "UNIDENTIFIED"
     if problem is not None:
         if not allow_unstable:
-            raise TwinInputError(f"UNSTABLE MODEL REFUSED (not saved): {problem}; pass --allow-unstable to save it "
+            raise TwinInputError(f"{kind} MODEL REFUSED (not saved): {problem}; pass --allow-unstable to save it "
                                  "anyway")
-        cm.metadata["unstable"] = problem
+        cm.metadata["unstable"] = f"{kind}: {problem}"
     if out is not None:
         cm.save(out)
     return cm
