@@ -121,12 +121,13 @@ def test_cli_place_writes_the_report(machine, tmp_path, capsys):
     code = main(["place", "--parts", "ram,carrier,column,spindle_motor", "--candidates", "120",
                  "--train", f"{sc['p_heat']},{sc['p_steps']},{sc['p_room']}", "--validation", sc["p_val"],
                  "--test", sc["p_test"],
-                 "--k-max", "3", "--record-interval", "300", "--response-horizon", "4", "--scheduler", "serial",
+                 "--k-max", "3", "--record-interval", "60", "--response-horizon", "4", "--scheduler", "serial",
                  "--no-cache", "--out", str(out)])
     assert code == 0, capsys.readouterr().err
     text = capsys.readouterr().out
     assert "## Z: validation max |residual|" in text and "| K | gra+fcm |" in text
     assert "## Chosen locations (method and K = 1–3 chosen on validation)" in text and "4–5" not in text
+    assert "; records every 300 s\n" in text                    # the scenarios' own sampling, not 60 s
     for name in ("placement.md", "placement.json", "k_method_table.csv", "candidate_scores.csv",
                  "chosen_sensors.csv", "chosen_sensors.png", "k_curves.png"):
         assert (out / name).exists(), name

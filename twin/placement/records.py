@@ -74,8 +74,29 @@ class Record:
     from_cache: bool = False
 
 
+def record_interval(scenario: Scenario, record_interval_s: float | None = None) -> float:
+    """The interval a scenario is recorded at, s: ``record_interval_s``, or the scenario's own sampling interval
+    if that is coarser (or ``record_interval_s`` is None).
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The scenario.
+    record_interval_s : float, optional
+        Recording interval asked for, s.
+
+    Returns
+    -------
+    float
+        The spacing of :func:`record_times`, s.
+    """
+    if record_interval_s is None or record_interval_s <= scenario.sample_interval_s:
+        return float(scenario.sample_interval_s)
+    return float(record_interval_s)
+
+
 def record_times(scenario: Scenario, record_interval_s: float | None = None) -> np.ndarray:
-    """Record times, s: the scenario's samples, or every ``record_interval_s`` if that is coarser.
+    """Record times, s: every :func:`record_interval` (the scenario's samples if they are not finer).
 
     Parameters
     ----------
@@ -89,11 +110,11 @@ def record_times(scenario: Scenario, record_interval_s: float | None = None) -> 
     ndarray
         Times from 0 to the scenario's end, s.
     """
-    t = scenario.times()
-    if record_interval_s is None or record_interval_s <= scenario.sample_interval_s:
-        return t
-    n = int(round(scenario.duration_s / record_interval_s))
-    grid = np.arange(n + 1) * float(record_interval_s)
+    step = record_interval(scenario, record_interval_s)
+    if step == scenario.sample_interval_s:
+        return scenario.times()
+    n = round(scenario.duration_s / step)
+    grid = np.arange(n + 1) * step
     return grid[grid <= scenario.duration_s + 1e-9]
 
 

@@ -104,18 +104,28 @@ def verdicts(result: PlacementResult) -> dict:
     return out
 
 
+def _intervals(cfg):
+    """How often the records are, as the header says it: the most common interval, s, then the others' scenarios
+    (sampled more coarsely than ``--record-interval``)."""
+    by = {}
+    for name, dt in cfg["record_intervals_s"].items():
+        by.setdefault(dt, []).append(name)
+    common = max(by, key=lambda dt: len(by[dt]))
+    return f"every {common:g} s" + "".join(f"; every {dt:g} s for {', '.join(names)} (their own sampling)"
+                                            for dt, names in by.items() if dt != common)
+
+
 def _header(result):
     cfg, t = result.config, result.timings
-    skipped = f" (skipped, not available: {', '.join(map(str, cfg['skipped']))})" if cfg["skipped"] else ""
     return [f"# Sensor placement on {cfg['machine']}", "",
             (f"- candidates: {cfg['n_candidates']} ({cfg['n_surface']} surface nodes of "
              f"{', '.join(cfg['parts'])}; {cfg['n_camera']} camera spots)"),
             f"- training scenarios (selection, model fit): {', '.join(cfg['train'])}",
             f"- validation scenarios (choice of method and K): {', '.join(cfg['validation'])}",
-            f"- test scenarios (the chosen sets only, once): {', '.join(cfg['test'])}" + skipped,
+            f"- test scenarios (the chosen sets only, once): {', '.join(cfg['test'])}",
             (f"- compensation model scored: MLR with intercept on zero-referenced inputs and drift; sensor noise "
-             f"{'DS18S20/S65/NCDT' if cfg['noise'] else 'none'} seeded by scenario name; records every "
-             f"{cfg['record_interval_s']:g} s"),
+             f"{'DS18S20/S65/NCDT' if cfg['noise'] else 'none'} seeded by scenario name; records "
+             f"{_intervals(cfg)}"),
             (f"- wall time: simulations {t['simulation_s']:.1f} s ({t['simulated']} run, {t['from_cache']} from "
              f"cache), selection {t['selection_s']:.1f} s, scoring {t['scoring_s']:.1f} s, total "
              f"{t['total_s']:.1f} s"),

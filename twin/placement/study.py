@@ -23,13 +23,15 @@ The three scenario sets must be disjoint.
 """
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..core.scenario import Scenario, available_scenarios
-from ..core.variants import MachineSpec
+from meshes.tomlspec import DefinitionError, duplicates
+
+from ..core.variants import MachineSpec, as_scenario
 from ..errors import TwinInputError
 from ..infra.outdir import atomic_directory, check_output_folder
 from .candidates import DEFAULT_PARTS, Candidates, CandidateSpec
@@ -39,6 +41,7 @@ from .records import (
     ResponseTask,
     add_noise,
     elementary_inputs,
+    record_interval,
     run_records,
     scenario_seed,
 )
@@ -112,35 +115,82 @@ class PlacementResult:
     uncompensated_test: dict = field(default_factory=dict)
 
 
-def _name(scenario):
-    return getattr(scenario, "name", str(scenario))
+#: The option of each scenario role, named in the messages.
+ROLE_OPTIONS = {"training": "--train", "validation": "--validation", "test": "--test"}
 
 
-def _check_disjoint(roles):
-    """Refuse a scenario given in two roles (training, validation, test)."""
-    seen = {}
-    for role, names in roles.items():
-        for s in names:
-            if seen.setdefault(_name(s), role) != role:
-                raise TwinInputError(f"scenario {_name(s)!r} is both a {seen[_name(s)]} and a {role} scenario; "
-                                     "training, validation and test scenarios must differ")
+def _check_list(option, items, what, least=1):
+    """Refuse a list option with fewer than ``least`` items or with an item given twice."""
+    items = [str(i) for i in items]
+    if len(items) < least:
+        raise TwinInputError(f"{option} must name at least {least} {what}{'s' if least > 1 else ''}, got {items}"
+                             + ("; leave the option out for the default" if not items else ""))
+    if duplicates(items):
+        raise TwinInputError(f"{option} names {what} {duplicates(items)[0]!r} more than once")
 
 
-def _available_split(train, validation, test, log):
-    """Drop unavailable scenarios (noted); refuse a scenario in two roles, fewer than 2 training, or no
-    validation or test scenario."""
-    roles = {"training": list(train), "validation": list(validation), "test": list(test)}
-    _check_disjoint(roles)
-    known = set(available_scenarios())
-    skipped = [s for names in roles.values() for s in names if not isinstance(s, Scenario) and str(s) not in known
-               and not Path(str(s)).exists()]
-    roles = {role: [s for s in names if s not in skipped] for role, names in roles.items()}
-    if skipped and log:
-        log(f"scenarios not available, skipped: {skipped}")
-    if len(roles["training"]) < 2 or not roles["validation"] or not roles["test"]:
-        raise TwinInputError(f"need ≥ 2 training, ≥ 1 validation and ≥ 1 test scenarios; have {roles}; "
-                             f"available: {sorted(known)}")
-    return roles["training"], roles["validation"], roles["test"], skipped
+def _check_positive(option, value, unit="", zero=False):
+    """Refuse a numeric option that is not a finite number > 0 (≥ 0 with ``zero``); ``unit`` follows the value."""
+    if not (math.isfinite(value) and (value >= 0 if zero else value > 0)):
+        raise TwinInputError(f"{option} must be {'≥ 0' if zero else 'positive'}, got {value:g}{unit}")
+
+
+def _check_options(methods, parts, n_candidates, k_max, axes, record_interval_s, response_horizon_s):
+    """Refuse an unknown method, an empty or repeating list, or a bad number, before anything is built."""
+    _check_list("--methods", methods, "method")
+    bad = sorted(set(methods) - set(METHODS))
+    if bad:
+        raise TwinInputError(f"unknown placement method(s) {bad}; methods: {list(METHODS)}")
+    _check_list("--parts", parts, "part")
+    _check_list("--axes", axes, "axis")
+    _check_positive("--candidates", n_candidates, zero=True)         # 0: the camera spots only
+    _check_positive("--k-max", k_max)
+    if record_interval_s is not None:
+        _check_positive("--record-interval", record_interval_s, " s")
+    _check_positive("--response-horizon", response_horizon_s / 3600.0, " h")
+
+
+def _load_role(option, value):
+    """The scenario ``value`` of ``option`` (a shipped name or a TOML path), loaded; an unknown one refused."""
+    try:
+        return as_scenario(value)
+    except DefinitionError as exc:          # its message lists the shipped scenarios for an unknown name
+        raise TwinInputError(f"{option} {str(value)!r}: {exc}") from None
+
+
+def _resolve_roles(train, validation, test):
+    """The scenarios of each role (role → list of :class:`Scenario`), loaded before any simulation.
+
+    A scenario is compared by its name, however it was given (name, path or Scenario): refused when it is unknown,
+    repeated within a role (``greedy-loso`` would predict it from its own copy), in two roles (an in-sample fit
+    reported as held out), or when there are fewer than 2 training or no validation or test scenarios.
+    """
+    roles = {"training": train, "validation": validation, "test": test}
+    loaded, seen = {}, {}
+    for role, option in ROLE_OPTIONS.items():
+        loaded[role] = [_load_role(option, v) for v in roles[role]]
+        _check_list(option, [s.name for s in loaded[role]], "scenario", 2 if role == "training" else 1)
+        for s in loaded[role]:
+            if seen.setdefault(s.name, role) != role:
+                raise TwinInputError(f"scenario {s.name!r} is both a {seen[s.name]} and a {role} scenario "
+                                     f"({ROLE_OPTIONS[seen[s.name]]}, {option}); training, validation and test "
+                                     "scenarios must differ")
+    return loaded
+
+
+def _check_against_machine(machine, cands, axes, k_max, scenarios):
+    """Refuse ``axes`` that are not drift axes of ``machine``, a ``k_max`` above the number of candidates, and a
+    scenario the machine cannot run (speeds, feeds, zones) — before any simulation."""
+    drift = [c.name for c in machine.channels if c.kind == "displacement"]     # TCP drift X, Y, Z and Y_top, µm
+    bad = [a for a in axes if a not in drift]
+    if bad:
+        raise TwinInputError(f"--axes {','.join(axes)}: {bad[0]!r} is not a drift axis of "
+                             f"{machine.definition.name!r}; drift axes: {','.join(drift)}")
+    if k_max > len(cands):
+        raise TwinInputError(f"--k-max {k_max} exceeds the {len(cands)} candidates (--candidates, --parts, "
+                             "--no-camera)")
+    for sc in scenarios:
+        sc.check_machine(machine.definition)
 
 
 def _record_axes(axes):
@@ -195,18 +245,19 @@ def placement_study(machine: str = "vmc_ram", mesh_size_m: float | None = None, 
     train, validation, test
         Scenario names, paths or :class:`~twin.core.scenario.Scenario` s, disjoint: the selection sees the
         training scenarios, the choice of method and K the validation scenarios, and the chosen sets are
-        scored once on the test scenarios.  Missing ones are skipped with a note; at least two training
-        scenarios and one of each other kind are needed.
+        scored once on the test scenarios.  Compared by the scenario's name however given; an unknown or repeated
+        one is refused; at least two training scenarios and one of each other kind are needed.
     methods, k_max, axes
-        Selection methods (:data:`~twin.placement.selection.METHODS`), the largest K, the drift axes.
+        Selection methods (:data:`~twin.placement.selection.METHODS`), the largest K (1 … the number of
+        candidates), the drift axes (the machine's displacement channels: X, Y, Z, Y_top).
     record_interval_s
-        Recording interval, s (None: the scenario's samples).
+        Recording interval, s (None: the scenario's samples; a scenario sampled more coarsely keeps its samples).
     max_selection_rows
         Training rows the selection uses (thinned evenly per scenario).
     scheduler, use_cache, progress
         The sweep (see :func:`twin.infra.sweep.run_tasks`) and the record cache.
     log : callable or None, default print
-        Receives notes (skipped scenarios, selection progress); None is silent.
+        Receives notes (selection progress); None is silent.
     noise
         Draw DS18S20/S65/NCDT noise on the records, seeded by each scenario's name.
     report_k
@@ -228,26 +279,29 @@ def placement_study(machine: str = "vmc_ram", mesh_size_m: float | None = None, 
     Raises
     ------
     TwinInputError
-        An unknown method, a scenario in two roles, too few scenarios, or an unusable ``out_dir``.
+        Before any simulation: an unknown method, scenario or drift axis; an empty list or one naming an item
+        twice; a scenario in two roles; too few scenarios; a non-positive number (``n_candidates`` may be 0:
+        camera spots only); ``k_max`` above the number of candidates; or an unusable ``out_dir``.
     """
     check_output_folder(out_dir, overwrite, inputs=(machine,))
     t_start = time.perf_counter()
-    methods = list(methods)
-    bad = sorted(set(methods) - set(METHODS))
-    if bad:
-        raise TwinInputError(f"unknown placement method(s) {bad}; methods: {list(METHODS)}")
-    train, validation, test, skipped = _available_split(train, validation, test, log)
+    methods, given = list(methods), list(train) + list(validation) + list(test)
+    _check_options(methods, parts, n_candidates, k_max, axes, record_interval_s, response_horizon_s)
+    roles = _resolve_roles(train, validation, test)
+    scenarios = roles["training"] + roles["validation"] + roles["test"]
     spec = MachineSpec(machine, mesh_size_m)
     cspec = CandidateSpec(tuple(parts), int(n_candidates), bool(camera))
-    m, records, responses, timings = _simulate(
-        spec, cspec, train + validation + test, _record_axes(axes), record_interval_s, response_horizon_s,
-        "greedy-physics" in methods, scheduler, use_cache, progress)
+    m = spec.build()
     cands = cspec.build(m)
+    _check_against_machine(m, cands, axes, k_max, scenarios)
+    m, records, responses, timings = _simulate(
+        spec, cspec, given, _record_axes(axes), record_interval_s, response_horizon_s,
+        "greedy-physics" in methods, scheduler, use_cache, progress)
+    n_train, n_val = len(roles["training"]), len(roles["validation"])
     if noise:         # the step responses too: greedy-physics sees them as measured
         noisy = [add_noise(r, cands.kinds, scenario_seed(r.scenario)) for r in records + responses]
         records, responses = noisy[:len(records)], noisy[len(records):]
-    rec_train, rec_val = records[:len(train)], records[len(train):len(train) + len(validation)]
-    rec_test = records[len(train) + len(validation):]
+    rec_train, rec_val, rec_test = records[:n_train], records[n_train:n_train + n_val], records[n_train + n_val:]
 
     t0 = time.perf_counter()
     chosen = select_sets(rec_train, responses, methods, axes, k_max, max_selection_rows, log)
@@ -268,15 +322,16 @@ def placement_study(machine: str = "vmc_ram", mesh_size_m: float | None = None, 
     result.config = {"machine": machine, "mesh_size_m": mesh_size_m, "parts": list(parts),
                      "n_candidates": len(cands), "n_surface": int(sum(k == "surface" for k in cands.kinds)),
                      "n_camera": int(sum(k == "camera" for k in cands.kinds)),
-                     "train": [_name(s) for s in train], "validation": [_name(s) for s in validation],
-                     "test": [_name(s) for s in test],
-                     "skipped": skipped, "methods": methods, "k_max": k_max, "axes": list(axes),
-                     "record_interval_s": record_interval_s, "noise": noise, "model": "mlr",
+                     "train": [s.name for s in roles["training"]],
+                     "validation": [s.name for s in roles["validation"]], "test": [s.name for s in roles["test"]],
+                     "methods": methods, "k_max": k_max, "axes": list(axes), "record_interval_s": record_interval_s,
+                     "record_intervals_s": {s.name: record_interval(s, record_interval_s) for s in scenarios},
+                     "noise": noise, "model": "mlr",
                      "selection_rows": chosen.rows, "report_k": report_k,
                      "response_horizon_s": float(response_horizon_s) if "greedy-physics" in methods else None}
     result.cand_scores = chosen.scores
     result.records = records if write_datasets else None
-    result.config["scenario_objects"] = train + validation + test
+    result.config["scenario_objects"] = given
     result.summary = placement_summary(result)
     if out_dir is not None:
         with atomic_directory(out_dir, overwrite) as tmp:
