@@ -4,8 +4,9 @@ import json
 import numpy as np
 import pytest
 
-from twin.compensation.studies import cross_condition_study, hybrid_study
+from twin.compensation.studies import cross_condition_study, hybrid_study, select_inputs
 from twin.compensation.train import physics_prediction
+from twin.core.dataset import ChannelInfo, Dataset
 from twin.core.simulate import simulate
 from twin.core.variants import MachineSpec
 
@@ -83,3 +84,14 @@ def test_hybrid_beats_physics_alone_when_the_twin_is_wrong(machine, tmp_path):
     assert (tmp_path / "hy" / "hybrid_heldout.png").exists()
     # the perturbed machine really is different from the nominal one
     assert MachineSpec("vmc_ram", None, gap["source_scale"], 0.8).perturbed
+
+
+def test_a_thermometer_that_never_moves_is_no_candidate_input():
+    """A sensor stuck at one DS18S20 step through a short record carries nothing (and training refuses it)."""
+    t = np.arange(0.0, 3600.0, 60.0)
+    warming = 20.0 + 2.0 * (1.0 - np.exp(-t / 900.0))
+    values = np.column_stack([warming, np.full_like(t, 20.25), 20.0 + 0.001 * t, 3.0 * (warming - 20.0)])
+    channels = [ChannelInfo(name, "degC", "temperature") for name in ("T01", "T02", "T03")] + [
+        ChannelInfo("Z", "um", "displacement")]
+    record = Dataset(t, values, channels, {"scenario": "short"})
+    assert sorted(select_inputs([record], "Z", k=3)) == ["T01", "T03"]

@@ -110,10 +110,10 @@ def test_a_loggers_date_time_stamps_are_seconds_since_the_first(tmp_path, stamps
 
 @pytest.mark.parametrize("stamps, message", [
     (["2026-10-25 02:59:50", "2026-10-25 02:00:00"], (r"row 2 has 2026-10-25 02:00:00 after 2026-10-25 02:59:50 "
-                                                     r"\(a clock set back, such as a daylight-saving change\?"),
+                                                     r"\(a clock set back, such as a daylight-saving change\?")),
     (["2026-10-25T02:59:50+02:00", "2026-10-25T02:00:00"], r"data row 2: '2026-10-25T02:00:00' has no UTC offset"),
-    (["23.11.2026 14:05", "23.11.2026 14:06"], r"data row 1: '23.11.2026 14:05' is neither a number \(s\) nor an "
-                                               r"ISO 8601 date-time"),
+    (["23.11.2026 14:05", "23.11.2026 14:06"], (r"data row 1: '23.11.2026 14:05' is neither a number \(s\) nor "
+                                                r"an ISO 8601 date-time")),
     (["0", "abc"], r"data row 2: 'abc' is not a number"),           # the first stamp decides: s
     (["2026-11-23 14:05:00", ""], r"stamp is empty or NaN at data row 2"),
 ])

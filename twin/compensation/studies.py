@@ -166,7 +166,8 @@ def select_inputs(datasets: Sequence[Dataset], target: str, k: int = 4, method: 
     method : str, default "gm-influence+fcm"
         A method of :func:`models.selection.select_sensors`.
     candidates : list of str, optional
-        Candidate channels (default: the first record's thermometers).
+        Candidate channels (default: the first record's thermometers); those that never move in the records
+        are left out.
     random_state : int, default 0
         Seeds FCM.
 
@@ -177,6 +178,8 @@ def select_inputs(datasets: Sequence[Dataset], target: str, k: int = 4, method: 
     """
     candidates = candidates or installed_thermometers(datasets[0])
     X = np.vstack([zero_referenced(d.matrix(candidates)) for d in datasets])
+    moving = np.ptp(X, axis=0) > 0   # a thermometer that never moves here carries nothing, and cannot be trained on
+    candidates, X = [c for c, m in zip(candidates, moving) if m], X[:, moving]
     y = np.concatenate([d[target] - d[target][0] for d in datasets])
     sel = select_sensors(X, y, method=method, n_select=min(k, len(candidates)), random_state=random_state)
     return [candidates[i] for i in sel.indices]

@@ -25,7 +25,7 @@ _UTC_OFFSET = r"(?:Z|[+-]\d\d(?::?\d\d)?)$"
 EXAMPLES = "2026-11-23 14:05:00 or 2026-11-23T14:05:00.5+01:00"
 
 
-def seconds_since_first_stamp(source: str, column: str, cells) -> tuple[np.ndarray, str]:
+def seconds_since_first_stamp(source: str, column: str, cells: Sequence[object]) -> tuple[np.ndarray, str]:
     """A column of ISO 8601 date-times as seconds since its first stamp.
 
     Parameters
@@ -71,7 +71,20 @@ def seconds_since_first_stamp(source: str, column: str, cells) -> tuple[np.ndarr
 
 
 def stamp(origin: str, seconds: float) -> str:
-    """The date-time ``seconds`` after ``origin`` (ISO 8601), as a message shows it."""
+    """The date-time ``seconds`` after ``origin``, as a message shows it.
+
+    Parameters
+    ----------
+    origin : str
+        An ISO 8601 date-time (a record's ``time_origin``).
+    seconds : float
+        s after it.
+
+    Returns
+    -------
+    str
+        ISO 8601 with a space between date and time.
+    """
     import pandas as pd
 
     return (pd.Timestamp(origin) + pd.Timedelta(seconds=float(seconds))).isoformat(sep=" ")

@@ -360,16 +360,9 @@ class Dataset:
         if unknown_map:
             raise TwinInputError(f"{path}: column map names column(s) {unknown_map} that the file lacks; "
                                  f"columns: {header}")
-        if time_column not in header:
-            raise TwinInputError(f"{path}: no time column {time_column!r}; columns: {header}")
-        t_index = header.index(time_column)
+        t_index, time_s = _time_column(path, header, data, time_column, origin)
         channels, cols = _measured_channels(path, header, t_index, column_map, channel_kinds or {})
-        time_s = data[:, t_index]
         values = data[:, cols]
-        if np.isnan(time_s).any():
-            row = int(np.flatnonzero(np.isnan(time_s))[0])
-            raise TwinInputError(f"{path}: {time_column} is empty or NaN at data row {row + 1}")
-        _check_time(time_s, str(path), time_column, origin)
         report = {"file": str(path), "rows": int(len(time_s)), "nan_policy": nan_policy}
         if origin:
             report["time_origin"] = origin
@@ -384,6 +377,19 @@ class Dataset:
     def __repr__(self):
         span = f"{self.time_s[0]:g}–{self.time_s[-1]:g} s" if len(self) else "empty"
         return f"Dataset({len(self)} rows, {span}, channels {self.names[:8]}{'…' if len(self.names) > 8 else ''})"
+
+
+def _time_column(path, header, data, time_column, origin):
+    """``(index, time in s)`` of a measured CSV's time column, present, complete and strictly increasing."""
+    if time_column not in header:
+        raise TwinInputError(f"{path}: no time column {time_column!r}; columns: {header}")
+    t_index = header.index(time_column)
+    time_s = data[:, t_index]
+    if np.isnan(time_s).any():
+        row = int(np.flatnonzero(np.isnan(time_s))[0])
+        raise TwinInputError(f"{path}: {time_column} is empty or NaN at data row {row + 1}")
+    _check_time(time_s, str(path), time_column, origin)
+    return t_index, time_s
 
 
 def _measured_channels(path, header, t_index, column_map, channel_kinds):

@@ -36,13 +36,25 @@ def write_text_atomic(path: str | Path, text: str) -> Path:
 
 
 def sync_file(path: str | Path) -> None:
-    """Flush a written file's content to the disk (``fsync``)."""
+    """Flush a written file's content to the disk (``fsync``).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    """
     with open(path, "rb") as file:
         os.fsync(file.fileno())
 
 
 def sync_folder(path: str | Path) -> None:
-    """Flush a folder's entries (its renames) to the disk; Windows has no folder ``fsync`` and needs none."""
+    """Flush a folder's entries (its renames) to the disk; Windows has no folder ``fsync`` and needs none.
+
+    Parameters
+    ----------
+    path : str or Path
+        The folder.
+    """
     if os.name == "nt":  # pragma: no cover - the CI runs on Linux
         return
     descriptor = os.open(path, os.O_RDONLY)
