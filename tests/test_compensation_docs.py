@@ -1,4 +1,7 @@
-"""The hybrid study's tables in docs/compensation.md are what the study prints today (see ``doc_examples``)."""
+"""The studies' tables in docs/compensation.md are what the studies print today (see ``doc_examples``)."""
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -18,3 +21,17 @@ def test_the_hybrid_tables_are_a_checked_example():
 def test_hybrid_example_prints_what_the_docs_show():
     """About 2.5 min: eight simulated records, eight physics predictions, four ANFIS fits."""
     check_example(DOC, HYBRID[0])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("study", ["cross-condition", "thesis"])
+def test_the_pasted_study_tables_are_what_the_study_prints(study, tmp_path):
+    """About 1.5 min each without a record cache: every table row `twin study` prints is in the document."""
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    run = subprocess.run([Path(sys.executable).parent / "twin", "study", study, "--out", str(tmp_path / study)],
+                         capture_output=True, text=True, env=env, check=False)
+    assert run.returncode == 0, run.stderr
+    rows = [line for line in run.stdout.splitlines() if line.startswith("| ") and not line.startswith("| train")]
+    documented = set(DOC.read_text(encoding="utf-8").splitlines())
+    assert len(rows) >= 10
+    assert [row for row in rows if row not in documented] == []
