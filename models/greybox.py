@@ -378,6 +378,27 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         lam = 1.0 / _time_constants(theta[: self.n_poles], *log_bounds)
         return lam, theta[self.n_poles] if fit_exponent else float(self.exponent)
 
+    def determined_by(self, span_s: float) -> bool:
+        """Whether records lasting ``span_s`` (the longest one) determine the fitted poles: the slowest time
+        constant is shorter than that and off the upper bound of ``time_constant_bounds``.
+
+        A slower pole is seen only at its start, where its response is nearly
+        a ramp, which a slower pole with a larger gain, or two with gains of
+        opposite sign, fit as well: its gain is then a guess.
+
+        Parameters
+        ----------
+        span_s : float
+            Duration of the longest training record, s.
+
+        Returns
+        -------
+        bool
+        """
+        check_is_fitted(self, "time_constants_")
+        slowest, high = float(np.max(self.time_constants_)), _pair(self.time_constant_bounds, "time_constant_bounds")[1]
+        return slowest < float(span_s) and slowest < high * (1.0 - 1e-6)
+
     # ------------------------------------------------------------ fit
     def _checked_settings(self):
         """``(n_poles, (τ low, τ high) s)``, each checked."""

@@ -711,3 +711,30 @@ def test_a_pole_its_records_do_not_determine_is_refused(records, tmp_path, capsy
     assert main(common) == 2 and "UNIDENTIFIED MODEL REFUSED" in capsys.readouterr().err
     assert main([*common, "--allow-unstable"]) == 0
     assert "WARNING: MODEL SAVED DESPITE ITS CHECK (--allow-unstable): UNIDENTIFIED" in capsys.readouterr().err
+
+
+def test_select_auto_trains_the_next_in_rank_when_the_choice_is_not_determined(records):
+    """The folds may rank first a candidate whose fit on all the records is refused (here 3 poles on the warm-up
+    of the test above): the next in the ranking whose fit is sound is trained, and the reason says so."""
+    from models.selection_cv import Selection
+    from twin.compensation.train import _first_sound_fit
+
+    times = np.arange(0.0, 4 * 3600.0, 60.0)
+    speed = np.where(times < 600.0, 0.0, np.where(times < 2 * 3600.0, 3000.0, 5000.0))
+    values = _dataset(times, speed, "warm-up").matrix(["spindle", "air", "Z"])
+    values[:, 2] += np.random.default_rng(0).normal(0.0, 0.2, len(times))
+    warm_up = Dataset(times, values, CHANNELS, {"scenario": "warm-up"})
+    ranking = ["greybox n_poles=3", "mlr", "greybox n_poles=2", "greybox n_poles=1"]
+    selection = Selection(ranking=ranking, chosen=ranking[0], score=dict.fromkeys(ranking, 1.0),
+                          mean_rmse=dict.fromkeys(ranking, 1.0), worst_rmse=dict.fromkeys(ranking, 1.0),
+                          fold_rmse={}, folds=[], reason="chose greybox n_poles=3.")
+
+    def fit(name, params):
+        return train([warm_up], "spindle,air", "Z", model=name, params=params, allow_unstable=True)
+
+    cm, _, (_, problem) = _first_sound_fit(selection, fit, [warm_up], {})
+    assert problem is None and cm.metadata["selection"]["trained"] == "mlr"       # the next in rank, not an order
+    assert cm.metadata["selection"]["chosen"] == "greybox n_poles=3"
+    assert re.search(r"Trained on all the records, greybox n_poles=3 is refused \(unidentified: its slowest time "
+                     r"constant is \d+ h, longer than .*\); the next in rank that is not, mlr, is trained instead\.$",
+                     cm.metadata["selection"]["reason"])

@@ -260,12 +260,10 @@ def identification_problem(cm: CompensationModel, datasets: Sequence[Dataset]) -
         The reason, or None for a model without time constants or one whose records cover them.
     """
     taus = getattr(cm.estimator, "time_constants_", None)
-    if taus is None:
+    span = max(float(ds.time_s[-1] - ds.time_s[0]) for ds in datasets)
+    if taus is None or cm.estimator.determined_by(span):
         return None
     slowest, bound = float(np.max(taus)), float(cm.estimator.time_constant_bounds[1])
-    span = max(float(ds.time_s[-1] - ds.time_s[0]) for ds in datasets)
-    if slowest < span and slowest < bound * (1.0 - 1e-6):
-        return None
     n_poles = len(taus)
     where = (f"sits on its upper bound, {bound / 3600:.3g} h (time_constant_bounds)"
              if slowest >= bound * (1.0 - 1e-6) else

@@ -39,7 +39,13 @@ from ..infra.cli_common import split_names
 from ..infra.outdir import atomic_directory, check_output_file, check_output_folder
 from ..infra.tables import markdown_table
 from ..rom.reduction import cached_rom
-from .protocol import auto_select, continued_prediction, identification_problem, stability_problem
+from .protocol import (
+    AUTO_CANDIDATES,
+    auto_select,
+    continued_prediction,
+    identification_problem,
+    stability_problem,
+)
 from .records import (
     continued_record,
     dataset_label,
@@ -279,29 +285,23 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
     channels = [*split_names(inputs), *observe, target]
     loaded = joined_when_contiguous(on_one_clock([load_dataset(d, column_map, nan_policy, machine, channels=channels)
                                                   for d in datasets]), channels)
-    selection = None
-    if select is not None:
+    def fit(model_name, model_params):
+        return fit_compensation_model(loaded, split_names(inputs), target, model_name, model_params,
+                                      zero_reference, reference_samples, observe)
+
+    if select is None:
+        cm = fit(model, params)
+        predictions, (kind, problem) = _predicted_and_checked(cm, loaded)
+    else:
         if select != "auto":
             raise TwinInputError(f"--select {select!r}: the only selection rule is 'auto'")
         if observe:
             raise TwinInputError("--observe names thermometers for a model with an observer (--model greybox); "
                                  "--select auto ranks candidates on the same inputs, without one")
-        model, chosen_params, selection = auto_select(loaded, split_names(inputs), target,
-                                                      zero_reference=zero_reference)
-        params = {**chosen_params, **(params or {})}
-    cm = fit_compensation_model(loaded, split_names(inputs), target, model, params, zero_reference,
-                                reference_samples, observe)
-    if selection is not None:
-        cm.metadata["selection"] = {"reason": selection.reason, "chosen": selection.chosen,
-                                    "ranking": selection.ranking,
-                                    "geometric_mean_rmse": selection.score, "mean_rmse": selection.mean_rmse,
-                                    "folds": selection.folds, "fold_rmse": selection.fold_rmse}
-    predictions = [cm.predict(ds) for ds in loaded]
+        _, _, selection = auto_select(loaded, split_names(inputs), target, zero_reference=zero_reference)
+        cm, predictions, (kind, problem) = _first_sound_fit(selection, fit, loaded, params or {})
     cm.metadata["training_metrics"] = {label: score(cm.target_values(ds), predicted)
                                        for ds, label, predicted in zip(loaded, distinct_labels(loaded), predictions)}
-    problem, kind = stability_problem(cm, loaded, predictions), "UNSTABLE"
-    if problem is None:
-        problem, kind = identification_problem(cm, loaded), "UNIDENTIFIED"
     if problem is not None:
         if not allow_unstable:
             raise TwinInputError(f"{kind} MODEL REFUSED (not saved): {problem}; pass --allow-unstable to save it "
@@ -310,6 +310,47 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
     if out is not None:
         cm.save(out)
     return cm
+
+
+def _predicted_and_checked(cm, datasets):
+    """``(predictions of each training record, (kind, problem))``: the problem is None for a fit that is stable
+    (:func:`~twin.compensation.protocol.stability_problem`) and determined by its records
+    (:func:`~twin.compensation.protocol.identification_problem`)."""
+    predictions = [cm.predict(ds) for ds in datasets]
+    problem = stability_problem(cm, datasets, predictions)
+    if problem is not None:
+        return predictions, ("UNSTABLE", problem)
+    return predictions, ("UNIDENTIFIED", identification_problem(cm, datasets))
+
+
+def _first_sound_fit(selection, fit, datasets, params):
+    """The selection's choice fitted on all the records; if that fit is refused, the next candidate in the
+    ranking whose fit is not (the reason says so), else the choice with its problem.
+
+    The folds score each candidate trained on part of the records; only the final fit shows whether all of
+    them determine it (a third pole that settles on its bound there is no model to ship, however it scored).
+    """
+    order = [selection.chosen, *(c for c in selection.ranking if c != selection.chosen
+                                 and np.isfinite(selection.score[c]))]
+    fits = []
+    for label in order:
+        name, candidate_params = AUTO_CANDIDATES[label]
+        cm = fit(name, {**candidate_params, **params})
+        fits.append((label, cm, *_predicted_and_checked(cm, datasets)))
+        if fits[-1][3][1] is None:
+            break
+    label, cm, predictions, (kind, problem) = fits[-1] if fits[-1][3][1] is None else fits[0]
+    if len(fits) > 1 or problem is not None:
+        first_kind, first_problem = fits[0][3]
+        selection.reason += (f" Trained on all the records, {selection.chosen} is refused ({first_kind.lower()}: "
+                             f"{first_problem.split(': ', 1)[-1]}); "
+                             + (f"the next in rank that is not, {label}, is trained instead." if problem is None
+                                else "so is every other candidate."))
+    cm.metadata["selection"] = {"reason": selection.reason, "chosen": selection.chosen, "trained": label,
+                                "ranking": selection.ranking, "geometric_mean_rmse": selection.score,
+                                "mean_rmse": selection.mean_rmse, "folds": selection.folds,
+                                "fold_rmse": selection.fold_rmse}
+    return cm, predictions, (kind, problem)
 
 
 def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset | Path | str],
