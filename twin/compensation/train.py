@@ -285,6 +285,7 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
     channels = [*split_names(inputs), *observe, target]
     loaded = joined_when_contiguous(on_one_clock([load_dataset(d, column_map, nan_policy, machine, channels=channels)
                                                   for d in datasets]), channels)
+
     def fit(model_name, model_params):
         return fit_compensation_model(loaded, split_names(inputs), target, model_name, model_params,
                                       zero_reference, reference_samples, observe)
@@ -332,16 +333,17 @@ def _first_sound_fit(selection, fit, datasets, params):
     """
     order = [selection.chosen, *(c for c in selection.ranking if c != selection.chosen
                                  and np.isfinite(selection.score[c]))]
-    fits = []
+    tried = []
     for label in order:
         name, candidate_params = AUTO_CANDIDATES[label]
         cm = fit(name, {**candidate_params, **params})
-        fits.append((label, cm, *_predicted_and_checked(cm, datasets)))
-        if fits[-1][3][1] is None:
+        predictions, (kind, problem) = _predicted_and_checked(cm, datasets)
+        tried.append((label, cm, predictions, (kind, problem)))
+        if problem is None:
             break
-    label, cm, predictions, (kind, problem) = fits[-1] if fits[-1][3][1] is None else fits[0]
-    if len(fits) > 1 or problem is not None:
-        first_kind, first_problem = fits[0][3]
+    label, cm, predictions, (kind, problem) = tried[-1] if problem is None else tried[0]
+    if len(tried) > 1 or problem is not None:
+        first_kind, first_problem = tried[0][3]
         selection.reason += (f" Trained on all the records, {selection.chosen} is refused ({first_kind.lower()}: "
                              f"{first_problem.split(': ', 1)[-1]}); "
                              + (f"the next in rank that is not, {label}, is trained instead." if problem is None
