@@ -263,10 +263,9 @@ def identification_problem(cm: CompensationModel, datasets: Sequence[Dataset]) -
     span = max(float(ds.time_s[-1] - ds.time_s[0]) for ds in datasets)
     if taus is None or cm.estimator.determined_by(span):
         return None
-    slowest, bound = float(np.max(taus)), float(cm.estimator.time_constant_bounds[1])
-    n_poles = len(taus)
-    where = (f"sits on its upper bound, {bound / 3600:.3g} h (time_constant_bounds)"
-             if slowest >= bound * (1.0 - 1e-6) else
+    slowest, n_poles = float(np.max(taus)), len(taus)
+    where = (f"sits on its upper bound, {slowest / 3600:.3g} h (time_constant_bounds)"
+             if not cm.estimator.determined_by(np.inf) else    # however long the records, it is on the bound
              f"is {slowest / 3600:.3g} h, longer than the longest training record ({span / 3600:.3g} h)")
     fewer = f", or with fewer poles (--param n_poles={n_poles - 1})" if n_poles > 1 else ""
     return (f"{cm.model_name}: its slowest time constant {where}: the records show only the start of that "
@@ -345,15 +344,31 @@ def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Datas
                                  f"{cm.sampling_interval_s:g} s; --reference train needs the same interval")
     start = _history_start(cm, history)
     measured = dataset[cm.target] - cm.target_reference(start)
-    # a model that takes the time was trained on records of any interval: the history's own is the one to
-    # continue at (the model file's is its first training record's)
-    interval_s = sampling_interval(history, strict=False) if timed else cm.sampling_interval_s
-    bridge_s, bridge, record_s = bridging_inputs(history, dataset, cm.inputs, interval_s, gap, on_grid=not timed)
+    bridge_s, bridge, record_s = bridging_inputs(history, dataset, cm.inputs, continuation_interval(cm, history),
+                                                 gap, on_grid=not timed)
     X = np.vstack([history.matrix(cm.inputs), bridge, dataset.matrix(cm.inputs)]) - cm.input_reference(start)
     if timed:
         X = np.column_stack([np.r_[history.time_s, bridge_s, record_s] - history.time_s[0], X])
     predicted = np.asarray(cm.estimator.predict(X), float)[len(history) + len(bridge):]
     return measured, cm.series_change(predicted)
+
+
+def continuation_interval(cm: CompensationModel, history: Dataset) -> float:
+    """The sampling interval at which a record continues ``history``, s: the model's, or, for a model that takes
+    the time (trained on records of any interval; its file keeps its first training record's), the history's own.
+
+    Parameters
+    ----------
+    cm : CompensationModel
+        A time-series model.
+    history : Dataset
+        The record continued.
+
+    Returns
+    -------
+    float
+    """
+    return sampling_interval(history, strict=False) if cm.preprocessing.get("time_column") else cm.sampling_interval_s
 
 
 def _history_start(cm, history):

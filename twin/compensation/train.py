@@ -42,6 +42,7 @@ from ..rom.reduction import cached_rom
 from .protocol import (
     AUTO_CANDIDATES,
     auto_select,
+    continuation_interval,
     continued_prediction,
     identification_problem,
     stability_problem,
@@ -423,12 +424,15 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
         y, p = _measured_and_predicted(cm, ds, label, reference, past, gap)
         rows.append({"dataset": label, **score(y, p)})
         predictions[label] = (ds.time_s, y, p)
-        if past is not None and cm.is_time_series and ds.time_s[0] > past.time_s[-1]:
+        if past is None or not cm.is_time_series:
+            continue
+        interval_s = continuation_interval(cm, past)   # the interval the prediction continued it at
+        if ds.time_s[0] > past.time_s[-1]:
             # a later record continues this one (and the bridge, where --gap interpolate made one)
-            past = continued_record(past, ds, channels, cm.sampling_interval_s)
-        elif past is not None and cm.is_time_series:   # its clock restarts: it followed directly, on the history's
-            shifted = Dataset(ds.time_s - ds.time_s[0] + past.time_s[-1] + cm.sampling_interval_s, ds.values,
-                              ds.channels, ds.metadata)
+            past = continued_record(past, ds, channels, interval_s)
+        else:   # its clock restarts: it followed directly, on the history's
+            shifted = Dataset(ds.time_s - ds.time_s[0] + past.time_s[-1] + interval_s, ds.values, ds.channels,
+                              ds.metadata)
             past = continued_record(past, shifted, channels)
     out_dir = Path(out_dir) if out_dir is not None else None
     result = Evaluation(rows, out_dir, predictions)

@@ -546,8 +546,7 @@ def _parse_csv(path, text, time_column=None):
     for j, column in enumerate(frame.columns):
         numeric = pd.to_numeric(frame[column], errors="coerce")
         bad = numeric.isna() & frame[column].notna()
-        given = frame[column].dropna()
-        if header[j] == time_column and len(given) and bad[given.index[0]]:   # the first stamp is no number
+        if bad.any() and header[j] == time_column and bad[frame[column].first_valid_index()]:   # stamps, not s
             numeric, origin = seconds_since_first_stamp(path, header[j], frame[column].astype(object))
         elif bad.any():
             i = int(np.flatnonzero(bad.to_numpy())[0])

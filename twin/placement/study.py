@@ -198,12 +198,12 @@ def _record_axes(axes):
     return tuple(sorted(set(axes) | {"X", "Y", "Z"}, key="XYZ".index)) if set(axes) <= set("XYZ") else tuple(axes)
 
 
-def _simulate(spec, cspec, scenarios, axes, record_interval_s, response_horizon_s, physics, scheduler, use_cache,
-              progress):
-    """(machine, scenario records, step responses, timings) — noise-free, from the cache where possible."""
+def _simulate(machine, spec, cspec, scenarios, axes, record_interval_s, response_horizon_s, physics, scheduler,
+              use_cache, progress):
+    """(scenario records, step responses, timings) — noise-free, from the cache where possible. ``machine`` is
+    ``spec`` built here first, so that its mesh and operator caches are ready for the workers."""
     t0 = time.perf_counter()
     tasks = [RecordTask(spec, cspec, s, axes, record_interval_s) for s in scenarios]
-    machine = spec.build()            # here first: mesh and operator caches are then ready for the workers
     if physics:
         tasks += [ResponseTask(spec, cspec, name, axes, float(response_horizon_s))
                   for name, _j, _s in elementary_inputs(machine)]
@@ -211,7 +211,7 @@ def _simulate(spec, cspec, scenarios, axes, record_interval_s, response_horizon_
     timings = {"simulation_s": time.perf_counter() - t0, "simulated": sum(not r.from_cache for r in everything),
                "from_cache": sum(r.from_cache for r in everything), "responses": len(everything) - len(scenarios),
                "simulation_cpu_s": sum(r.seconds for r in everything if not r.from_cache)}
-    return machine, everything[:len(scenarios)], everything[len(scenarios):], timings
+    return everything[:len(scenarios)], everything[len(scenarios):], timings
 
 
 def _test_choices(table, best, cands, axes, k_max, methods, rec_train, rec_test):
@@ -294,8 +294,8 @@ def placement_study(machine: str = "vmc_ram", mesh_size_m: float | None = None, 
     m = spec.build()
     cands = cspec.build(m)
     _check_against_machine(m, cands, axes, k_max, scenarios)
-    m, records, responses, timings = _simulate(
-        spec, cspec, given, _record_axes(axes), record_interval_s, response_horizon_s,
+    records, responses, timings = _simulate(
+        m, spec, cspec, given, _record_axes(axes), record_interval_s, response_horizon_s,
         "greedy-physics" in methods, scheduler, use_cache, progress)
     n_train, n_val = len(roles["training"]), len(roles["validation"])
     if noise:         # the step responses too: greedy-physics sees them as measured
