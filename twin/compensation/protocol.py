@@ -30,9 +30,9 @@ from ..errors import TwinInputError
 from .records import (
     bridge_times,
     check_complete,
+    continued_record,
     dataset_label,
     evenly_sampled,
-    linear_bridge,
     note_long_steps,
     repeats,
     sampling_interval,
@@ -275,9 +275,9 @@ def identification_problem(cm: CompensationModel, datasets: Sequence[Dataset]) -
 
 def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Dataset | None = None,
                          gap: Literal["refuse", "interpolate"] = "refuse"
-                         ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``(measured, predicted)`` change of the target since the *training* start, for a record that continues it
-    (for a time-series model trained on several records, the start of the one ``history`` is).
+                         ) -> tuple[NDArray[np.float64], NDArray[np.float64], Dataset | None]:
+    """``(measured, predicted, ran_over)``: the change of the target since the *training* start, for a record that
+    continues it (for a time-series model trained on several records, the start of the one ``history`` is).
 
     Static models map the inputs referenced to the training start. A
     time-series model runs over ``history`` (the training record, from its
@@ -308,6 +308,10 @@ def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Datas
         Target change since the training start, in the target's unit (µm for a drift axis).
     predicted : ndarray, shape (n_rows,)
         The model's prediction of it, same unit.
+    ran_over : Dataset or None
+        For a time-series model, the record it ran over, in its inputs and target: ``history``, the bridge and
+        ``dataset`` on the history's clock (the history of a record that continues this one); None for a
+        static model.
 
     Raises
     ------
@@ -326,7 +330,7 @@ def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Datas
             cm.check(history)
         start = None if history is None else _history_start(cm, history)
         return (dataset[cm.target] - cm.target_reference(start),
-                np.asarray(cm.estimator.predict(dataset.matrix(cm.inputs) - cm.input_reference(start)), float))
+                np.asarray(cm.estimator.predict(dataset.matrix(cm.inputs) - cm.input_reference(start)), float), None)
     if history is None:
         which = "the training record" if len(cm.training) < 2 else \
             f"the training record it continues (one of {', '.join(t['label'] for t in cm.training)})"
@@ -344,13 +348,15 @@ def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Datas
                                  f"{cm.sampling_interval_s:g} s; --reference train needs the same interval")
     start = _history_start(cm, history)
     measured = dataset[cm.target] - cm.target_reference(start)
-    bridge_s, bridge, record_s = bridging_inputs(history, dataset, cm.inputs, continuation_interval(cm, history),
-                                                 gap, on_grid=not timed)
-    X = np.vstack([history.matrix(cm.inputs), bridge, dataset.matrix(cm.inputs)]) - cm.input_reference(start)
+    interval_s = continuation_interval(cm, history)
+    record_s = bridging_inputs(history, dataset, cm.inputs, interval_s, gap, on_grid=not timed)[1]
+    ran_over = continued_record(history, Dataset(record_s, dataset.values, dataset.channels, dataset.metadata),
+                                [*cm.inputs, cm.target], interval_s)
+    X = ran_over.matrix(cm.inputs) - cm.input_reference(start)
     if timed:
-        X = np.column_stack([np.r_[history.time_s, bridge_s, record_s] - history.time_s[0], X])
-    predicted = np.asarray(cm.estimator.predict(X), float)[len(history) + len(bridge):]
-    return measured, cm.series_change(predicted)
+        X = np.column_stack([ran_over.time_s - history.time_s[0], X])
+    predicted = np.asarray(cm.estimator.predict(X), float)[len(ran_over) - len(dataset):]
+    return measured, cm.series_change(predicted), ran_over
 
 
 def continuation_interval(cm: CompensationModel, history: Dataset) -> float:
@@ -389,8 +395,9 @@ def _history_start(cm, history):
 
 def bridging_inputs(history: Dataset, dataset: Dataset, inputs: list[str], interval_s: float,
                     gap: Literal["refuse", "interpolate"] = "refuse", on_grid: bool = True
-                    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """Input rows between the end of ``history`` and the start of ``dataset``, at the model's interval.
+                    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Times of the input rows between the end of ``history`` and the start of ``dataset``, at the model's
+    interval (:func:`~twin.compensation.records.continued_record` fills them), and the record's times.
 
     A time-series model carries its thermal state from the history into the
     record, so the rows it does not see are not harmless: after a stop of a
@@ -420,9 +427,8 @@ def bridging_inputs(history: Dataset, dataset: Dataset, inputs: list[str], inter
     Returns
     -------
     bridge_time : ndarray, shape (n_missing,)
-        Times of the bridging rows, s on the history's clock.
-    bridge : ndarray, shape (n_missing, n_inputs)
-        The bridging rows (none when the record follows the history, or when its clock restarts).
+        Times of the bridging rows, s on the history's clock (none when the record follows the history, or
+        when its clock restarts).
     record_time : ndarray, shape (n_rows,)
         The record's times on the history's clock, s (shifted when its clock restarts).
 
@@ -438,11 +444,10 @@ def bridging_inputs(history: Dataset, dataset: Dataset, inputs: list[str], inter
         raise TwinInputError(f"{label} starts with the rows of --history {source} (t = {start:g} s, the same "
                              "readings): a record cannot continue itself; evaluate it without --reference train, "
                              "or pass as --history the record it continues")
-    no_bridge = np.empty(0), np.empty((0, len(inputs)))
     if start <= float(history.time_s[0]):
         log.warning("%s: its time starts at %g s, not after --history %s ends (%g s): taken to follow it directly",
                     label, start, source, end)
-        return *no_bridge, dataset.time_s - start + end + interval_s
+        return np.empty(0), dataset.time_s - start + end + interval_s
     if start <= end:
         raise TwinInputError(f"{label}: time_s starts at {start:g} s, inside --history {source} ({history.time_s[0]:g}"
                              f"..{end:g} s); pass as --history the record that ends where this one starts")
@@ -452,7 +457,7 @@ def bridging_inputs(history: Dataset, dataset: Dataset, inputs: list[str], inter
                              f"ends: not a whole number of the model's {interval_s:g} s steps")
     times = bridge_times(end, start, interval_s)
     if len(times) == 0:
-        return *no_bridge, dataset.time_s
+        return times, dataset.time_s
     if gap != "interpolate":
         raise TwinInputError(f"{label}: time_s starts at {start:g} s, {start - end:g} s after --history {source} "
                              f"ends ({end:g} s): {len(times)} rows of {', '.join(inputs)} are missing, and a "
@@ -460,4 +465,4 @@ def bridging_inputs(history: Dataset, dataset: Dataset, inputs: list[str], inter
                              "--gap interpolate to bridge them by linear interpolation (the spindle speed too)")
     log.warning("%s: %d missing rows after --history %s bridged by linear interpolation of the inputs",
                 label, len(times), source)
-    return times, linear_bridge(history.matrix(inputs)[-1], dataset.matrix(inputs)[0], len(times)), dataset.time_s
+    return times, dataset.time_s

@@ -42,13 +42,11 @@ from ..rom.reduction import cached_rom
 from .protocol import (
     AUTO_CANDIDATES,
     auto_select,
-    continuation_interval,
     continued_prediction,
     identification_problem,
     stability_problem,
 )
 from .records import (
-    continued_record,
     dataset_label,
     distinct,
     distinct_labels,
@@ -421,19 +419,11 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
         cm.check_readings(ds)
     rows, predictions = [], {}
     for ds, label in zip(loaded, distinct_labels(loaded)):
-        y, p = _measured_and_predicted(cm, ds, label, reference, past, gap)
+        y, p, ran_over = _measured_and_predicted(cm, ds, label, reference, past, gap)
         rows.append({"dataset": label, **score(y, p)})
         predictions[label] = (ds.time_s, y, p)
-        if past is None or not cm.is_time_series:
-            continue
-        interval_s = continuation_interval(cm, past)   # the interval the prediction continued it at
-        if ds.time_s[0] > past.time_s[-1]:
-            # a later record continues this one (and the bridge, where --gap interpolate made one)
-            past = continued_record(past, ds, channels, interval_s)
-        else:   # its clock restarts: it followed directly, on the history's
-            shifted = Dataset(ds.time_s - ds.time_s[0] + past.time_s[-1] + interval_s, ds.values, ds.channels,
-                              ds.metadata)
-            past = continued_record(past, shifted, channels)
+        if ran_over is not None:   # a later record continues this one, as the model ran over it
+            past = ran_over
     out_dir = Path(out_dir) if out_dir is not None else None
     result = Evaluation(rows, out_dir, predictions)
     if out_dir is not None:
@@ -461,7 +451,7 @@ def _measured_and_predicted(cm, ds, label, reference, past, gap):
             return continued_prediction(cm, ds, past, gap)
         if cm.preprocessing.get("time_column"):
             note_long_steps(ds)
-        return cm.target_values(ds), cm.predict(ds)
+        return cm.target_values(ds), cm.predict(ds), None
     except TwinInputError:
         raise
     except ValueError as exc:
