@@ -94,3 +94,16 @@ def test_the_header_says_how_often_each_scenario_is_recorded():
         assert np.allclose(np.diff(record_times(s, 60.0)), intervals[s.name])
     assert _intervals({"record_intervals_s": intervals}) == (
         "every 60 s; every 300 s for etve_5K, stratified_ambient, iso230_3_etve (their own sampling)")
+
+
+@pytest.mark.parametrize("role", ["--train", "--validation", "--test"])
+def test_a_scenario_beyond_the_machines_limits_is_refused_naming_file_and_limit(refused, tmp_path, role):
+    """Checked against the machine before any simulation: else the study would fail (or run a spindle the
+    machine does not have) after hours of the other scenarios."""
+    too_fast = (SCENARIOS_DIR / "iso230_3_spindle_short.toml").read_text(encoding="utf-8").replace(
+        'name = "iso230_3_spindle_short"', 'name = "too_fast"').replace("spindle_rpm = 6000", "spindle_rpm = 15000")
+    path = tmp_path / "too_fast.toml"
+    path.write_text(too_fast, encoding="utf-8")
+    given = {"--train": f"{TRAIN},{path}", "--validation": f"{VALIDATION},{path}", "--test": f"{TEST},{path}"}
+    err = refused(role, given[role])
+    assert f"{path}: " in err and "spindle_rpm 15000 exceeds the maximum of machine 'vmc_ram' (12000 rpm)" in err
