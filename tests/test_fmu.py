@@ -9,11 +9,21 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_cli_outdir import one_error_line
 
 from twin.cli import main
 from twin.core.scenario import load_scenario
-from twin.fmu.export import export_fmu, input_table, scenario_start, simulate, simulate_table, validate
+from twin.fmu.export import (
+    export_fmu,
+    fmu_identity,
+    input_table,
+    scenario_start,
+    simulate,
+    simulate_table,
+    validate,
+)
 from twin.fmu.session import FMUSession, FMUStepError
+from twin.fmu.spec import FMUError
 from twin.rom.reduction import simulate_rom
 
 KINDS = ("native", "python")
@@ -192,6 +202,72 @@ def test_cli_exports_and_validates(tmp_path, capsys):
     assert main(["fmu", "export", "--kind", "native", "--out", str(out), "--outputs", "T01,X,Y,Z"]) == 0
     assert "no problems" in capsys.readouterr().out
     assert main(["fmu", "validate", str(out)]) == 0
+
+
+def test_an_fmu_names_the_model_it_runs(fmus, fmu3, rom):
+    """Machine, digest, method and order are read back from every kind's description (fmu simulate needs them)."""
+    for path in (*fmus.values(), fmu3):
+        identity = fmu_identity(path)
+        assert (identity.machine, identity.digest, identity.method, identity.order) == (
+            rom.machine, rom.digest, rom.method, rom.order)
+
+
+def test_an_fmu_of_another_tool_is_not_taken_for_a_twin(fmus, tmp_path):
+    other = tmp_path / "other.fmu"
+    with zipfile.ZipFile(fmus["native"]) as zin, zipfile.ZipFile(other, "w") as zout:
+        for item in zin.infolist():
+            data = zin.read(item.filename)
+            if item.filename == "modelDescription.xml":
+                data = data.replace(b'description="Thermal twin of machine', b'description="A plant of machine')
+            zout.writestr(item, data)
+    with pytest.raises(FMUError, match="other.fmu: not a thermal-twin FMU of this version"):
+        fmu_identity(other)
+
+
+def test_fmu_simulate_compares_the_fmu_with_its_own_rom_and_refuses_another(fmus, tmp_path, capsys):
+    """Another order, machine, mesh or source, or a scenario of another machine, would compare two models and
+    report their difference as the FMU's (it exited 0 with 11 % and 1900 %)."""
+    fmu, out = str(fmus["native"]), str(tmp_path / "out.csv")
+    assert main(["fmu", "simulate", fmu, "heat_cool_9000", "--out", out]) == 0
+    shown = capsys.readouterr().out.splitlines()[-1]
+    assert shown.startswith("largest relative difference from the in-process krylov ROM of order 80: ")
+    assert float(shown.rsplit(" ", 1)[1]) < 1e-9
+    hot = tmp_path / "vmc_hot.toml"     # the same machine name, mesh and sensors; a front bearing 15 W hotter
+    source = (Path(__file__).parents[1] / "meshes" / "machines" / "vmc_ram.toml").read_text(encoding="utf-8")
+    hot.write_text(source.replace("coefficient_W = 105.0", "coefficient_W = 120.0", 1), encoding="utf-8")
+    refused = {
+        ("heat_cool_9000", "--order", "40"): "--order 40 --method krylov: ",
+        ("heat_cool_9000", "--method", "modal"): "--order 80 --method modal: ",
+        ("heat_cool_9000", "--machine", "machine_a"): "--machine machine_a is machine 'machine_a'; ",
+        ("machine_a_heat_cool",): "scenario 'machine_a_heat_cool' is written for machine 'machine_a'; ",
+        ("heat_cool_9000", "--machine", str(hot)): f"machine {hot} (mesh size its default) has digest ",
+    }
+    for options, message in refused.items():
+        assert main(["fmu", "simulate", fmu, *options, "--out", out, "--overwrite"]) == 2, options
+        err = one_error_line(capsys)
+        assert message in err and "runs a krylov ROM of order 80 of machine 'vmc_ram' (digest " in err
+    # run on the FMU's machine on purpose, as twin run --machine does
+    assert main(["fmu", "simulate", fmu, "machine_a_heat_cool", "--machine", "vmc_ram", "--out", out,
+                 "--overwrite"]) == 0
+
+
+@pytest.mark.parametrize(("option", "value", "message"), [
+    ("--step", "0", "--step 0: the default experiment's step size must be a positive number of seconds"),
+    ("--step", "-5", "--step -5: "),
+    ("--step", "nan", "--step nan: "),
+    ("--initial-temperature", "500", "--initial-temperature 500: must be in [-50, 100] °C"),
+    ("--initial-temperature", "nan", "--initial-temperature nan: "),
+])
+def test_fmu_export_refuses_a_start_or_step_the_fmu_cannot_run_with(option, value, message, tmp_path, capsys):
+    """They exported with 'no problems', then the FMU failed in its first step or initialisation (or gcc's
+    output was the error)."""
+    out = tmp_path / "bad.fmu"
+    assert main(["fmu", "export", "--kind", "native", option, value, "--out", str(out)]) == 2
+    assert message in one_error_line(capsys) and not out.exists()
+
+
+def test_scenario_start_takes_a_scenario_name_as_input_table_does(rom):
+    assert scenario_start(rom, "heat_cool_9000") == scenario_start(rom, load_scenario("heat_cool_9000"))
 
 
 def test_cli_reports_an_order_too_high(machine, capsys):

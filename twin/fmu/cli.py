@@ -59,6 +59,11 @@ def cmd_fmu_validate(args: argparse.Namespace) -> None:
 def cmd_fmu_simulate(args: argparse.Namespace) -> None:
     """Run an FMU through a scenario in fmpy, compare it with the in-process ROM, write a CSV.
 
+    The machine, ROM order and method default to the FMU's own; options that contradict it, a machine of
+    another digest (mesh, materials, sources) and a scenario written for another machine (unless
+    ``--machine`` names the FMU's) are refused, before any build: the comparison would measure the
+    difference of two models, not the FMU's fidelity.
+
     Parameters
     ----------
     args : argparse.Namespace
@@ -69,14 +74,25 @@ def cmd_fmu_simulate(args: argparse.Namespace) -> None:
     import numpy as np
 
     from ..core.files import write_text_atomic
+    from ..core.machine import build_machine
     from ..core.scenario import load_scenario
-    from .export import input_table, scenario_start, simulate, simulate_table
+    from ..rom.reduction import cached_rom, machine_digest
+    from .export import fmu_identity, input_table, scenario_start, simulate, simulate_table
 
     existing_fmu(args.fmu)
+    identity = fmu_identity(args.fmu)
     scenario = load_scenario(args.scenario)
     args.out = args.out or f"runs/fmu_{scenario.name}.csv"
     check_out_file(args, inputs=(args.fmu, scenario.source))
-    machine, rom = machine_and_rom(args)
+    _check_options(args, identity, scenario)
+    machine = build_machine(args.machine, args.mesh_size)
+    scenario.check_machine(machine.definition)
+    if machine_digest(machine) != identity.digest:
+        raise TwinInputError(f"{args.fmu} runs {identity}; machine {args.machine} (mesh size "
+                             f"{args.mesh_size or 'its default'}) has digest {machine_digest(machine)}: another "
+                             "mesh, material, source or sensor. Pass the --machine and --mesh-size it was exported "
+                             "with")
+    rom = cached_rom(machine, args.order, args.method)
     T0, steady = scenario_start(rom, scenario)
     table = input_table(rom, scenario)
     result = simulate(args.fmu, table, T_initial=T0, steady_start=steady)
@@ -95,7 +111,29 @@ def cmd_fmu_simulate(args: argparse.Namespace) -> None:
             j = rom.output_index(n)
             scale = max(float(np.abs(ref[:, j]).max()), 1e-30)
             worst = max(worst, float(np.abs(result[n] - ref[:, j]).max()) / scale)
-    print(f"largest relative difference from the in-process ROM: {worst:.2e}")
+    print(f"largest relative difference from the in-process {rom.method} ROM of order {rom.order}: {worst:.2e}")
+
+
+def _check_options(args, identity, scenario):
+    """Fill the machine, order and method the options leave out with the FMU's; refuse any that contradict it,
+    and a scenario written for another machine unless ``--machine`` names the FMU's (as ``twin run --machine``
+    runs a scenario on another machine). An FE-engine FMU is compared with its machine's default ROM."""
+    from ..core.machine_definition import load_machine
+    from ..rom.reduction import DEFAULT_ORDER
+
+    named = load_machine(args.machine or scenario.machine).name     # a TOML read, before any build
+    if named != identity.machine:
+        which = (f"--machine {args.machine} is machine {named!r}" if args.machine else
+                 f"{scenario.source}: scenario {scenario.name!r} is written for machine {named!r}")
+        raise TwinInputError(f"{which}; {args.fmu} runs {identity}. Pass --machine {identity.machine} to run the "
+                             "scenario on the FMU's machine")
+    args.machine = args.machine or identity.machine
+    own_order, own_method = (DEFAULT_ORDER, "krylov") if identity.order is None else (identity.order, identity.method)
+    args.order = own_order if args.order is None else args.order
+    args.method = own_method if args.method is None else args.method
+    if identity.order is not None and (args.order, args.method) != (identity.order, identity.method):
+        raise TwinInputError(f"--order {args.order} --method {args.method}: {args.fmu} runs {identity}; leave "
+                             "the options out to compare it with its own ROM")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -131,7 +169,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     run = fsub.add_parser("simulate", help="run an FMU through a scenario in fmpy and compare with the ROM")
     run.add_argument("fmu")
     run.add_argument("scenario")
-    add_rom_options(run)
+    add_rom_options(run, defaults_from="the FMU's")
     run.add_argument("--out", help="CSV of the FMU outputs (default runs/fmu_<scenario>.csv)")
     add_overwrite(run, "file")
     run.set_defaults(func=cmd_fmu_simulate)

@@ -26,11 +26,13 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 import shutil
 import subprocess
 import tempfile
 import zipfile
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 from xml.dom.minidom import parseString
@@ -73,9 +75,56 @@ def _subset(rom, rows):
 
 
 def _description(rom, engine):
+    """The model description's text; it names what the FMU runs, read back by :func:`fmu_identity`."""
     what = "full finite-element model" if engine == "fe" else f"{rom.method} ROM of order {rom.order}"
-    return (f"Thermal twin of machine {rom.machine!r} ({what}): spindle speed, feeds and ambient in; "
-            f"temperatures (degC), TCP drift (um) and strains (ue) out")
+    return (f"Thermal twin of machine {rom.machine!r} ({what}; machine digest {rom.digest}): spindle speed, "
+            f"feeds and ambient in; temperatures (degC), TCP drift (um) and strains (ue) out")
+
+
+_IDENTITY = re.compile(r"^Thermal twin of machine '(?P<machine>[^']*)' \((?:full finite-element model|(?P<method>\w+) "
+                       r"ROM of order (?P<order>\d+)); machine digest (?P<digest>[0-9a-f]+)\)")
+
+
+@dataclass(frozen=True)
+class FMUIdentity:
+    """What a twin FMU runs, from its model description."""
+
+    machine: str            #: the machine's name
+    digest: str             #: :func:`twin.rom.reduction.machine_digest` of the machine the FMU was built from
+    method: str | None      #: the ROM's reduction method; None for the full FE engine
+    order: int | None       #: the ROM's order; None for the full FE engine
+
+    def __str__(self):
+        what = "the full FE model" if self.order is None else f"a {self.method} ROM of order {self.order}"
+        return f"{what} of machine {self.machine!r} (digest {self.digest})"
+
+
+def fmu_identity(path: Path | str) -> FMUIdentity:
+    """The machine, ROM and machine digest an FMU exported by this version runs.
+
+    Parameters
+    ----------
+    path : Path or str
+        The FMU file.
+
+    Returns
+    -------
+    FMUIdentity
+
+    Raises
+    ------
+    FMUError
+        The FMU's description is not one this version writes (another tool's FMU, or an older export).
+    """
+    from fmpy import read_model_description
+
+    text = read_model_description(str(path), validate=False).description or ""
+    found = _IDENTITY.match(text)
+    if found is None:
+        raise FMUError(f"{path}: not a thermal-twin FMU of this version (its description does not name the "
+                       f"machine digest: {text[:80]!r}); export it again with twin fmu export")
+    order = found["order"]
+    return FMUIdentity(found["machine"], found["digest"], found["method"], None if order is None else int(order))
 
 
 def export_fmu(rom: ReducedModel, out: Path | str, kind: Literal["python", "native"] = "python",
@@ -112,6 +161,12 @@ def export_fmu(rom: ReducedModel, out: Path | str, kind: Literal["python", "nati
     """
     if kind not in KINDS:
         raise FMUError(f"unknown FMU kind {kind!r}; kinds: {list(KINDS)}")
+    if not step_s > 0 or not np.isfinite(step_s):
+        raise FMUError(f"--step {step_s:g}: the default experiment's step size must be a positive number of seconds")
+    low, high = spec.AMBIENT_RANGE_C
+    if not low <= default_temperature_C <= high:
+        raise FMUError(f"--initial-temperature {default_temperature_C:g}: must be in [{low:g}, {high:g}] °C, the "
+                       "range of T_initial and of the ambient inputs it starts")
     if engine not in ENGINES:
         raise FMUError(f"unknown FMU engine {engine!r}; engines: {list(ENGINES)}")
     if kind == "native" and engine != "rom":
@@ -565,7 +620,7 @@ def input_table(rom: ReducedModel, scenario: Scenario | Path | str, times: Array
     return table
 
 
-def scenario_start(rom: ReducedModel, scenario: Scenario) -> tuple[float, bool]:
+def scenario_start(rom: ReducedModel, scenario: Scenario | Path | str) -> tuple[float, bool]:
     """FMU start parameters ``(T_initial, steady_start)`` for a scenario's initial state.
 
     A steady start is the steady state for the inputs set at initialisation
@@ -575,7 +630,8 @@ def scenario_start(rom: ReducedModel, scenario: Scenario) -> tuple[float, bool]:
     ----------
     rom : ReducedModel
         The machine's ROM.
-    scenario : Scenario
+    scenario : Scenario, Path or str
+        The scenario (object, TOML path or name).
 
     Returns
     -------
@@ -583,6 +639,7 @@ def scenario_start(rom: ReducedModel, scenario: Scenario) -> tuple[float, bool]:
         °C: the scenario's uniform temperature, else the room's air at t = 0 (20.0, unused, for a steady start).
     steady_start : bool
     """
+    scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     init = scenario.initial
     if init["kind"] == "steady":
         return 20.0, True

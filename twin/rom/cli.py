@@ -48,18 +48,27 @@ def machine_and_rom(args: argparse.Namespace) -> tuple[Machine, ReducedModel]:
     return machine, cached_rom(machine, args.order, args.method, rebuild=getattr(args, "rebuild", False))
 
 
-def add_rom_options(p: argparse.ArgumentParser) -> None:
+def add_rom_options(p: argparse.ArgumentParser, defaults_from: str | None = None) -> None:
     """Add the options that choose the machine and its ROM (``rom build``, ``fmu export``, ``fmu simulate``).
 
     Parameters
     ----------
     p : argparse.ArgumentParser
         The command's parser.
+    defaults_from : str, optional
+        What the machine, order and method default to, if not to vmc_ram, order
+        :data:`DEFAULT_ORDER` and krylov (e.g. "the FMU's": they are then None until the command fills them).
     """
-    p.add_argument("--machine", default="vmc_ram", help="machine name or TOML path (default vmc_ram)")
+    def default(value, shown):
+        return (None, f"default {defaults_from}") if defaults_from else (value, f"default {shown}")
+
+    value, shown = default("vmc_ram", "vmc_ram")
+    p.add_argument("--machine", default=value, help=f"machine name or TOML path ({shown})")
     p.add_argument("--mesh-size", type=float, help="target tetrahedron edge length, m")
-    p.add_argument("--order", type=int, default=DEFAULT_ORDER, help=f"ROM order (default {DEFAULT_ORDER})")
-    p.add_argument("--method", choices=("krylov", "modal"), default="krylov", help="reduction method")
+    value, shown = default(DEFAULT_ORDER, DEFAULT_ORDER)
+    p.add_argument("--order", type=int, default=value, help=f"ROM order ({shown})")
+    value, shown = default("krylov", "krylov")
+    p.add_argument("--method", choices=("krylov", "modal"), default=value, help=f"reduction method ({shown})")
 
 
 def cmd_rom_build(args: argparse.Namespace) -> None:
