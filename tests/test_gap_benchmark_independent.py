@@ -42,7 +42,8 @@ def _result(case, kind, outcome, correct, drift=0.9, source=None, params=()):
 def test_metrics_and_report():
     results = [
         _result("joint_ram_guides", "library", "explained", True, 0.9,
-                params=[{"truth": 0.2, "fitted": 0.21, "sd": 0.01}, {"truth": 1.0, "fitted": 1.2, "sd": 0.01}]),
+                params=[{"truth": 0.2, "fitted": 0.21, "sd": 0.01, "interval": [0.19, 0.23]},
+                        {"truth": 1.0, "fitted": 1.2, "sd": 0.01, "interval": [1.18, 1.22]}]),
         _result("belt_drive", "library", "partly_explained", False, 0.5),
         _result("column_source", "outside", "explained", False, 0.4,
                 source={"distance_m": 0.05, "power_W": 41.0, "truth_W": 40.0, "ok": True}),

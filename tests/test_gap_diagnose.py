@@ -71,6 +71,65 @@ def test_bad_channel_gives_a_clear_error_listing_valid_names(machine):
         match_record(wrong_unit, machine)
 
 
+def _with(data, name, values):
+    """``data`` with channel ``name``'s values replaced, or added as the room's ambient column (a unit error
+    written by hand, not by the twin)."""
+    if name not in data.names:
+        data = Dataset(data.time_s, np.column_stack([data.values, values]),
+                       data.channels + [ChannelInfo(name, "degC", "ambient")], data.metadata)
+    changed = data.values.copy()
+    changed[:, data.names.index(name)] = values
+    return Dataset(data.time_s, changed, data.channels, {**data.metadata, "source": "rig.csv"})
+
+
+@pytest.mark.parametrize(("name", "convert", "message"), [
+    ("ambient_room", lambda v: np.full(len(v), 293.15),
+     ("column 'ambient_room_degC' has value 293.15 at t = 0 s, outside the plausible -40 … 80 degC of an air "
+      "sensor; it looks like kelvin")),
+    ("spindle", lambda v: v / 60.0,
+     (r"column 'spindle_rpm' peaks at 200 rpm, 1.7% of the 12000 rpm top speed of machine 'vmc_ram': in Hz "
+      r"\(rev/s\) it would be 12000 rpm")),
+    ("spindle", lambda v: v * 2.0, "column 'spindle_rpm' has value 18000 at t = .* outside the 0 … 12600 spindle"),
+    ("spindle", lambda v: -v, "column 'spindle_rpm' has value -9000 .* outside the 0 … 12600 spindle speed"),
+    ("feed_x", lambda v: v + 60000.0, r"column 'feed_x_mm_min' has value 60000 .* outside the -42000 … 42000 feed"),
+])
+def test_operating_conditions_in_another_unit_are_refused_by_column(machine, name, convert, message):
+    """A spindle column in Hz had become a 7.7 kW "discovered" source; an ambient in kelvin was averaged into the
+    room's air and its 270 K offsets called thermometer accuracy."""
+    data = truth(machine)
+    with pytest.raises(TwinInputError, match="rig.csv: " + message):
+        match_record(_with(data, name, convert(data[name] if name in data.names else data.time_s)), machine)
+
+
+def test_a_spindle_at_rest_that_reads_a_few_rpm_is_at_rest_not_in_hz(machine):
+    data = truth(machine)
+    noise = np.random.default_rng(0).uniform(0.0, 3.0, len(data))   # a tachometer at standstill
+    record = match_record(_with(data, "spindle", noise), machine)
+    np.testing.assert_allclose(record.spindle, noise)
+
+
+def test_an_empty_spindle_column_is_named_as_empty_not_missing(machine):
+    from twin.gap.drive import measured_drive
+
+    data = truth(machine)
+    record = match_record(_with(data, "spindle", np.full(len(data), np.nan)), machine)
+    with pytest.raises(TwinInputError, match="rig.csv: column spindle_rpm holds no value; give the spindle speed"):
+        measured_drive(machine, data.time_s, record)
+
+
+@pytest.mark.parametrize(("step", "message"), [
+    (0.0, "step_s .--step. must be a positive number of seconds, got 0"),
+    (-60.0, "got -60"), (float("nan"), "got nan"),
+    (7200.0, r"step_s \(--step\) 7200 s is longer than a tenth of the held-out"),
+])
+def test_a_time_step_the_twin_cannot_take_is_refused(machine, step, message):
+    """--step 0 and a negative step had ended in an OverflowError and an IndexError from numpy."""
+    from twin.gap.diagnose import diagnose
+
+    with pytest.raises(TwinInputError, match=message):
+        diagnose(truth(machine), machine, step_s=step)
+
+
 def test_nan_gaps_offsets_missing_channels_and_other_sampling(machine, tmp_path):
     """Every third row with jitter (another sampling), NaN gaps, constant offsets, a missing sensor: still named."""
     from twin.gap.diagnose import diagnose

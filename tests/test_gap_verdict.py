@@ -11,7 +11,7 @@ import pytest
 from twin.core.dataset import Dataset
 from twin.errors import TwinInputError
 from twin.gap import verdict
-from twin.gap.fit import FitResult, Residual
+from twin.gap.fit import FitResult, Residual, interval90
 
 CYCLE = "\n".join(f"[[segments]]\nduration_min = 10\nspindle_rpm = {12000 if i % 2 == 0 else 0}" for i in range(15))
 SCENARIO = f"""
@@ -297,3 +297,40 @@ def test_a_named_model_that_the_discovery_fits_better_without_is_displaced():
     d = SimpleNamespace(winner=v.winner, decision=v, n_eff_hold=n_eff)
     assert _better_start(d, after_winner, SimpleNamespace(items=[], held_out_sse_ratio=1e-9, n_atoms=0)) \
         is after_winner and v.outcome == "partly_explained"
+
+
+def test_an_interval_stays_within_the_parameters_bounds():
+    """A lag of 43.7 ± 32.6 min (bounds 1 … 240) had been reported as 90 %: -10.1 … 97.6 min."""
+    from scipy.stats import norm
+
+    z = norm.ppf(0.95)
+    assert interval90(43.7, 32.7, 1.0, 240.0) == pytest.approx([1.0, 43.7 + z * 32.7])
+    assert interval90(0.5, 0.1, -10.0, 10.0) == pytest.approx([0.5 - z * 0.1, 0.5 + z * 0.1])
+    assert interval90(9.0, 5.0, -10.0, 10.0) == pytest.approx([9.0 - z * 5.0, 10.0])
+
+
+def test_a_candidate_that_removes_nothing_material_says_so_in_words():
+    """It read "materiality -inf < 1"."""
+    from types import SimpleNamespace
+
+    v = SimpleNamespace(best=SimpleNamespace(delta_bic=50.0), material=-np.inf, worsened=[], displaced=None)
+    assert verdict._rejection_reasons(v) == \
+        "it removes no material share of the held-out gap in any group or flagged sensor"
+
+
+def test_thermometer_offsets_no_accuracy_explains_are_called_out_with_units():
+    """°F renamed to degC read as "+48.96 K (thermometer accuracy)", and "largest |offset| 678" mixed K and µm."""
+    from types import SimpleNamespace
+
+    from twin.gap.report import _offset_lines
+
+    residual = SimpleNamespace(offsets=np.array([0.4, 48.96, -2.0, 12.0]), nuisance={"initial_uniform": 0.1})
+    d = SimpleNamespace(nominal=SimpleNamespace(residual=residual), names=["T01", "T05", "A_top", "Z"],
+                        evaluator=SimpleNamespace(kinds=["temperature", "temperature", "air", "displacement"],
+                                                  groups=lambda: ["temperature", "air", "displacement"]))
+    offsets, beyond, nuisance = _offset_lines(d)
+    assert "largest |offset| surface temperatures 49 K, air sensors 2 K, TCP drift 12 µm; T01" in offsets
+    assert beyond.startswith("- **offsets no thermometer's accuracy (±3 K) explains**: T05 +48.96 K; check")
+    assert "Z" not in beyond and nuisance == "- initial state (nuisance, nominal): initial_uniform +0.1"
+    residual.offsets = np.array([0.4, 2.9, -2.0, 120.0])       # a probe's zero is arbitrary: never called out
+    assert len(_offset_lines(d)) == 2

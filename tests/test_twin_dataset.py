@@ -88,6 +88,10 @@ def test_measured_nan_policies(tmp_path):
     ("time_s,temperature\n0,20\n", r"'temperature' is not named <name>_<unit>"),
     ("t,T01_degC\n0,20\n", r"no time column 'time_s'"),
     ("time_s,T01_degC\n", r"no data rows"),
+    # pandas renames a repeated header to T01_degC.1: the message named that, not the repetition
+    ("time_s,T01_degC,Z_um,T01_degC\n0,20,1,21\n", r"column 'T01_degC' appears 2 times \(columns 2, 4\); give each"),
+    # the map's example named another channel (Z_mm → T01_degC); a map renames, it cannot convert mm
+    ("time_s,Z_mm\n0,0.001\n", r"e.g. \{'Z_mm': 'Z_<unit>'\} \(a map renames, it does not convert"),
 ])
 def test_measured_bad_input(tmp_path, text, message):
     with pytest.raises(TwinInputError, match=message):

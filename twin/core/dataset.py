@@ -14,6 +14,7 @@ the time column, reports gaps and handles NaNs by an explicit policy.
 """
 from __future__ import annotations
 
+import csv
 import hashlib
 import io
 import json
@@ -400,9 +401,11 @@ def _measured_channels(path, header, t_index, column_map, channel_kinds):
             continue
         parts = split_column(column_map.get(col, col))
         if parts is None:
+            stem = col.rsplit("_", 1)[0]
             raise TwinInputError(
-                f"{path}: column {col!r} is not named <name>_<unit> with a known unit "
-                f"{sorted(UNITS)}; give a column map, e.g. {{{col!r}: 'T01_degC'}}")
+                f"{path}: column {col!r} is not named <name>_<unit> with a known unit {sorted(UNITS)}; rename it "
+                f"or give a column map, e.g. {{{col!r}: '{stem}_<unit>'}} (a map renames, it does not convert: "
+                "convert values in another unit first)")
         name, unit = parts
         channels.append(ChannelInfo(name, unit, channel_kinds.get(name, KIND_OF_UNIT[unit])))
         cols.append(j)
@@ -533,6 +536,13 @@ def _parse_csv(path, text, time_column=None):
 
     # pandas ≥ 3 parses floats exactly by default; older versions need round_trip.
     exact = {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"}
+    first_line = next(csv.reader(io.StringIO(text)), [])
+    named = [h.strip() for h in first_line]
+    twice = next((h for i, h in enumerate(named) if h in named[:i]), None)
+    if twice is not None:
+        where = [i + 1 for i, h in enumerate(named) if h == twice]
+        raise TwinInputError(f"{path}: column {twice!r} appears {len(where)} times (columns "
+                             f"{', '.join(map(str, where))}); give each channel once")
     try:
         frame = pd.read_csv(io.StringIO(text), skipinitialspace=True, **exact)
     except pd.errors.EmptyDataError:

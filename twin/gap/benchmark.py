@@ -246,7 +246,7 @@ def _truth_fit(case, d, truth_result):
         t = truth_values.get(p["name"])
         if t is not None:
             errors.append({"param": p["name"], "truth": t, "fitted": p["value"], "sd": p["sd"], "unit": p["unit"],
-                           "interval": p.get("interval"), "error": p["value"] - t,
+                           "interval": p["interval"], "error": p["value"] - t,
                            "relative": (p["value"] - t) / t if t else None})
     return {"name": truth_result.name, "delta_bic": truth_result.delta_bic, "params": errors}
 
@@ -915,8 +915,8 @@ def score_independent(case: IndependentCase, d: Diagnosis, machine: Machine) -> 
 
 
 def _covered(p):
-    """Whether a fitted parameter's 90 % interval (``interval``, else ± 1.645 sd) holds the truth."""
-    lo, hi = p.get("interval") or (p["fitted"] - 1.645 * p["sd"], p["fitted"] + 1.645 * p["sd"])
+    """Whether a fitted parameter's 90 % interval holds the truth."""
+    lo, hi = p["interval"]
     return bool(lo <= p["truth"] <= hi)
 
 

@@ -376,17 +376,23 @@ def split_half_sd(model: GapModel, ev: Evaluator, result: FitResult, effects: Se
     return np.abs(estimates[1] - estimates[0]) / 2.0
 
 
-def _read_inputs(measured, machine, scenario, column_map, holdout_fraction, initial):
+def _read_inputs(measured, machine, scenario, column_map, holdout_fraction, initial, step_s):
     """``(machine, scenario or None, matched record, (split, fit rows, held-out rows), initial)`` of a diagnosis,
-    each checked (clear errors for a bad hold-out fraction, record or scenario)."""
+    each checked (clear errors for a bad hold-out fraction, time step, record or scenario)."""
     if not 0.05 <= float(holdout_fraction) <= 0.8:
         raise TwinInputError(f"holdout_fraction must lie in [0.05, 0.8], got {holdout_fraction}")
+    if not 0.0 < float(step_s) < np.inf:
+        raise TwinInputError(f"step_s (--step) must be a positive number of seconds, got {step_s:g}")
     machine = _machine(machine)
     sc = None
     if scenario is not None:
         sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     record = match_record(read_measured(measured, column_map), machine)
     rows = _check_length(record, holdout_fraction)
+    held_out_s = record.time_s[-1] - rows[0]
+    if step_s > held_out_s / 10.0:
+        raise TwinInputError(f"step_s (--step) {step_s:g} s is longer than a tenth of the held-out "
+                             f"{held_out_s:g} s of the record: the twin would take too few steps there")
     if initial is None:
         initial = "uniform" if sc is not None and sc.initial["kind"] == "uniform" else "steady"
     return machine, sc, record, rows, initial
@@ -521,7 +527,7 @@ def diagnose(measured: Dataset | str | Path, machine: str | Path | Machine = "vm
     timings = {}
     t0 = time.perf_counter()
     machine, sc, record, (split, fit_rows, hold_rows), initial = _read_inputs(
-        measured, machine, scenario, column_map, holdout_fraction, initial)
+        measured, machine, scenario, column_map, holdout_fraction, initial, step_s)
     library = library_by_name(effects)
     applicable = [e for e in library if e.applicable(machine)]
     structure, be = engine(machine, library_by_name(None), backend, **(engine_options or {}))

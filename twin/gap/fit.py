@@ -393,6 +393,7 @@ class FitResult:
     n_eff_fit: float = 0.0
     prediction: object = None
     notes: list = field(default_factory=list)
+    bounds: list = field(default_factory=list)   #: (lower, upper) of each parameter, in its unit
 
     @property
     def k(self) -> int:
@@ -405,10 +406,35 @@ class FitResult:
         Returns
         -------
         list of dict
-            ``name``, ``value``, ``sd`` (in ``unit``) and ``unit`` of every parameter.
+            ``name``, ``value``, ``sd`` (in ``unit``), ``interval`` (90 %, :func:`interval90`) and ``unit`` of
+            every parameter.
         """
-        return [{"name": lab, "value": float(v), "sd": float(s), "unit": u}
-                for lab, v, s, u in zip(self.labels, self.values, self.sd, self.units)]
+        return [{"name": lab, "value": float(v), "sd": float(s), "interval": interval90(v, s, *b), "unit": u}
+                for lab, v, s, u, b in zip(self.labels, self.values, self.sd, self.units, self.bounds, strict=True)]
+
+
+#: Standard normal 95 % quantile: a 90 % two-sided interval is ± Z90 sd.
+Z90 = 1.6448536269514722
+
+
+def interval90(value: float, sd: float, lower: float, upper: float) -> list[float]:
+    """The 90 % interval of a fitted parameter, ± :data:`Z90` sd cut to its bounds, outside which the model
+    does not exist (a negative lag). The cut removes no value the fit could have returned, so the coverage
+    checked on truth records (``docs/gap_benchmark.md``) is that of the uncut interval.
+
+    Parameters
+    ----------
+    value, sd : float
+        The estimate and its standard deviation, in the parameter's unit.
+    lower, upper : float
+        The parameter's bounds, same unit.
+
+    Returns
+    -------
+    list of float
+        ``[low, high]``, same unit.
+    """
+    return [float(max(value - Z90 * sd, lower)), float(min(value + Z90 * sd, upper))]
 
 
 def _fit_linear(model, evaluator, co):
@@ -491,7 +517,8 @@ def fit_effects(model: GapModel, evaluator: Evaluator, effects: Sequence[Effect]
     result = FitResult("+".join(e.name for e in effects), [e.name for e in effects], co.labels,
                        [p.unit for _, p in co.params], values, sd, res,
                        evaluator.summary(res, model_names(model, evaluator)), time.perf_counter() - t0, nfev,
-                       linear, n_eff_fit=n_eff, prediction=pred)
+                       linear, n_eff_fit=n_eff, prediction=pred,
+                       bounds=[(p.lower, p.upper) for _, p in co.params])
     at_bound = [lab for lab, u in zip(co.labels, co.unit(values)) if u <= 1e-6 or u >= 1 - 1e-6]
     if at_bound:
         result.notes.append(f"at a bound: {', '.join(at_bound)}")

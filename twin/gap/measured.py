@@ -22,6 +22,7 @@ import numpy as np
 
 from ..core.dataset import ChannelInfo, Dataset, sidecar_path
 from ..core.machine import Machine
+from ..core.machine_definition import MachineDefinition
 from ..errors import TwinInputError
 
 SENSOR_KINDS = ("temperature", "air", "displacement", "strain")
@@ -32,6 +33,12 @@ PLAUSIBLE = {"temperature": (-40.0, 150.0), "air": (-40.0, 80.0), "displacement"
 #: A measured channel whose range differs from the nominal twin's by more than this factor (either way) is
 #: taken as a unit error (mm under ``_um``) when the twin predicts a clear signal there.
 SCALE_FACTOR = 20.0
+#: A speed or feed above this factor × the machine's limit is a unit error, not an overload.
+LIMIT_MARGIN = 1.05
+#: A spindle column that peaks between these fractions of the machine's top speed is taken to be in Hz or rev/s
+#: (60× too small: 1000 … 12000 rpm read 17 … 200): below the first it is at standstill (a tachometer reads a
+#: few rpm there), above the second it runs.
+SPINDLE_PEAK_IN_HZ = (0.001, 0.02)
 CONDITION_UNITS = {"spindle": "rpm", "feed_x": "mm_min", "feed_y": "mm_min", "feed_z": "mm_min",
                    "ambient_gradient": "K_m"}
 
@@ -130,10 +137,57 @@ def check_plausible(dataset: Dataset, channel: ChannelInfo, kind: str, values: n
     if bad.size:
         k = bad[0]
         source = dataset.metadata.get("source", "the data")
+        article = "an" if kind[0] in "aeiou" else "a"
         raise TwinInputError(
             f"{source}: column {channel.column!r} has value {values[k]:g} at "
-            f"t = {dataset.time_s[k]:g} s, outside the plausible {lo:g} … {hi:g} {channel.unit} of a {kind} "
+            f"t = {dataset.time_s[k]:g} s, outside the plausible {lo:g} … {hi:g} {channel.unit} of {article} {kind} "
             f"sensor{_hint(kind, float(values[k]))}")
+
+
+def check_operating_range(dataset: Dataset, channel: ChannelInfo, values: np.ndarray,
+                          definition: MachineDefinition) -> None:
+    """Stop with a clear error when a spindle speed or feed lies outside what the machine can do (a unit error:
+    rad/s or Hz under ``_rpm``, mm/s under ``_mm_min`` read larger than the limit; a spindle column in Hz
+    reads 60× too small and is caught by its peak), or a spindle speed is negative.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The record (its source and times name the bad value).
+    channel : ChannelInfo
+        ``spindle`` (rpm) or ``feed_x|y|z`` (mm/min).
+    values : ndarray, shape (n_times,)
+        The channel's values, NaN where missing (ignored).
+    definition : MachineDefinition
+        The machine, with ``max_spindle_rpm`` and ``max_feed_mm_min``.
+
+    Raises
+    ------
+    TwinInputError
+        At the first value outside the range, or when the spindle peaks in the band of
+        :data:`SPINDLE_PEAK_IN_HZ`.
+    """
+    source = dataset.metadata.get("source", "the data")
+    if channel.name == "spindle":
+        lo, hi, limit = 0.0, LIMIT_MARGIN * definition.max_spindle_rpm, "spindle speed (rpm, a magnitude)"
+    else:
+        hi = LIMIT_MARGIN * definition.max_feed_mm_min
+        lo, limit = -hi, "feed (mm/min, signed)"
+    finite = np.isfinite(values)
+    bad = np.flatnonzero(finite & ((values < lo) | (values > hi)))
+    if bad.size:
+        k = bad[0]
+        raise TwinInputError(f"{source}: column {channel.column!r} has value {values[k]:g} at "
+                             f"t = {dataset.time_s[k]:g} s, outside the {lo:g} … {hi:g} {limit} of machine "
+                             f"{definition.name!r}: is the column in another unit?")
+    peak = float(np.max(values[finite]))
+    standstill, running = (f * definition.max_spindle_rpm for f in SPINDLE_PEAK_IN_HZ)
+    if channel.name == "spindle" and standstill < peak < running:
+        raise TwinInputError(f"{source}: column {channel.column!r} peaks at {peak:g} rpm, "
+                             f"{peak / definition.max_spindle_rpm:.1%} of the {definition.max_spindle_rpm:g} rpm top speed of "
+                             f"machine {definition.name!r}: in Hz (rev/s) it would be {60 * peak:g} rpm. "
+                             "Give the speed in rpm; a spindle that ran this slowly heats nothing the twin "
+                             "could tell from its standstill")
 
 
 def check_scale(record: Record, predicted: np.ndarray, columns: Mapping[str, str]) -> None:
@@ -203,6 +257,7 @@ class _Channels:
             self.condition(ch, v)
         elif ch.name.startswith("ambient_") and ch.name[len("ambient_"):] in self.zones and ch.unit == "degC":
             if np.isfinite(v).any():
+                check_plausible(self.dataset, ch, "air", v)
                 self.air.append((ch.name, ch.name[len("ambient_"):], 0.0, _fill(self.t, v)))
         elif ch.name.startswith("P_") and ch.unit == "W" or ch.name in self.cameras:
             self.ignored.append(ch.name)
@@ -235,6 +290,8 @@ class _Channels:
         if not np.isfinite(v).any():
             self.empty.append(ch.name)
             return
+        if ch.name != "ambient_gradient":
+            check_operating_range(self.dataset, ch, v, self.d)
         filled = _fill(self.t, v)
         if ch.name == "spindle":
             self.spindle = filled

@@ -29,6 +29,9 @@ from .fit import GROUP_UNIT
 from .verdict import parameters, role
 from .verdict import to_json as verdict_json
 
+#: Largest constant offset of a thermometer in calibration, K (a type K thermocouple's class 2 tolerance is
+#: ±2.5 K up to 333 °C; a class B Pt100's ±0.8 K at 100 °C).
+THERMOMETER_ACCURACY_K = 3.0
 GROUP_LABEL = {"temperature": "surface temperatures", "air": "air sensors", "displacement": "TCP drift",
                "strain": "strain lines"}
 
@@ -428,14 +431,23 @@ def _split_lines(d):
 
 
 def _offset_lines(d):
-    """The constant sensor offsets and the initial-state nuisance of the nominal fit."""
-    off = d.nominal.residual.offsets
-    big = [(n, o, GROUP_UNIT[k]) for n, o, k in zip(d.names, off, d.evaluator.kinds) if abs(o) > 0.25]
+    """The constant sensor offsets and the initial-state nuisance of the nominal fit; thermometer offsets no
+    thermometer's accuracy explains are called out (°F or kelvin renamed to degC, a wrong calibration)."""
+    off, kinds = d.nominal.residual.offsets, d.evaluator.kinds
+    big = [(n, o, GROUP_UNIT[k]) for n, o, k in zip(d.names, off, kinds) if abs(o) > 0.25]
     listed = ", ".join(f"{n} {o:+.2f} {u}" for n, o, u in big[:12]) or "all small"
+    largest = ", ".join(f"{GROUP_LABEL[g]} {max(abs(o) for o, k in zip(off, kinds) if k == g):.3g} {GROUP_UNIT[g]}"
+                        for g in _groups(d))
     nuisance = ", ".join(f"{k} {v:+.3g}" for k, v in d.nominal.residual.nuisance.items())
-    return [(f"- constant offsets (estimated on the fit part, every model): largest |offset| {max(np.abs(off)):.3g}; "
-             f"{listed} (thermometer accuracy, probe zero, ambient level)"),
-            f"- initial state (nuisance, nominal): {nuisance}"]
+    lines = [(f"- constant offsets (estimated on the fit part, every model): largest |offset| {largest}; "
+              f"{listed} (thermometer accuracy, probe zero, ambient level)")]
+    beyond = [f"{n} {o:+.2f} K" for n, o, k in zip(d.names, off, kinds)
+              if k in ("temperature", "air") and abs(o) > THERMOMETER_ACCURACY_K]
+    if beyond:
+        lines.append(f"- **offsets no thermometer's accuracy (±{THERMOMETER_ACCURACY_K:g} K) explains**: "
+                     f"{', '.join(beyond)}; check these channels' unit (°F or kelvin under _degC) and calibration "
+                     "before reading the rest")
+    return [*lines, f"- initial state (nuisance, nominal): {nuisance}"]
 
 
 def _data_section(d, figures):

@@ -418,8 +418,6 @@ def decide(nominal: FitResult, ranking: Sequence[FitResult], sc: Scales) -> Verd
 
 
 # ============================================================================= written forms
-Z90 = 1.6448536269514722
-
 
 def displace(v: Verdict, by: str, delta_bic: float) -> None:
     """The named model gives way to effects found beyond the library (in place): the outcome becomes
@@ -474,12 +472,11 @@ def parameters(result: FitResult | None) -> list[dict[str, str | float | list[fl
     Returns
     -------
     list of dict
-        One per parameter: value ± 1.645 sd as the interval, in the parameter's ``unit``.
+        One per parameter, with its 90 % interval (:func:`~twin.gap.fit.interval90`), in its ``unit``.
     """
     if result is None:
         return []
-    return [{"name": p["name"], "value": p["value"], "interval90": [p["value"] - Z90 * p["sd"],
-                                                                   p["value"] + Z90 * p["sd"]], "unit": p["unit"]}
+    return [{"name": p["name"], "value": p["value"], "interval90": p["interval"], "unit": p["unit"]}
             for p in result.params()]
 
 
@@ -552,7 +549,9 @@ def _rejection_reasons(v):
     why = []
     if v.best.delta_bic <= MIN_DELTA_BIC:
         why.append(f"ΔBIC {v.best.delta_bic:.1f} ≤ {MIN_DELTA_BIC:g}")
-    if v.material < MIN_MATERIAL:
+    if not np.isfinite(v.material):
+        why.append("it removes no material share of the held-out gap in any group or flagged sensor")
+    elif v.material < MIN_MATERIAL:
         why.append(f"materiality {v.material:.2f} < {MIN_MATERIAL:g}")
     if v.worsened:
         why.append(f"worsens {', '.join(v.worsened)}")
