@@ -146,9 +146,8 @@ def check_plausible(dataset: Dataset, channel: ChannelInfo, kind: str, values: n
 
 def check_operating_range(dataset: Dataset, channel: ChannelInfo, values: np.ndarray,
                           definition: MachineDefinition) -> None:
-    """Stop with a clear error when a spindle speed or feed lies outside what the machine can do (a unit error:
-    rad/s or Hz under ``_rpm``, mm/s under ``_mm_min`` read larger than the limit; a spindle column in Hz
-    reads 60× too small and is caught by its peak), or a spindle speed is negative.
+    """Stop with a clear error when a spindle speed or feed lies beyond what the machine can do (a unit error),
+    a spindle speed is negative, or a spindle column peaks where one in Hz or rev/s would (60× too small).
 
     Parameters
     ----------
@@ -184,8 +183,8 @@ def check_operating_range(dataset: Dataset, channel: ChannelInfo, values: np.nda
     standstill, running = (f * definition.max_spindle_rpm for f in SPINDLE_PEAK_IN_HZ)
     if channel.name == "spindle" and standstill < peak < running:
         raise TwinInputError(f"{source}: column {channel.column!r} peaks at {peak:g} rpm, "
-                             f"{peak / definition.max_spindle_rpm:.1%} of the {definition.max_spindle_rpm:g} rpm top speed of "
-                             f"machine {definition.name!r}: in Hz (rev/s) it would be {60 * peak:g} rpm. "
+                             f"{peak / definition.max_spindle_rpm:.1%} of the {definition.max_spindle_rpm:g} rpm "
+                             f"top speed of machine {definition.name!r}: in Hz (rev/s) it would be {60 * peak:g} rpm. "
                              "Give the speed in rpm; a spindle that ran this slowly heats nothing the twin "
                              "could tell from its standstill")
 
