@@ -7,8 +7,14 @@ import dataclasses
 import numpy as np
 import pytest
 
+from twin.cli import main as twin_main
 from twin.errors import TwinInputError
-from twin.live.cli import DEFAULT_THERMOMETERS, free_port
+from twin.live.cli import (
+    DEFAULT_THERMOMETERS,
+    EXIT_NOT_OBSERVED,
+    free_port,
+    replay_session,
+)
 from twin.live.client import LiveClient
 from twin.live.nodemap import load_node_map
 from twin.live.observer import DriftObserver
@@ -385,3 +391,102 @@ def test_nan_missing_and_late_samples(rom):
     assert stats.late == len(CHANNELS)
     assert stats.missing == 2 + 6                                       # NaN, absent, and the empty start sample
     assert np.all(np.isfinite(np.array([h[1] for h in stats.history])))
+
+
+# ----------------------------------------------------------------------------- command line: inputs, ends, exit codes
+def _dataset_with_camera(path, spots=30):
+    """A small twin-made dataset (CSV + sidecar) with the replayed channels and a camera's spots."""
+    from twin.core.dataset import ChannelInfo, Dataset
+
+    channels = [ChannelInfo("spindle", "rpm", "spindle_speed", "", None), ChannelInfo("T15", "degC", "air", "", None),
+                *(ChannelInfo(t, "degC", "temperature", "", None) for t in THERMOMETERS),
+                *(ChannelInfo(f"cam{i:03d}", "degC", "camera", "", None) for i in range(spots))]
+    t = np.arange(3) * 10.0
+    Dataset(t, np.full((len(t), len(channels)), 20.0), channels).write(path)
+    return path
+
+
+@pytest.mark.parametrize("target", ["dataset", "sidecar"])
+def test_log_never_replaces_the_replayed_dataset(tmp_path, capsys, target):
+    dataset = _dataset_with_camera(tmp_path / "rec.csv")
+    log = {"dataset": dataset, "sidecar": tmp_path / "rec.csv.json"}[target]
+    before = log.read_bytes()
+    assert twin_main(["live", "--replay", str(dataset), "--log", str(log), "--overwrite"]) == 2
+    assert "the output would replace an input of this command" in capsys.readouterr().err
+    assert log.read_bytes() == before
+
+
+def test_log_never_replaces_the_node_map(tmp_path, capsys):
+    node_map = tmp_path / "machine.toml"
+    node_map.write_text(default_node_map(THERMOMETERS).to_toml())
+    assert twin_main(["live", "--endpoint", f"opc.tcp://127.0.0.1:{free_port()}/", "--node-map", str(node_map),
+                 "--log", str(node_map), "--overwrite", "--duration", "0.5"]) == 2
+    assert "machine.toml: the output would replace an input of this command" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("url", ["http://foo", "opc.tcp:///path", "opc.tcp://host:port/"])
+def test_endpoint_that_is_no_opc_tcp_address_is_refused(tmp_path, capsys, url):
+    node_map = tmp_path / "machine.toml"
+    node_map.write_text(default_node_map(THERMOMETERS).to_toml())
+    assert twin_main(["live", "--endpoint", url, "--node-map", str(node_map), "--duration", "5"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"twin live: error: --endpoint {url!r}: not an OPC UA address; use opc.tcp://HOST:PORT/…"
+
+
+def test_unknown_room_air_lists_the_air_and_temperature_channels_not_the_camera_spots(tmp_path, capsys):
+    dataset = _dataset_with_camera(tmp_path / "rec.csv")
+    assert twin_main(["live", "--replay", str(dataset), "--room-air", "NOPE"]) == 2
+    err = capsys.readouterr().err
+    assert f"--room-air 'NOPE': no such channel in {dataset}" in err
+    assert "T15" in err and THERMOMETERS[0] in err and "cam001" not in err
+
+
+def test_nothing_listening_exits_1_counting_every_failed_attempt(tmp_path, capsys):
+    node_map = tmp_path / "machine.toml"
+    node_map.write_text(default_node_map(THERMOMETERS).to_toml())
+    endpoint = f"opc.tcp://127.0.0.1:{free_port()}/x/"
+    with pytest.raises(SystemExit) as exit_:
+        twin_main(["live", "--endpoint", endpoint, "--node-map", str(node_map), "--duration", "0.5",
+              "--log", str(tmp_path / "drift.csv")])
+    assert exit_.value.code == EXIT_NOT_OBSERVED == 1
+    out, err = capsys.readouterr()
+    assert "fused 0 samples" in out and "reconnects 0, failed connection attempts " in out
+    assert "failed connection attempts 0" not in out and "log written" not in out
+    assert f"twin live: the session ended disconnected from --endpoint {endpoint} after " in err
+    assert not list(tmp_path.glob("drift.csv*"))
+
+
+def test_server_gone_for_good_counts_the_failed_reconnects(rom):
+    async def main():
+        async with ReplayServer(CHANNELS, port=free_port()) as server:
+            client = _client(server, rom, backoff_s=0.01, max_backoff_s=0.01)
+            task = asyncio.create_task(client.run(max_wall_s=60))
+            await _until_subscribed(client, task)
+            await server.publish(0.0, _sample(0.0))
+            while not client.stats.samples:
+                await asyncio.sleep(0.02)
+        while client.stats.failed_attempts < 2:                     # the server is gone: attempts fail
+            await asyncio.sleep(0.02)
+        task.cancel()
+        return client.stats
+
+    stats = asyncio.run(main())
+    assert stats.samples == 1 and stats.reconnects == 0 and stats.failed_attempts >= 2
+    assert not stats.ended_connected and stats.last_error
+
+
+def test_replay_honours_late_after(tmp_path, rom, monkeypatch):
+    from twin.core.dataset import Dataset
+
+    waits = []
+
+    class Recorded(LiveClient):
+        def __init__(self, *args, **kw):
+            super().__init__(*args, **kw)
+            waits.append(self.late_after_s)
+
+    monkeypatch.setattr("twin.live.client.LiveClient", Recorded)
+    dataset = Dataset.read(_dataset_with_camera(tmp_path / "rec.csv", spots=0))
+    stats, _ = asyncio.run(replay_session(dataset, THERMOMETERS, DriftObserver(rom, THERMOMETERS), speed=100.0,
+                                          port=free_port(), late_after_s=0.25))
+    assert waits == [0.25] and stats.samples == 3

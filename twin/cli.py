@@ -113,7 +113,8 @@ def main(argv: list[str] | None = None) -> int:
     Returns
     -------
     int
-        Exit code: 0 done, 2 error, 130 interrupted.
+        Exit code: 0 done, 2 error, 130 interrupted (``twin live`` exits 1 when it observed nothing; it raises
+        ``SystemExit`` itself).
     """
     previous = _on_sigint(_exit_now)
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]

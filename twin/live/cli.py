@@ -5,6 +5,7 @@
 """
 from __future__ import annotations
 
+import sys
 from typing import TYPE_CHECKING
 
 from ..errors import TwinInputError
@@ -22,6 +23,12 @@ if TYPE_CHECKING:
 #: (order 80, Z axis, k = 6; model-based, no record used).
 DEFAULT_THERMOMETERS = ("T18", "T26", "T23", "T22", "T16", "T09")
 DEFAULT_SPEED = 600.0
+#: Exit code of a session that fused no sample or ended without a connection to the server.
+EXIT_NOT_OBSERVED = 1
+#: The dataset channel kinds a replay option can name (a measured CSV's °C columns are all "temperature";
+#: a thermometer may be a camera spot).
+OPTION_KINDS = {"--spindle": ("spindle_speed",), "--room-air": ("air", "ambient", "temperature"),
+                "thermometer": ("temperature", "air", "camera")}
 
 
 def free_port(host: str = "127.0.0.1") -> int:
@@ -62,18 +69,44 @@ def _observer(args, default):
     return live_observer(cached_rom(machine, args.order), thermometers), thermometers
 
 
-def _replay_columns(dataset, path, names):
-    """The dataset's ``names`` columns (k, len(names)), or an error naming the file and the missing channel."""
-    missing = [n for n in names if n not in dataset]
-    if missing:
-        raise TwinInputError(f"{path}: no channel {missing[0]!r} to replay; channels: {', '.join(dataset.names)}")
-    return dataset.matrix(names)
+def _channels_of(dataset, kinds):
+    """The channels of ``kinds`` as a short text: camera spots only counted (a camera has hundreds)."""
+    named = dataset.names_of_kind(*(k for k in kinds if k != "camera"))
+    spots = dataset.names_of_kind("camera") if "camera" in kinds else []
+    text = ", ".join(named) or "none"
+    return text + (f" and {len(spots)} camera spots ({spots[0]} … {spots[-1]})" if spots else "")
+
+
+def check_replay_channels(dataset: Dataset, path: str, channels: dict[str, list[str]]) -> None:
+    """Check that the dataset has the channels the replay options name.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The record replayed.
+    path : str
+        Its file, named in errors.
+    channels : dict
+        Option (a key of :data:`OPTION_KINDS`) → the channels it names.
+
+    Raises
+    ------
+    TwinInputError
+        Naming the option, the channel and the file, and listing the channels of the kinds the option takes.
+    """
+    for option, names in channels.items():
+        for name in names:
+            if name not in dataset:
+                *others, last = kinds = OPTION_KINDS[option]
+                raise TwinInputError(f"{option} {name!r}: no such channel in {path}; its "
+                                     f"{', '.join(others)}{' or ' if others else ''}{last} channels: "
+                                     f"{_channels_of(dataset, kinds)}")
 
 
 async def replay_session(dataset: Dataset, thermometers: list[str], observer: RecordRunner, speed: float,
                          room_air: str = "T15", spindle: str = "spindle", port: int | None = None,
                          log_path: str | None = None, host: str = "127.0.0.1",
-                         source: str = "dataset") -> tuple[LiveStats, float]:
+                         source: str = "dataset", late_after_s: float = 1.0) -> tuple[LiveStats, float]:
     """Serve ``dataset`` on a local replay server and run the live client against it.
 
     Parameters
@@ -96,6 +129,8 @@ async def replay_session(dataset: Dataset, thermometers: list[str], observer: Re
         Address of the server.
     source : str
         The dataset's file, named in errors.
+    late_after_s : float
+        Wall seconds the client waits for a sample's missing readings before fusing it.
 
     Returns
     -------
@@ -107,11 +142,13 @@ async def replay_session(dataset: Dataset, thermometers: list[str], observer: Re
     from .client import LiveClient
     from .replay import ReplayServer, default_node_map
 
+    check_replay_channels(dataset, source, {"--spindle": [spindle], "--room-air": [room_air],
+                                            "thermometer": thermometers})
     names = [spindle, room_air, *thermometers]
-    values = _replay_columns(dataset, source, names)
+    values = dataset.matrix(names)
     async with ReplayServer(names, host, port or free_port(host)) as server:
         node_map = default_node_map(thermometers, room_air, spindle, server.index)
-        client = LiveClient(server.endpoint, node_map, observer, log_path)
+        client = LiveClient(server.endpoint, node_map, observer, log_path, late_after_s)
         until = float(dataset.time_s[-1])
         task = asyncio.create_task(client.run(until_time_s=until, max_wall_s=30.0 + until / speed * 5))
         while not client._subscribed and not task.done():
@@ -136,12 +173,27 @@ def _run_replay(args):
     if args.speed <= 0 or not np.isfinite(args.speed):
         raise TwinInputError(f"--speed must be a positive number, got {args.speed}")
     dataset = Dataset.read(args.replay)
+    # before the observer is built (seconds); the thermometers are checked once it has chosen them
+    check_replay_channels(dataset, args.replay, {"--spindle": [args.spindle], "--room-air": [args.room_air]})
     observer, thermometers = _observer(args, DEFAULT_THERMOMETERS)
-    _replay_columns(dataset, args.replay, [args.spindle, args.room_air, *thermometers])
     stats, wall = asyncio.run(replay_session(dataset, thermometers, observer, args.speed, args.room_air,
-                                             args.spindle, args.port, args.log, source=args.replay))
+                                             args.spindle, args.port, args.log, source=args.replay,
+                                             late_after_s=args.late_after))
     print(f"replayed {len(dataset)} samples of {Path(args.replay).name} at {args.speed:g}× in {wall:.1f} s")
     return stats, thermometers, dataset
+
+
+def _check_endpoint(url):
+    """Refuse an ``--endpoint`` that is not an OPC UA TCP address (asyncua would only retry it, unreachable)."""
+    from urllib.parse import urlsplit
+
+    try:
+        parts = urlsplit(url)
+        well_formed = parts.scheme == "opc.tcp" and bool(parts.hostname) and parts.port != 0
+    except ValueError:                          # a port that is no number, an unclosed [IPv6 address
+        well_formed = False
+    if not well_formed:
+        raise TwinInputError(f"--endpoint {url!r}: not an OPC UA address; use opc.tcp://HOST:PORT/…")
 
 
 def _run_endpoint(args):
@@ -155,6 +207,7 @@ def _run_endpoint(args):
 
     if not (args.endpoint and args.node_map):
         raise TwinInputError("twin live: give --endpoint opc.tcp://… with --node-map FILE.toml (or --replay DATASET)")
+    _check_endpoint(args.endpoint)
     node_map = load_node_map(args.node_map)
     try:
         observer, thermometers = _observer(args, node_map.thermometers)
@@ -173,7 +226,7 @@ def _print_summary(stats, thermometers, dataset):
     rate = stats.samples / stats.wall_s if stats.wall_s else 0.0
     print(f"fused {stats.samples} samples in {stats.wall_s:.1f} s ({rate:.0f} samples/s) from "
           f"{', '.join(thermometers)} + spindle speed + room air; late {stats.late}, missing readings "
-          f"{stats.missing}, reconnects {stats.reconnects}")
+          f"{stats.missing}, reconnects {stats.reconnects}, failed connection attempts {stats.failed_attempts}")
     if stats.last is not None:
         e = stats.last
         print(f"at t = {e.time_s:g} s: " + ", ".join(f"{a} {e.drift_um[j]:.2f} ± {e.band_um[j]:.2f} µm"
@@ -186,6 +239,32 @@ def _print_summary(stats, thermometers, dataset):
               f"max {np.abs(z - truth).max():.2f} µm")
 
 
+def _input_files(args):
+    """The files ``twin live`` reads, which its ``--log`` must not replace: the replayed dataset and its sidecar,
+    the node map, the placement's chosen set and the machine's TOML (names that are no file are skipped)."""
+    from pathlib import Path
+
+    from ..core.dataset import sidecar_path
+    from .placement import CHOSEN_FILE
+
+    files = [args.node_map, args.thermometers_from, args.machine]
+    if args.replay:
+        files += [args.replay, sidecar_path(args.replay)]
+    if args.thermometers_from:
+        files.append(Path(args.thermometers_from) / CHOSEN_FILE)
+    return tuple(f for f in files if f is not None)
+
+
+def _not_observed(stats, server):
+    """Why the session did not observe the machine to its end (one line naming ``server``), or None."""
+    if not stats.ended_connected:
+        return (f"the session ended disconnected from {server} after {stats.failed_attempts} failed connection "
+                f"attempts (last: {stats.last_error})")
+    if not stats.samples:
+        return f"no sample fused from {server}"
+    return None
+
+
 def cmd_live(args: argparse.Namespace) -> None:
     """``twin live``: replay (``--replay``) or observe a machine (``--endpoint``); print the summary.
 
@@ -193,14 +272,24 @@ def cmd_live(args: argparse.Namespace) -> None:
     ----------
     args : argparse.Namespace
         The parsed ``twin live`` options.
+
+    Raises
+    ------
+    SystemExit
+        :data:`EXIT_NOT_OBSERVED` when no sample was fused or the session ended without a connection (after
+        the summary, with the reason on stderr).
     """
     if args.log:
         from ..infra.outdir import check_output_file
-        check_output_file(args.log, args.overwrite)
+        check_output_file(args.log, args.overwrite, inputs=_input_files(args))
     stats, thermometers, dataset = _run_replay(args) if args.replay else _run_endpoint(args)
     _print_summary(stats, thermometers, dataset)
-    if args.log:
+    if args.log and stats.samples:              # the log of a session that fused nothing is removed
         print(f"log written to {args.log}")
+    reason = _not_observed(stats, f"--endpoint {args.endpoint}" if args.endpoint else "the replay server")
+    if reason:
+        print(f"twin live: {reason}", file=sys.stderr)
+        raise SystemExit(EXIT_NOT_OBSERVED)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -211,7 +300,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     sub : argparse._SubParsersAction
         The ``twin`` subparsers.
     """
-    p = sub.add_parser("live", help="run the drift observer on a machine's OPC UA sensors (or a replayed dataset)")
+    p = sub.add_parser("live", help="run the drift observer on a machine's OPC UA sensors (or a replayed dataset)",
+                       epilog=f"Exit code: 0 done, {EXIT_NOT_OBSERVED} no sample fused or the session ended "
+                                  "without a connection to the server, 2 bad input.")
     p.add_argument("--endpoint", help="OPC UA server, opc.tcp://HOST:PORT/…")
     p.add_argument("--node-map", help="TOML file: [inputs] spindle_speed, room_air; [thermometers]; [outputs]")
     p.add_argument("--replay", metavar="DATASET", help="serve this dataset (CSV) on a local OPC UA server and run "

@@ -52,6 +52,14 @@ class LiveStats:
         Thermometer readings missing (NaN or not received) in fused samples.
     reconnects : int
         Connections re-established after a loss.
+    failed_attempts : int
+        Connection attempts that failed before subscribing (refused, timed out, lost): the first connection's
+        and every reconnection's.
+    ended_connected : bool
+        Whether the client was still subscribed when the session ended (False: it ended while reconnecting,
+        or never connected).
+    last_error : str
+        The last connection error ("" if none).
     wall_s : float
         Wall time of the session, s.
     last : Estimate or None
@@ -64,6 +72,9 @@ class LiveStats:
     late: int = 0
     missing: int = 0
     reconnects: int = 0
+    failed_attempts: int = 0
+    ended_connected: bool = False
+    last_error: str = ""
     wall_s: float = 0.0
     last: Estimate | None = None
     history: list = field(default_factory=list)
@@ -305,6 +316,13 @@ class LiveClient:
             return float(e.band_um[axis])
         return float(-e.drift_um[axis] if key.endswith("_compensation") else e.drift_um[axis])
 
+    def _connection_failed(self, exc, delay):
+        """Count and log a lost connection or a failed attempt (``delay``: s until the next one)."""
+        self.stats.ended_connected = False
+        self.stats.last_error = str(exc) or type(exc).__name__
+        self.stats.failed_attempts += not self._subscribed      # a session that was up was lost, not failed
+        log.info("live: %s: %s; reconnecting in %.1f s", self.endpoint, self.stats.last_error, delay)
+
     async def run(self, until_time_s: float = np.inf, max_wall_s: float = np.inf) -> LiveStats:
         """Run until a sample at machine time ≥ ``until_time_s`` (s) is fused or ``max_wall_s`` wall s have passed.
 
@@ -336,11 +354,11 @@ class LiveClient:
             while not stop():
                 try:
                     await self._session(stop)
+                    self.stats.ended_connected = True        # it returns only when stop() ends a live session
                 except (ConnectionError, OSError, asyncio.TimeoutError, ua.UaError) as exc:
                     if self._subscribed:
                         delay = self.backoff_s       # it was up: start the backoff again
-                    log.info("live: %s: %s; reconnecting in %.1f s", self.endpoint,
-                             str(exc) or type(exc).__name__, delay)
+                    self._connection_failed(exc, delay)
                     await asyncio.sleep(delay)
                     delay = min(2 * delay, self.max_backoff_s)
                 sessions += self._subscribed
