@@ -1,5 +1,6 @@
 """FMUs of the default machine: export, fmpy validation (zero problems), simulation, match with the twin."""
 import ast
+import copy
 import math
 import shutil
 import subprocess
@@ -212,6 +213,16 @@ def test_an_fmu_names_the_model_it_runs(fmus, fmu3, rom):
             rom.machine, rom.digest, rom.method, rom.order)
 
 
+@pytest.mark.parametrize("name", ["O'Neil mill", "a\\b", 'bay "3"', "Fräse 5"])
+def test_an_fmu_names_any_machine_a_toml_file_can_name(fmus, rom, tmp_path, name):
+    """A name with a quote or a backslash was read back wrong or not at all (the FMU then refused as another
+    machine's, or as no twin's)."""
+    renamed = copy.copy(rom)
+    renamed.machine = name
+    identity = fmu_identity(export_fmu(renamed, tmp_path / "renamed.fmu", kind="native", outputs=["Z"]))
+    assert (identity.machine, identity.digest, identity.order) == (name, rom.digest, rom.order)
+
+
 def test_an_fmu_of_another_tool_is_not_taken_for_a_twin(fmus, tmp_path):
     other = tmp_path / "other.fmu"
     with zipfile.ZipFile(fmus["native"]) as zin, zipfile.ZipFile(other, "w") as zout:
@@ -222,6 +233,10 @@ def test_an_fmu_of_another_tool_is_not_taken_for_a_twin(fmus, tmp_path):
             zout.writestr(item, data)
     with pytest.raises(FMUError, match="other.fmu: not a thermal-twin FMU of this version"):
         fmu_identity(other)
+    with zipfile.ZipFile(tmp_path / "empty.fmu", "w") as zout:       # a zip without a model description
+        zout.writestr("readme.txt", "no model")
+    with pytest.raises(FMUError, match=r"empty.fmu: not an FMU \(KeyError"):
+        fmu_identity(tmp_path / "empty.fmu")
 
 
 def test_fmu_simulate_compares_the_fmu_with_its_own_rom_and_refuses_another(fmus, tmp_path, capsys):
@@ -252,11 +267,11 @@ def test_fmu_simulate_compares_the_fmu_with_its_own_rom_and_refuses_another(fmus
 
 
 @pytest.mark.parametrize(("option", "value", "message"), [
-    ("--step", "0", "--step 0: the default experiment's step size must be a positive number of seconds"),
-    ("--step", "-5", "--step -5: "),
-    ("--step", "nan", "--step nan: "),
-    ("--initial-temperature", "500", "--initial-temperature 500: must be in [-50, 100] °C"),
-    ("--initial-temperature", "nan", "--initial-temperature nan: "),
+    ("--step", "0", "(--step) 0: the default experiment's step size must be a positive number of seconds"),
+    ("--step", "-5", "(--step) -5: "),
+    ("--step", "nan", "(--step) nan: "),
+    ("--initial-temperature", "500", "(--initial-temperature) 500: must be in [-50, 100] °C"),
+    ("--initial-temperature", "nan", "(--initial-temperature) nan: "),
 ])
 def test_fmu_export_refuses_a_start_or_step_the_fmu_cannot_run_with(option, value, message, tmp_path, capsys):
     """They exported with 'no problems', then the FMU failed in its first step or initialisation (or gcc's

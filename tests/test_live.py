@@ -441,14 +441,20 @@ def test_unknown_room_air_lists_the_air_and_temperature_channels_not_the_camera_
     assert "T15" in err and THERMOMETERS[0] in err and "cam001" not in err
 
 
+@pytest.mark.parametrize("late_after", ["nan", "inf", "-1"])
+def test_a_late_after_that_never_or_always_fuses_at_once_is_refused(tmp_path, capsys, late_after):
+    """NaN or ∞ would hold an incomplete sample for ever, a negative value fuse every sample at once."""
+    dataset = _dataset_with_camera(tmp_path / "rec.csv")
+    assert twin_main(["live", "--replay", str(dataset), "--late-after", late_after]) == 2
+    assert f"--late-after must be a finite number of seconds ≥ 0, got {late_after}" in capsys.readouterr().err
+
+
 def test_nothing_listening_exits_1_counting_every_failed_attempt(tmp_path, capsys):
     node_map = tmp_path / "machine.toml"
     node_map.write_text(default_node_map(THERMOMETERS).to_toml())
     endpoint = f"opc.tcp://127.0.0.1:{free_port()}/x/"
-    with pytest.raises(SystemExit) as exit_:
-        twin_main(["live", "--endpoint", endpoint, "--node-map", str(node_map), "--duration", "0.5",
-              "--log", str(tmp_path / "drift.csv")])
-    assert exit_.value.code == EXIT_NOT_OBSERVED == 1
+    assert twin_main(["live", "--endpoint", endpoint, "--node-map", str(node_map), "--duration", "0.5",
+                      "--log", str(tmp_path / "drift.csv")]) == EXIT_NOT_OBSERVED == 1
     out, err = capsys.readouterr()
     assert "fused 0 samples" in out and "reconnects 0, failed connection attempts " in out
     assert "failed connection attempts 0" not in out and "log written" not in out

@@ -12,7 +12,7 @@ from test_models_greybox import EXPONENT, ambient, duty, simulate, true_time_con
 from test_models_greybox import record as network_record
 
 from twin.cli import main
-from twin.compensation.protocol import bridging_inputs, stability_problem
+from twin.compensation.protocol import continuation_times, stability_problem
 from twin.compensation.records import continued_record
 from twin.compensation.store import CompensationModel
 from twin.compensation.train import evaluate, train
@@ -256,16 +256,15 @@ def test_the_bridging_rows_interpolate_every_input_on_the_model_grid():
     record = Dataset(np.array([140.0, 150.0]), np.array([[3000.0, 24.0], [3000.0, 24.0]]), channels,
                      {"scenario": "r"})
     expected = [[750.0, 21.0], [1500.0, 22.0], [2250.0, 23.0]]   # at 110, 120 and 130 s
-    times, record_times = bridging_inputs(history, record, ["spindle", "air"], 10.0, "interpolate")
-    np.testing.assert_allclose(times, [110.0, 120.0, 130.0])
-    np.testing.assert_array_equal(record_times, record.time_s)
+    np.testing.assert_array_equal(continuation_times(history, record, ["spindle", "air"], 10.0, "interpolate"),
+                                  record.time_s)
     joined = continued_record(history, record, ["spindle", "air"], 10.0)
     np.testing.assert_allclose(joined.time_s, [90.0, 100.0, 110.0, 120.0, 130.0, 140.0, 150.0])
     np.testing.assert_allclose(joined.values[2:5], expected)
     following = Dataset(np.array([110.0]), np.array([[3000.0, 24.0]]), channels, {"scenario": "f"})
-    assert bridging_inputs(history, following, ["spindle", "air"], 10.0)[0].shape == (0,)
+    assert len(continued_record(history, following, ["spindle", "air"], 10.0)) == 3     # no bridge
     restarted = Dataset(np.array([0.0, 10.0]), record.values, channels, {"scenario": "r"})
-    np.testing.assert_allclose(bridging_inputs(history, restarted, ["spindle", "air"], 10.0)[1], [110.0, 120.0])
+    np.testing.assert_allclose(continuation_times(history, restarted, ["spindle", "air"], 10.0), [110.0, 120.0])
 
 
 def test_greybox_names_the_speed_input_it_needs_first(records):

@@ -113,8 +113,8 @@ def main(argv: list[str] | None = None) -> int:
     Returns
     -------
     int
-        Exit code: 0 done, 2 error, 130 interrupted (``twin live`` exits 1 when it observed nothing; it raises
-        ``SystemExit`` itself).
+        Exit code: 0 done, 2 error, 130 interrupted, or the code a command returns (``twin live``: 1 when it
+        observed nothing).
     """
     previous = _on_sigint(_exit_now)
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
@@ -125,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
         _on_sigint(_interrupt_once)
         try:
             try:
-                args.func(args)
+                code = args.func(args)
             finally:                       # the command has unwound: nothing left to clean up
                 _on_sigint(_exit_now)
                 close_bars()
@@ -139,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
             if message is None:
                 raise
         else:
-            return 0
+            return code or 0
         print(f"twin {_command_name(args)}: error: {message}", file=sys.stderr)
         return 2
     finally:

@@ -283,7 +283,7 @@ def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Datas
     time-series model runs over ``history`` (the training record, from its
     start) followed by ``dataset`` at the training sampling interval, and the
     tail is returned. Its state carries from one to the other, so the two
-    clocks are checked (:func:`bridging_inputs`): a record that starts one
+    clocks are checked (:func:`continuation_times`): a record that starts one
     interval after the history's end follows it; one that starts later leaves
     a gap, refused unless ``gap="interpolate"``; one that overlaps the history
     is refused; one whose clock restarts (it starts no later than the
@@ -349,7 +349,7 @@ def continued_prediction(cm: CompensationModel, dataset: Dataset, history: Datas
     start = _history_start(cm, history)
     measured = dataset[cm.target] - cm.target_reference(start)
     interval_s = continuation_interval(cm, history)
-    record_s = bridging_inputs(history, dataset, cm.inputs, interval_s, gap, on_grid=not timed)[1]
+    record_s = continuation_times(history, dataset, cm.inputs, interval_s, gap, on_grid=not timed)
     ran_over = continued_record(history, Dataset(record_s, dataset.values, dataset.channels, dataset.metadata),
                                 [*cm.inputs, cm.target], interval_s)
     X = ran_over.matrix(cm.inputs) - cm.input_reference(start)
@@ -393,11 +393,11 @@ def _history_start(cm, history):
                          f"(inputs and {cm.target} {np.round(start, 4).tolist()} against {theirs})")
 
 
-def bridging_inputs(history: Dataset, dataset: Dataset, inputs: list[str], interval_s: float,
-                    gap: Literal["refuse", "interpolate"] = "refuse", on_grid: bool = True
-                    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Times of the input rows between the end of ``history`` and the start of ``dataset``, at the model's
-    interval (:func:`~twin.compensation.records.continued_record` fills them), and the record's times.
+def continuation_times(history: Dataset, dataset: Dataset, inputs: list[str], interval_s: float,
+                       gap: Literal["refuse", "interpolate"] = "refuse", on_grid: bool = True
+                       ) -> NDArray[np.float64]:
+    """The times of ``dataset`` on the clock of the ``history`` it continues, once the two clocks are checked;
+    the input rows missing between them are bridged by :func:`~twin.compensation.records.continued_record`.
 
     A time-series model carries its thermal state from the history into the
     record, so the rows it does not see are not harmless: after a stop of a
@@ -426,11 +426,8 @@ def bridging_inputs(history: Dataset, dataset: Dataset, inputs: list[str], inter
 
     Returns
     -------
-    bridge_time : ndarray, shape (n_missing,)
-        Times of the bridging rows, s on the history's clock (none when the record follows the history, or
-        when its clock restarts).
-    record_time : ndarray, shape (n_rows,)
-        The record's times on the history's clock, s (shifted when its clock restarts).
+    ndarray, shape (n_rows,)
+        The record's times on the history's clock, s (shifted to follow it directly when its clock restarts).
 
     Raises
     ------
@@ -447,7 +444,7 @@ def bridging_inputs(history: Dataset, dataset: Dataset, inputs: list[str], inter
     if start <= float(history.time_s[0]):
         log.warning("%s: its time starts at %g s, not after --history %s ends (%g s): taken to follow it directly",
                     label, start, source, end)
-        return np.empty(0), dataset.time_s - start + end + interval_s
+        return dataset.time_s - start + end + interval_s
     if start <= end:
         raise TwinInputError(f"{label}: time_s starts at {start:g} s, inside --history {source} ({history.time_s[0]:g}"
                              f"..{end:g} s); pass as --history the record that ends where this one starts")
@@ -457,7 +454,7 @@ def bridging_inputs(history: Dataset, dataset: Dataset, inputs: list[str], inter
                              f"ends: not a whole number of the model's {interval_s:g} s steps")
     times = bridge_times(end, start, interval_s)
     if len(times) == 0:
-        return times, dataset.time_s
+        return dataset.time_s
     if gap != "interpolate":
         raise TwinInputError(f"{label}: time_s starts at {start:g} s, {start - end:g} s after --history {source} "
                              f"ends ({end:g} s): {len(times)} rows of {', '.join(inputs)} are missing, and a "
@@ -465,4 +462,4 @@ def bridging_inputs(history: Dataset, dataset: Dataset, inputs: list[str], inter
                              "--gap interpolate to bridge them by linear interpolation (the spindle speed too)")
     log.warning("%s: %d missing rows after --history %s bridged by linear interpolation of the inputs",
                 label, len(times), source)
-    return times, dataset.time_s
+    return dataset.time_s

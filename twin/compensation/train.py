@@ -395,7 +395,7 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
         The training record, for ``reference="train"``.
     gap : {"refuse", "interpolate"}, default "refuse"
         With ``reference="train"``, a record that starts more than one interval after ``history``
-        ends is refused, or bridged (:func:`~twin.compensation.protocol.bridging_inputs`).
+        ends is refused, or bridged (:func:`~twin.compensation.protocol.continuation_times`).
 
     Returns
     -------

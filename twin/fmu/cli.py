@@ -59,10 +59,11 @@ def cmd_fmu_validate(args: argparse.Namespace) -> None:
 def cmd_fmu_simulate(args: argparse.Namespace) -> None:
     """Run an FMU through a scenario in fmpy, compare it with the in-process ROM, write a CSV.
 
-    The machine, ROM order and method default to the FMU's own; options that contradict it, a machine of
-    another digest (mesh, materials, sources) and a scenario written for another machine (unless
-    ``--machine`` names the FMU's) are refused, before any build: the comparison would measure the
-    difference of two models, not the FMU's fidelity.
+    The machine, ROM order and method default to the FMU's own (the mesh size to the machine's default);
+    options that contradict it and a scenario written for another machine (unless ``--machine`` names the
+    FMU's) are refused before anything is built, a machine of another digest (mesh, materials, sources)
+    before the ROM is built: the comparison would measure the difference of two models, not the FMU's
+    fidelity.
 
     Parameters
     ----------
@@ -77,7 +78,13 @@ def cmd_fmu_simulate(args: argparse.Namespace) -> None:
     from ..core.machine import build_machine
     from ..core.scenario import load_scenario
     from ..rom.reduction import cached_rom, machine_digest
-    from .export import fmu_identity, input_table, scenario_start, simulate, simulate_table
+    from .export import (
+        fmu_identity,
+        input_table,
+        scenario_start,
+        simulate,
+        simulate_table,
+    )
 
     existing_fmu(args.fmu)
     identity = fmu_identity(args.fmu)
@@ -131,6 +138,8 @@ def _check_options(args, identity, scenario):
     own_order, own_method = (DEFAULT_ORDER, "krylov") if identity.order is None else (identity.order, identity.method)
     args.order = own_order if args.order is None else args.order
     args.method = own_method if args.method is None else args.method
+    if args.order < 1:
+        raise TwinInputError(f"--order {args.order}: a ROM's order is at least 1")
     if identity.order is not None and (args.order, args.method) != (identity.order, identity.method):
         raise TwinInputError(f"--order {args.order} --method {args.method}: {args.fmu} runs {identity}; leave "
                              "the options out to compare it with its own ROM")

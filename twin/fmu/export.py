@@ -77,12 +77,13 @@ def _subset(rom, rows):
 def _description(rom, engine):
     """The model description's text; it names what the FMU runs, read back by :func:`fmu_identity`."""
     what = "full finite-element model" if engine == "fe" else f"{rom.method} ROM of order {rom.order}"
-    return (f"Thermal twin of machine {rom.machine!r} ({what}; machine digest {rom.digest}): spindle speed, "
-            f"feeds and ambient in; temperatures (degC), TCP drift (um) and strains (ue) out")
+    return (f"Thermal twin of machine {json.dumps(rom.machine)} ({what}; machine digest {rom.digest}): spindle "
+            f"speed, feeds and ambient in; temperatures (degC), TCP drift (um) and strains (ue) out")
 
 
-_IDENTITY = re.compile(r"^Thermal twin of machine '(?P<machine>[^']*)' \((?:full finite-element model|(?P<method>\w+) "
-                       r"ROM of order (?P<order>\d+)); machine digest (?P<digest>[0-9a-f]+)\)")
+#: :func:`_description` read back; the machine's name is a JSON string (any name a TOML file can give).
+_IDENTITY = re.compile(r'^Thermal twin of machine (?P<machine>"(?:[^"\\]|\\.)*") \((?:full finite-element model|'
+                       r"(?P<method>\w+) ROM of order (?P<order>\d+)); machine digest (?P<digest>[0-9a-f]+)\)")
 
 
 @dataclass(frozen=True)
@@ -118,13 +119,17 @@ def fmu_identity(path: Path | str) -> FMUIdentity:
     """
     from fmpy import read_model_description
 
-    text = read_model_description(str(path), validate=False).description or ""
+    try:
+        text = read_model_description(str(path), validate=False).description or ""
+    except (KeyError, ValueError, SyntaxError, OSError, zipfile.BadZipFile) as exc:   # lxml's errors: SyntaxError
+        raise FMUError(f"{path}: not an FMU ({type(exc).__name__}: {exc})") from None
     found = _IDENTITY.match(text)
     if found is None:
         raise FMUError(f"{path}: not a thermal-twin FMU of this version (its description does not name the "
                        f"machine digest: {text[:80]!r}); export it again with twin fmu export")
     order = found["order"]
-    return FMUIdentity(found["machine"], found["digest"], found["method"], None if order is None else int(order))
+    return FMUIdentity(json.loads(found["machine"]), found["digest"], found["method"],
+                       None if order is None else int(order))
 
 
 def export_fmu(rom: ReducedModel, out: Path | str, kind: Literal["python", "native"] = "python",
@@ -161,12 +166,13 @@ def export_fmu(rom: ReducedModel, out: Path | str, kind: Literal["python", "nati
     """
     if kind not in KINDS:
         raise FMUError(f"unknown FMU kind {kind!r}; kinds: {list(KINDS)}")
-    if not step_s > 0 or not np.isfinite(step_s):
-        raise FMUError(f"--step {step_s:g}: the default experiment's step size must be a positive number of seconds")
+    if not 0.0 < step_s < np.inf:
+        raise FMUError(f"step_s (--step) {step_s:g}: the default experiment's step size must be a positive number "
+                       "of seconds")
     low, high = spec.AMBIENT_RANGE_C
     if not low <= default_temperature_C <= high:
-        raise FMUError(f"--initial-temperature {default_temperature_C:g}: must be in [{low:g}, {high:g}] °C, the "
-                       "range of T_initial and of the ambient inputs it starts")
+        raise FMUError(f"default_temperature_C (--initial-temperature) {default_temperature_C:g}: must be in "
+                       f"[{low:g}, {high:g}] °C, the range of T_initial and of the ambient inputs it starts")
     if engine not in ENGINES:
         raise FMUError(f"unknown FMU engine {engine!r}; engines: {list(ENGINES)}")
     if kind == "native" and engine != "rom":

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 from ..errors import TwinInputError
@@ -38,6 +39,8 @@ def cmd_diagnose(args: argparse.Namespace) -> None:
                  effects=split_names(args.effects) or None, n_pairs=args.pairs, backend=args.backend,
                  step_s=args.step, progress=progress_bar("fitting effects", unit="fit"))
     out = write_report(d, args.out, render=not args.no_render, overwrite=args.overwrite)
+    for warning in d.record.report["warnings"]:
+        print(f"twin gap diagnose: warning: {warning}", file=sys.stderr)
     print(d.verdict)
     for r in d.ranking[:5]:
         named = f"  ← {role(d, r)}" if role(d, r) else ""

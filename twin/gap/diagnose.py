@@ -381,7 +381,8 @@ def _read_inputs(measured, machine, scenario, column_map, holdout_fraction, init
     each checked (clear errors for a bad hold-out fraction, time step, record or scenario)."""
     if not 0.05 <= float(holdout_fraction) <= 0.8:
         raise TwinInputError(f"holdout_fraction must lie in [0.05, 0.8], got {holdout_fraction}")
-    if not 0.0 < float(step_s) < np.inf:
+    step_s = float(step_s)
+    if not 0.0 < step_s < np.inf:
         raise TwinInputError(f"step_s (--step) must be a positive number of seconds, got {step_s:g}")
     machine = _machine(machine)
     sc = None
@@ -558,7 +559,7 @@ def diagnose(measured: Dataset | str | Path, machine: str | Path | Machine = "vm
     d = Diagnosis(machine, record, model, ev, float(split), nominal, singles, pairs, ranking, decision, scales,
                   n_eff_hold, noise_g,
                   {g: nominal.summary["groups"][g]["hold_rms"] / max(noise_g[g], 1e-9) for g in noise_g},
-                  where.phases(drive, t), notes=[*drive.notes, position_note],
+                  where.phases(drive, t), notes=[*record.report["warnings"], *drive.notes, position_note],
                   skipped=[e.name for e in library if not e.applicable(machine)])
     _explain(d, drive, discovery, timings)
     timings["total_s"] = time.perf_counter() - t0

@@ -600,9 +600,9 @@ def measured_drive(machine: Machine, grid: np.ndarray, record: Record, scenario:
         measured["spindle"] = record.spindle
     elif scenario is not None:
         notes.append(f"no spindle channel: the spindle speed of scenario {scenario.name!r} is used")
-    elif "spindle" in record.report.get("channels_empty", ()):
-        raise TwinInputError(f"{record.report.get('source', 'the data')}: column spindle_rpm holds no value; "
-                             "give the spindle speed, or a scenario that has it")
+    elif "spindle" in record.report["empty_columns"]:
+        raise TwinInputError(f"{record.report['source']}: column {record.report['empty_columns']['spindle']!r} "
+                             "holds no value; give the spindle speed, or a scenario that has it")
     else:
         raise TwinInputError("the data has no spindle-speed channel ('spindle_rpm'); give it or a scenario")
     if not record.feeds:

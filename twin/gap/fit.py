@@ -393,7 +393,7 @@ class FitResult:
     n_eff_fit: float = 0.0
     prediction: object = None
     notes: list = field(default_factory=list)
-    bounds: list = field(default_factory=list)   #: (lower, upper) of each parameter, in its unit
+    bounds: list = field(default_factory=list)   #: (lower, upper) of each parameter, in its unit; [] unbounded
 
     @property
     def k(self) -> int:
@@ -409,8 +409,9 @@ class FitResult:
             ``name``, ``value``, ``sd`` (in ``unit``), ``interval`` (90 %, :func:`interval90`) and ``unit`` of
             every parameter.
         """
+        bounds = self.bounds or [(-np.inf, np.inf)] * len(self.labels)
         return [{"name": lab, "value": float(v), "sd": float(s), "interval": interval90(v, s, *b), "unit": u}
-                for lab, v, s, u, b in zip(self.labels, self.values, self.sd, self.units, self.bounds, strict=True)]
+                for lab, v, s, u, b in zip(self.labels, self.values, self.sd, self.units, bounds, strict=True)]
 
 
 #: Standard normal 95 % quantile: a 90 % two-sided interval is ± Z90 sd.

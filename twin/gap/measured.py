@@ -33,11 +33,15 @@ PLAUSIBLE = {"temperature": (-40.0, 150.0), "air": (-40.0, 80.0), "displacement"
 #: A measured channel whose range differs from the nominal twin's by more than this factor (either way) is
 #: taken as a unit error (mm under ``_um``) when the twin predicts a clear signal there.
 SCALE_FACTOR = 20.0
-#: A speed or feed above this factor × the machine's limit is a unit error, not an overload.
-LIMIT_MARGIN = 1.05
-#: A spindle column that peaks between these fractions of the machine's top speed is taken to be in Hz or rev/s
-#: (60× too small: 1000 … 12000 rpm read 17 … 200): below the first it is at standstill (a tachometer reads a
-#: few rpm there), above the second it runs.
+#: A spindle speed above this factor × the machine's top speed is a unit error, not an overload.
+SPEED_LIMIT_FACTOR = 1.05
+#: A logged feed above this factor × the machine's top feed is a unit error: a log holds rapid traverses too,
+#: which are faster than the feeds a scenario asks for (typically 2–3 ×).
+FEED_LIMIT_FACTOR = 3.0
+#: A spindle column that peaks between these fractions of the machine's top speed reads like one in Hz or rev/s
+#: (60× too small: 1000 … 12000 rpm read 17 … 200), and is warned about: below the first it is at standstill (a
+#: tachometer reads a few rpm there), above the second it runs.  A record that truly peaks there is possible
+#: (a slow warm-up), so it is not refused.
 SPINDLE_PEAK_IN_HZ = (0.001, 0.02)
 CONDITION_UNITS = {"spindle": "rpm", "feed_x": "mm_min", "feed_y": "mm_min", "feed_z": "mm_min",
                    "ambient_gradient": "K_m"}
@@ -145,9 +149,14 @@ def check_plausible(dataset: Dataset, channel: ChannelInfo, kind: str, values: n
 
 
 def check_operating_range(dataset: Dataset, channel: ChannelInfo, values: np.ndarray,
-                          definition: MachineDefinition) -> None:
-    """Stop with a clear error when a spindle speed or feed lies beyond what the machine can do (a unit error),
-    a spindle speed is negative, or a spindle column peaks where one in Hz or rev/s would (60× too small).
+                          definition: MachineDefinition) -> str | None:
+    """Stop with a clear error when a spindle speed or feed lies beyond what the machine can do (a unit error);
+    warn when a spindle column peaks where one in Hz or rev/s would (60× too small).
+
+    A spindle speed is taken by its magnitude (reverse rotation is logged negative; the heat does not care).
+    A logged feed may include rapid traverses, faster than the largest feed a scenario asks for: it is
+    refused only beyond :data:`FEED_LIMIT_FACTOR` × the machine's top feed (µm/min or counts under
+    ``_mm_min``).
 
     Parameters
     ----------
@@ -156,37 +165,44 @@ def check_operating_range(dataset: Dataset, channel: ChannelInfo, values: np.nda
     channel : ChannelInfo
         ``spindle`` (rpm) or ``feed_x|y|z`` (mm/min).
     values : ndarray, shape (n_times,)
-        The channel's values, NaN where missing (ignored).
+        The channel's values, NaN where missing (ignored); at least one finite.
     definition : MachineDefinition
         The machine, with ``max_spindle_rpm`` and ``max_feed_mm_min``.
+
+    Returns
+    -------
+    str or None
+        A warning for the report when the spindle's typical peak (99th percentile of |n|) lies in the band
+        of :data:`SPINDLE_PEAK_IN_HZ`; else None.
 
     Raises
     ------
     TwinInputError
-        At the first value outside the range, or when the spindle peaks in the band of
-        :data:`SPINDLE_PEAK_IN_HZ`.
+        At the first value beyond the machine's limit.
     """
     source = dataset.metadata.get("source", "the data")
-    if channel.name == "spindle":
-        lo, hi, limit = 0.0, LIMIT_MARGIN * definition.max_spindle_rpm, "spindle speed (rpm, a magnitude)"
-    else:
-        hi = LIMIT_MARGIN * definition.max_feed_mm_min
-        lo, limit = -hi, "feed (mm/min, signed)"
-    finite = np.isfinite(values)
-    bad = np.flatnonzero(finite & ((values < lo) | (values > hi)))
+    spindle = channel.name == "spindle"
+    limit = (SPEED_LIMIT_FACTOR * definition.max_spindle_rpm if spindle
+             else FEED_LIMIT_FACTOR * definition.max_feed_mm_min)
+    what = "spindle speed (rpm)" if spindle else "feed (mm/min), rapid traverses allowed for,"
+    magnitude = np.abs(values[np.isfinite(values)])
+    bad = np.flatnonzero(np.abs(values) > limit)
     if bad.size:
         k = bad[0]
         raise TwinInputError(f"{source}: column {channel.column!r} has value {values[k]:g} at "
-                             f"t = {dataset.time_s[k]:g} s, outside the {lo:g} … {hi:g} {limit} of machine "
+                             f"t = {dataset.time_s[k]:g} s, beyond the ±{limit:g} {what} of machine "
                              f"{definition.name!r}: is the column in another unit?")
-    peak = float(np.max(values[finite]))
+    if not spindle:
+        return None
+    peak = float(np.percentile(magnitude, 99.0))
     standstill, running = (f * definition.max_spindle_rpm for f in SPINDLE_PEAK_IN_HZ)
-    if channel.name == "spindle" and standstill < peak < running:
-        raise TwinInputError(f"{source}: column {channel.column!r} peaks at {peak:g} rpm, "
-                             f"{peak / definition.max_spindle_rpm:.1%} of the {definition.max_spindle_rpm:g} rpm "
-                             f"top speed of machine {definition.name!r}: in Hz (rev/s) it would be {60 * peak:g} rpm. "
-                             "Give the speed in rpm; a spindle that ran this slowly heats nothing the twin "
-                             "could tell from its standstill")
+    if not standstill < peak < running:
+        return None
+    return (f"column {channel.column!r} peaks at about {peak:.4g} rpm (99th percentile), "
+            f"{100 * peak / definition.max_spindle_rpm:.2g} % of the {definition.max_spindle_rpm:g} rpm top speed "
+            f"of machine {definition.name!r}: if it is in Hz (rev/s), the speed is {60 * peak:.0f} rpm and every "
+            "spindle heat below is wrong (a spindle in Hz made the search beyond the library 'discover' a "
+            "7.7 kW source); convert it to rpm")
 
 
 def check_scale(record: Record, predicted: np.ndarray, columns: Mapping[str, str]) -> None:
@@ -242,6 +258,7 @@ class _Channels:
         self.t = np.asarray(dataset.time_s, float)
         self.names, self.kinds, self.cols = [], [], []
         self.feeds, self.air, self.ignored, self.empty = {}, [], [], []
+        self.empty_columns, self.warnings = {}, []    # condition → its empty column; notes for the report
         self.spindle = self.gradient = None
 
     def valid_names(self):
@@ -288,12 +305,18 @@ class _Channels:
             raise TwinInputError(f"channel {ch.name!r} must be in {CONDITION_UNITS[ch.name]!r}, got {ch.unit!r}")
         if not np.isfinite(v).any():
             self.empty.append(ch.name)
+            self.empty_columns[ch.name] = ch.column
             return
         if ch.name != "ambient_gradient":
-            check_operating_range(self.dataset, ch, v, self.d)
+            warning = check_operating_range(self.dataset, ch, v, self.d)
+            if warning:
+                self.warnings.append(warning)
         filled = _fill(self.t, v)
         if ch.name == "spindle":
-            self.spindle = filled
+            if np.nanmin(v) < 0.0:
+                self.warnings.append(f"column {ch.column!r} reads down to {np.nanmin(v):g} rpm: its magnitude is "
+                                     "the spindle speed (reverse rotation, a tachometer's noise at rest)")
+            self.spindle = np.abs(filled)
         elif ch.name == "ambient_gradient":
             self.gradient = filled
         else:
@@ -354,6 +377,8 @@ def _import_report(dataset, m, t, values):
         "sensors_used": names,
         "sensors_missing": sorted(set(m.sensors) - set(names) - {n for n, *_ in air}),
         "channels_empty": m.empty,
+        "empty_columns": m.empty_columns,
+        "warnings": m.warnings,
         "channels_ignored": m.ignored,
         "nan_counts": {n: int((~np.isfinite(values[:, j])).sum()) for j, n in enumerate(names)
                        if not np.isfinite(values[:, j]).all()},

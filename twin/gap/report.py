@@ -431,8 +431,9 @@ def _split_lines(d):
 
 
 def _offset_lines(d):
-    """The constant sensor offsets and the initial-state nuisance of the nominal fit; thermometer offsets no
-    thermometer's accuracy explains are called out (°F or kelvin renamed to degC, a wrong calibration)."""
+    """The constant sensor offsets and the initial-state nuisance of the nominal fit; surface thermometer offsets
+    no thermometer's accuracy explains are called out (°F or kelvin renamed to degC, a wrong calibration; an air
+    sensor's may be the room's stratification)."""
     off, kinds = d.nominal.residual.offsets, d.evaluator.kinds
     big = [(n, o, GROUP_UNIT[k]) for n, o, k in zip(d.names, off, kinds) if abs(o) > 0.25]
     listed = ", ".join(f"{n} {o:+.2f} {u}" for n, o, u in big[:12]) or "all small"
@@ -441,8 +442,8 @@ def _offset_lines(d):
     nuisance = ", ".join(f"{k} {v:+.3g}" for k, v in d.nominal.residual.nuisance.items())
     lines = [(f"- constant offsets (estimated on the fit part, every model): largest |offset| {largest}; "
               f"{listed} (thermometer accuracy, probe zero, ambient level)")]
-    beyond = [f"{n} {o:+.2f} K" for n, o, k in zip(d.names, off, kinds)
-              if k in ("temperature", "air") and abs(o) > THERMOMETER_ACCURACY_K]
+    beyond = [f"{n} {o:+.2f} K" for n, o, k in zip(d.names, off, kinds)      # air sensors: stratification
+              if k == "temperature" and abs(o) > THERMOMETER_ACCURACY_K]
     if beyond:
         lines.append(f"- **offsets no thermometer's accuracy (±{THERMOMETER_ACCURACY_K:g} K) explains**: "
                      f"{', '.join(beyond)}; check these channels' unit (°F or kelvin under _degC) and calibration "

@@ -265,7 +265,7 @@ def _not_observed(stats, server):
     return None
 
 
-def cmd_live(args: argparse.Namespace) -> None:
+def cmd_live(args: argparse.Namespace) -> int:
     """``twin live``: replay (``--replay``) or observe a machine (``--endpoint``); print the summary.
 
     Parameters
@@ -273,12 +273,14 @@ def cmd_live(args: argparse.Namespace) -> None:
     args : argparse.Namespace
         The parsed ``twin live`` options.
 
-    Raises
-    ------
-    SystemExit
-        :data:`EXIT_NOT_OBSERVED` when no sample was fused or the session ended without a connection (after
-        the summary, with the reason on stderr).
+    Returns
+    -------
+    int
+        0, or :data:`EXIT_NOT_OBSERVED` when no sample was fused or the session ended without a connection
+        (after the summary, with the reason on stderr).
     """
+    if not 0.0 <= args.late_after < float("inf"):
+        raise TwinInputError(f"--late-after must be a finite number of seconds ≥ 0, got {args.late_after:g}")
     if args.log:
         from ..infra.outdir import check_output_file
         check_output_file(args.log, args.overwrite, inputs=_input_files(args))
@@ -289,7 +291,8 @@ def cmd_live(args: argparse.Namespace) -> None:
     reason = _not_observed(stats, f"--endpoint {args.endpoint}" if args.endpoint else "the replay server")
     if reason:
         print(f"twin live: {reason}", file=sys.stderr)
-        raise SystemExit(EXIT_NOT_OBSERVED)
+        return EXIT_NOT_OBSERVED
+    return 0
 
 
 def register(sub: argparse._SubParsersAction) -> None:
