@@ -526,6 +526,16 @@ def _read_utf8(path):
                              "save the CSV as UTF-8") from None
 
 
+def _check_header_once(path, text):
+    """Refuse a header that names a column twice (pandas would rename the second ``X.1`` and read both)."""
+    named = [h.strip() for h in next(csv.reader(io.StringIO(text)), [])]
+    twice = next((h for i, h in enumerate(named) if h in named[:i]), None)
+    if twice is not None:
+        where = [i + 1 for i, h in enumerate(named) if h == twice]
+        raise TwinInputError(f"{path}: column {twice!r} appears {len(where)} times (columns "
+                             f"{', '.join(map(str, where))}); give each channel once")
+
+
 def _parse_csv(path, text, time_column=None):
     """Header, float matrix and time origin of a CSV; empty cells and NaN/NA become NaN.
 
@@ -536,13 +546,7 @@ def _parse_csv(path, text, time_column=None):
 
     # pandas ≥ 3 parses floats exactly by default; older versions need round_trip.
     exact = {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"}
-    first_line = next(csv.reader(io.StringIO(text)), [])
-    named = [h.strip() for h in first_line]
-    twice = next((h for i, h in enumerate(named) if h in named[:i]), None)
-    if twice is not None:
-        where = [i + 1 for i, h in enumerate(named) if h == twice]
-        raise TwinInputError(f"{path}: column {twice!r} appears {len(where)} times (columns "
-                             f"{', '.join(map(str, where))}); give each channel once")
+    _check_header_once(path, text)
     try:
         frame = pd.read_csv(io.StringIO(text), skipinitialspace=True, **exact)
     except pd.errors.EmptyDataError:
