@@ -94,9 +94,10 @@ def cmd_fmu_simulate(args: argparse.Namespace) -> None:
     _check_options(args, identity, scenario)
     machine = build_machine(args.machine, args.mesh_size)
     scenario.check_machine(machine.definition)
-    if machine_digest(machine) != identity.digest:
+    digest = machine_digest(machine)
+    if digest != identity.digest:
         raise TwinInputError(f"{args.fmu} runs {identity}; machine {args.machine} (mesh size "
-                             f"{args.mesh_size or 'its default'}) has digest {machine_digest(machine)}: another "
+                             f"{args.mesh_size or 'its default'}) has digest {digest}: another "
                              "mesh, material, source or sensor. Pass the --machine and --mesh-size it was exported "
                              "with")
     rom = cached_rom(machine, args.order, args.method)

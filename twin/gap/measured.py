@@ -185,7 +185,6 @@ def check_operating_range(dataset: Dataset, channel: ChannelInfo, values: np.nda
     limit = (SPEED_LIMIT_FACTOR * definition.max_spindle_rpm if spindle
              else FEED_LIMIT_FACTOR * definition.max_feed_mm_min)
     what = "spindle speed (rpm)" if spindle else "feed (mm/min), rapid traverses allowed for,"
-    magnitude = np.abs(values[np.isfinite(values)])
     bad = np.flatnonzero(np.abs(values) > limit)
     if bad.size:
         k = bad[0]
@@ -194,7 +193,7 @@ def check_operating_range(dataset: Dataset, channel: ChannelInfo, values: np.nda
                              f"{definition.name!r}: is the column in another unit?")
     if not spindle:
         return None
-    peak = float(np.percentile(magnitude, 99.0))
+    peak = float(np.percentile(np.abs(values[np.isfinite(values)]), 99.0))
     standstill, running = (f * definition.max_spindle_rpm for f in SPINDLE_PEAK_IN_HZ)
     if not standstill < peak < running:
         return None
@@ -313,8 +312,9 @@ class _Channels:
                 self.warnings.append(warning)
         filled = _fill(self.t, v)
         if ch.name == "spindle":
-            if np.nanmin(v) < 0.0:
-                self.warnings.append(f"column {ch.column!r} reads down to {np.nanmin(v):g} rpm: its magnitude is "
+            lowest = np.nanmin(v)
+            if lowest < 0.0:
+                self.warnings.append(f"column {ch.column!r} reads down to {lowest:g} rpm: its magnitude is "
                                      "the spindle speed (reverse rotation, a tachometer's noise at rest)")
             self.spindle = np.abs(filled)
         elif ch.name == "ambient_gradient":
