@@ -51,6 +51,11 @@ TETS_PER_CUBED_EDGE = 12.0
 #: 1,063-tetrahedron test machine, 698 s for a 49,535-tetrahedron vmc_ram mesh.
 MESHING_FIXED_S = 45.0
 MESHING_S_PER_TET = 0.014
+#: Smallest target edge length accepted, m (0.1 mm: below it a machine's mesh is astronomically large).
+MIN_MESH_SIZE_M = 1e-4
+#: Most tetrahedra a mesh may be expected to have before meshing starts: 20 million is about 400 times the
+#: shipped 45 mm mesh, days of meshing and more memory than the FE's direct solver has on a workstation.
+MAX_TETRAHEDRA = 2e7
 
 
 @dataclass
@@ -103,6 +108,41 @@ def meshing_estimate(geometry: MachineGeometry, size_m: float) -> tuple[float, f
     return tets, MESHING_FIXED_S + MESHING_S_PER_TET * tets
 
 
+def check_mesh_size(size_m: float) -> float:
+    """A target edge length given as a number (not read from a file), checked.
+
+    Parameters
+    ----------
+    size_m : float
+        Target tetrahedron edge length, m.
+
+    Returns
+    -------
+    float
+        The same length, m.
+
+    Raises
+    ------
+    DefinitionError
+        If it is not a finite length of at least :data:`MIN_MESH_SIZE_M`.
+    """
+    size = float(size_m)
+    if not (np.isfinite(size) and size >= MIN_MESH_SIZE_M):
+        raise DefinitionError(f"mesh size must be a finite length ≥ {MIN_MESH_SIZE_M:g} m "
+                              f"({MIN_MESH_SIZE_M * 1e3:g} mm), got {size_m!r} m")
+    return size
+
+
+def _check_feasible(geometry, size_m, tets, seconds):
+    """Refuse to start a meshing that would exceed :data:`MAX_TETRAHEDRA` (it would run for days)."""
+    if tets > MAX_TETRAHEDRA:
+        smallest = size_m * (tets / MAX_TETRAHEDRA) ** (1 / 3)
+        raise DefinitionError(
+            f"meshing {geometry.name} at {size_m * 1e3:g} mm would make about {tets:.2g} tetrahedra (roughly "
+            f"{duration_text(seconds)}), more than the {MAX_TETRAHEDRA:.0e} this twin meshes; use a mesh size of "
+            f"at least {np.ceil(smallest * 1e4) / 10:g} mm")
+
+
 def duration_text(seconds: float) -> str:
     """A rough duration as text.
 
@@ -135,7 +175,8 @@ def build_mesh(geometry: MachineGeometry, size_m: float | None = None, rebuild: 
     geometry : MachineGeometry
         The parts and mesh settings.
     size_m : float, optional
-        Target tetrahedron edge length, m (default: the definition's ``mesh.size_m``).
+        Target tetrahedron edge length, m (default: the definition's ``mesh.size_m``); at least
+        :data:`MIN_MESH_SIZE_M`, and no finer than makes about :data:`MAX_TETRAHEDRA` tetrahedra.
     rebuild : bool
         Mesh again even if a cached mesh exists.
     quiet : bool
@@ -148,9 +189,7 @@ def build_mesh(geometry: MachineGeometry, size_m: float | None = None, rebuild: 
     info : MeshInfo
         The file, whether it came from the cache, the time taken (s) and the geometry digest.
     """
-    size_m = float(size_m or geometry.mesh_size_m)
-    if not size_m > 0:
-        raise DefinitionError(f"{geometry.source}: mesh size must be positive, got {size_m!r}")
+    size_m = geometry.mesh_size_m if size_m is None else check_mesh_size(size_m)
     name = cache_file_name(geometry, size_m)
     digest = geometry.digest(size_m)
     path = None if rebuild else find_cached(name)
@@ -160,6 +199,7 @@ def build_mesh(geometry: MachineGeometry, size_m: float | None = None, rebuild: 
         return mesh, MeshInfo(path, True, time.perf_counter() - start, digest)
     path = user_cache_dir() / name
     tets, seconds = meshing_estimate(geometry, size_m)
+    _check_feasible(geometry, size_m, tets, seconds)
     log.info("meshing %s at %g mm (about %s tetrahedra): roughly %s on a 2-core machine",
              geometry.name, size_m * 1e3, f"{float(f'{tets:.2g}'):,.0f}", duration_text(seconds))
     start = time.perf_counter()

@@ -64,9 +64,31 @@ def add_cluster_options(parser: argparse.ArgumentParser) -> None:
         The command's parser.
     """
     parser.add_argument("--machine", default="vmc_ram", help="machine name or TOML path")
-    parser.add_argument("--mesh-size", type=float, help="target tetrahedron edge length, m")
+    parser.add_argument("--mesh-size", type=mesh_size, help="target tetrahedron edge length, m")
     parser.add_argument("--scheduler", default="local", help="'local' (a local Dask cluster, default), 'serial', "
                                                               "or tcp://HOST:8786 for an existing one")
+
+
+def mesh_size(text: str) -> float:
+    """The value of ``--mesh-size``: a target tetrahedron edge length in m (argparse ``type``).
+
+    Parameters
+    ----------
+    text : str
+        The option's text.
+
+    Returns
+    -------
+    float
+        The length, m, at least :data:`meshes.builder.MIN_MESH_SIZE_M`.
+    """
+    from meshes.builder import MIN_MESH_SIZE_M, check_mesh_size   # heavy (pyvista): only when the option is given
+
+    try:
+        return check_mesh_size(float(text))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a mesh size: give a finite length in m, at least "
+                                         f"{MIN_MESH_SIZE_M:g} m ({MIN_MESH_SIZE_M * 1e3:g} mm)") from None
 
 
 def check_out_file(args: argparse.Namespace, inputs: tuple = ()) -> None:

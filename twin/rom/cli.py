@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 
 from ..core.files import write_text_atomic
 from ..errors import TwinInputError
-from ..infra.cli_common import add_overwrite, check_out_file
+from ..infra.cli_common import add_overwrite, check_out_file, mesh_size
 
 if TYPE_CHECKING:
     from ..core.machine import Machine
@@ -64,7 +64,7 @@ def add_rom_options(p: argparse.ArgumentParser, defaults_from: str | None = None
 
     value, shown = default("vmc_ram", "vmc_ram")
     p.add_argument("--machine", default=value, help=f"machine name or TOML path ({shown})")
-    p.add_argument("--mesh-size", type=float, help="target tetrahedron edge length, m")
+    p.add_argument("--mesh-size", type=mesh_size, help="target tetrahedron edge length, m")
     value, shown = default(DEFAULT_ORDER, DEFAULT_ORDER)
     p.add_argument("--order", type=int, default=value, help=f"ROM order ({shown})")
     value, shown = default("krylov", "krylov")
@@ -135,7 +135,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     report = rsub.add_parser("report", help="error vs order against the full FE over scenarios (slow)")
     report.add_argument("--machine", default="vmc_ram")
-    report.add_argument("--mesh-size", type=float)
+    report.add_argument("--mesh-size", type=mesh_size, help="target tetrahedron edge length, m")
     report.add_argument("--orders", default="10,20,30,40,60,80,100", help="comma-separated orders")
     report.add_argument("--methods", default="krylov,modal", help="comma-separated: krylov,modal")
     report.add_argument("--scenarios", help="comma-separated scenarios (default: all shipped)")

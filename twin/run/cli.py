@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..infra.cli_common import add_overwrite, read_column_map
+from ..infra.cli_common import add_overwrite, mesh_size, read_column_map
 from ..infra.progress import progress_bar
 
 # Handlers import the library inside them, never up here: start-up time (`twin --help` must not load scipy).
@@ -87,7 +87,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     run = sub.add_parser("run", help="simulate a scenario and write dataset, plots and summary")
     run.add_argument("scenario", help="scenario name or path to its TOML file")
     run.add_argument("--machine", help="machine name or TOML path (default: the scenario's)")
-    run.add_argument("--mesh-size", type=float, help="target tetrahedron edge length, m")
+    run.add_argument("--mesh-size", type=mesh_size, help="target tetrahedron edge length, m")
     run.add_argument("--out", help="result folder (default runs/<scenario>)")
     run.add_argument("--fields", action="store_true", help="also write VTK temperature fields")
     run.add_argument("--camera", action="store_true", help="record the thermal-camera spots in the dataset")
@@ -98,7 +98,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     mesh = sub.add_parser("mesh", help="build and cache a machine's mesh; print statistics; render it")
     mesh.add_argument("machine", nargs="?", default="vmc_ram")
-    mesh.add_argument("--mesh-size", type=float, help="target tetrahedron edge length, m")
+    mesh.add_argument("--mesh-size", type=mesh_size, help="target tetrahedron edge length, m")
     mesh.add_argument("--out", help="folder for statistics and render (default runs/mesh_<machine>)")
     mesh.add_argument("--rebuild", action="store_true", help="mesh again even if cached")
     mesh.add_argument("--ship", action="store_true",
