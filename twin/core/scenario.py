@@ -27,6 +27,8 @@ if TYPE_CHECKING:   # for annotations only: a scenario is read without its machi
     from .machine_definition import MachineDefinition
 
 SCENARIOS_DIR = Path(__file__).resolve().parents[2] / "scenarios"
+#: The shipped machines, ``meshes.definition.MACHINES_DIR`` (that module loads pyvista; reading a scenario must not).
+MACHINES_DIR = Path(__file__).resolve().parents[2] / "meshes" / "machines"
 HOUR = 3600.0
 #: Ambient temperatures (°C) accepted as plausible for a machine-tool room (the FMU's input range too).
 AMBIENT_RANGE_C = (-50.0, 100.0)
@@ -90,6 +92,23 @@ class DoorOpening:
         falling = np.clip(s / self.duration_s, 0.0, 1.0) * self.drop_K
         after = np.exp(-np.clip(s - self.duration_s, 0.0, None) / self.recovery_s)
         return -np.where(s <= self.duration_s, falling, self.drop_K * after) * (s > 0)
+
+    def reaches(self, zone: str, lagged: bool = False) -> bool:
+        """Whether the opening changes the air of a zone.
+
+        Parameters
+        ----------
+        zone : str
+            A convection zone of the machine.
+        lagged : bool
+            The zone sees the room through a lag (an enclosure), so an opening that reaches the room reaches it.
+
+        Returns
+        -------
+        bool
+            True for an opening without ``zones``, or one naming the zone (or the room, for a lagged zone).
+        """
+        return self.zones is None or zone in self.zones or (lagged and "room" in self.zones)
 
 
 @dataclass
@@ -262,7 +281,7 @@ class Scenario:
             def raw(x, zone=zone, lagged=tau > 0):
                 value = self.ambient(x)
                 for ev in self.events:
-                    if ev.zones is None or zone in ev.zones or (lagged and "room" in ev.zones):
+                    if ev.reaches(zone, lagged):
                         value = value + ev.offset(x)
                 return value
 
@@ -270,7 +289,9 @@ class Scenario:
         return out
 
     def check_machine(self, definition: MachineDefinition) -> None:
-        """Validate the scenario against a machine: speeds and feeds within limits, event zones known.
+        """Validate the scenario against a machine: speeds and feeds within limits, event zones known, air plausible.
+
+        The air check is :meth:`check_air`.
 
         Parameters
         ----------
@@ -280,7 +301,8 @@ class Scenario:
         Raises
         ------
         DefinitionError
-            Naming the scenario file, the segment or event and the machine's limit.
+            Naming the scenario file, the segment or event and the machine's limit; or, from
+            :meth:`check_air`, the event or gradient that takes the air out of range.
         """
         for i, s in enumerate(self.segments):
             where = s.origin or f"segment {i}"
@@ -296,6 +318,73 @@ class Scenario:
                 if zone not in definition.zones:
                     raise DefinitionError(f"{self.source}: events[{i}].zones names an unknown zone {zone!r}; "
                                           f"zones of {definition.name!r}: {definition.zones}")
+        self.check_air(definition)
+
+    def check_air(self, definition: MachineDefinition) -> None:
+        """Refuse a scenario whose air, as a run on the machine applies it, leaves :data:`AMBIENT_RANGE_C`.
+
+        Reading a scenario checks the room ambient alone.  The door openings
+        (which may overlap) and the vertical gradient need the machine: its
+        zones, their lags, and the heights its convecting parts and air
+        sensors span.  Each zone's air is taken as the run computes it
+        (:meth:`zone_ambient`) at the sample times and the breakpoints (a
+        door's deepest point is one), plus g·(z − z_ref) at the zone's lowest
+        and highest point (linear in z, so those are its extremes); a steady
+        start with ``[initial] ambient_C`` adds the gradient to that too.
+
+        Parameters
+        ----------
+        definition : MachineDefinition
+            The machine it runs on.
+
+        Raises
+        ------
+        DefinitionError
+            One line (:func:`check_ambient_C`): the scenario file, the field that pushes the coldest (or
+            warmest) air furthest (``events[i].drop_K`` or ``ambient.vertical_gradient_K_per_m``) and its
+            value, then the zone, height (m) and time (h) of that air and its temperature (°C).
+        """
+        places = self._air_extremes(definition)
+        coldest = min(places, key=lambda place: place[0])
+        warmest = max(places, key=lambda place: place[0])
+        check_ambient_C([coldest[0], warmest[0]], self.source,
+                        lambda i: self._air_culprit(definition, (coldest, warmest)[i], (-1.0, 1.0)[i]))
+
+    def _air_extremes(self, definition: MachineDefinition) -> list[tuple]:
+        """(°C, zone, height in m or None, time in s or None for the steady start) of each zone's extreme air."""
+        lags = definition.zone_lags_s
+        t = np.union1d(self.times(), self.breakpoints_s(lags))
+        g, ref = self.ambient.gradient_K_per_m, definition.ambient_reference_height_m
+        heights = _zone_heights(definition) if g else {}     # without a gradient the height does not matter
+        steady = self.initial.get("ambient_C")
+        places = []
+        for zone, air in self.zone_ambient(t, definition.zones, lags).items():
+            for z in heights.get(zone, (None,)):
+                shift = 0.0 if z is None else g * (z - ref)
+                values = air + shift
+                places += [(float(values[k]), zone, z, float(t[k])) for k in (np.argmin(values), np.argmax(values))]
+                if steady is not None:
+                    places.append((steady + shift, zone, z, None))
+        return places
+
+    def _air_culprit(self, definition: MachineDefinition, place: tuple, sign: float) -> str:
+        """``: field = value (zone, height, time)``: what moves the air at ``place`` furthest towards ``sign``.
+
+        The room ambient (with its HVAC ripple) was checked on reading, so the
+        field is a door opening reaching the zone or the gradient at that
+        height, whichever pushes the air most towards −1 (colder) or +1 (warmer).
+        """
+        _, zone, z, t = place
+        g = self.ambient.gradient_K_per_m
+        lagged = definition.zone_lags_s.get(zone, 0.0) > 0
+        pushes = {f"events[{i}].drop_K": (float(ev.offset(t)), ev.drop_K)
+                  for i, ev in enumerate(self.events) if t is not None and ev.reaches(zone, lagged)}
+        pushes["ambient.vertical_gradient_K_per_m"] = (0.0 if z is None else
+                                                       g * (z - definition.ambient_reference_height_m), g)
+        name = max(pushes, key=lambda key: sign * pushes[key][0])
+        at = ([] if z is None else [f"z = {z:.3g} m"]) + (["the steady start"] if t is None else
+                                                          [f"t = {t / HOUR:.4g} h"])
+        return f": {name} = {pushes[name][1]:g} (zone {zone!r} air at {', '.join(at)})"
 
 
 def first_order_lag(signal: Callable[[np.ndarray], np.ndarray], t: np.ndarray, tau_s: float) -> np.ndarray:
@@ -346,6 +435,35 @@ def lag_step_s(tau_s: float) -> float:
         τ/20, at most 60 s.
     """
     return min(tau_s / 20.0, 60.0)
+
+
+def _zone_heights(definition: MachineDefinition) -> dict[str, tuple[float, float]]:
+    """The lowest and highest air of each zone: its convecting parts' extents and its air sensors.
+
+    A part counts with its whole height even when its rule takes only some of
+    its faces (``facing``): the extremes may be a little wide, never narrow.
+
+    Parameters
+    ----------
+    definition : MachineDefinition
+        The machine.
+
+    Returns
+    -------
+    dict of str to (float, float)
+        Zone → (lowest, highest) z, m.
+    """
+    size = definition.geometry.mesh_size_m
+    used = {name for rule in definition.convection for name in rule.parts}
+    extent = {p.name: p.shape.surface(size).bounds[4:6] for p in definition.geometry.parts if p.name in used}
+    heights = {}
+    for rule in definition.convection:
+        for name in rule.parts:
+            heights.setdefault(rule.zone, []).extend(float(z) for z in extent[name])
+    for sensor in definition.sensors:
+        if sensor.kind == "air":
+            heights.setdefault(sensor.zone, []).append(float(sensor.position[2]))
+    return {zone: (min(zs), max(zs)) for zone, zs in heights.items()}
 
 
 def check_ambient_C(values: float | np.ndarray, where: str, hint: str | Callable[[int], str] = "") -> None:
@@ -445,8 +563,7 @@ def _ambient(root: Table, base_dir: Path):
     if kind == "constant":
         a.check_keys(common | {"temperature_C"})
         params["temperature_C"] = a.number("temperature_C", 20.0)
-        check_ambient_C(params["temperature_C"] + np.array([-swing, swing]), a.where("temperature_C"),
-                        " (with the HVAC ripple)" if swing else "")
+        _check_with_ripple(np.array([params["temperature_C"]]), swing, a.where("temperature_C"), lambda i: "")
     elif kind == "sinusoid":
         a.check_keys(common | {"mean_C", "amplitude_K", "period_h", "peak_clock_h", "start_clock_h"})
         params.update(mean_C=a.number("mean_C", 20.0), amplitude_K=a.number("amplitude_K", minimum=0.0),
@@ -462,15 +579,22 @@ def _ambient(root: Table, base_dir: Path):
             raise a.error("values_C", f"must have one value per time ({len(times)})", list(values))
         if np.any(np.diff(times) <= 0):
             raise a.error("times_h", "must increase strictly", list(times / HOUR))
-        check_ambient_C(values, a.where("values_C"), lambda i: f"[{i}]")
+        _check_with_ripple(values, swing, a.where("values_C"), lambda i: f"[{i}]")
         params.update(times_s=times, values_C=values)
     else:
         a.check_keys(common | {"file", "time_column", "value_column"})
-        params.update(_ambient_csv(a, base_dir))
+        params.update(_ambient_csv(a, base_dir, swing))
     return Ambient(kind, params, a.number("vertical_gradient_K_per_m", 0.0))
 
 
-def _ambient_csv(a: Table, base_dir: Path):
+def _check_with_ripple(values: np.ndarray, swing: float, where: str, hint: Callable[[int], str]) -> None:
+    """:func:`check_ambient_C` of ambient values (°C) widened by ± the HVAC ripple's amplitude ``swing`` (K)."""
+    n = len(values)
+    suffix = " (with the HVAC ripple)" if swing else ""
+    check_ambient_C(np.concatenate([values - swing, values + swing]), where, lambda i: hint(i % n) + suffix)
+
+
+def _ambient_csv(a: Table, base_dir: Path, swing: float):
     import pandas as pd
 
     path = Path(a.string("file"))
@@ -500,7 +624,7 @@ def _ambient_csv(a: Table, base_dir: Path):
         k = int(np.flatnonzero(steps <= 0)[0])
         raise DefinitionError(f"{a.where('file')} {path}: column {time_col!r} must increase strictly: "
                               f"row {k + 3} has {t[k + 1]:g} after {t[k]:g}")
-    check_ambient_C(v, f"{a.where('file')} {path}", lambda i: f": column {value_col!r}, row {i + 2}")
+    _check_with_ripple(v, swing, f"{a.where('file')} {path}", lambda i: f": column {value_col!r}, row {i + 2}")
     return {"times_s": t, "values_C": v}
 
 
@@ -563,7 +687,7 @@ def load_scenario(scenario: str | Path) -> Scenario:
         name=head.string("name", path.stem),
         description=head.string("description", ""),
         source=str(path),
-        machine=head.string("machine", "vmc_ram"),
+        machine=_machine_reference(head, path.parent),
         duration_s=duration,
         sample_interval_s=sample,
         time_step_s=step,
@@ -579,6 +703,49 @@ def load_scenario(scenario: str | Path) -> Scenario:
         camera_image_times_s=_times_h(out, "camera_images_at_h", duration),
         iso_test=iso.string("test", None, choices={"spindle", "etve"}) if "test" in iso else None,
     )
+
+
+def _machine_reference(head: Table, base_dir: Path) -> str:
+    """``[scenario] machine``: a shipped machine's name, or the path of a machine file.
+
+    A value ending in ``.toml`` or holding a path separator is a path and, as
+    ``ambient.file``, a relative one is read from the scenario file's folder
+    (``base_dir``), whatever the current folder; anything else is a name.
+
+    Returns
+    -------
+    str
+        The name, or the absolute path of the file.
+
+    Raises
+    ------
+    DefinitionError
+        Naming the scenario file, ``scenario.machine`` and the value: an unknown name (with the shipped
+        machines) or a missing file (with the path it was looked for at).
+    """
+    value = head.string("machine", "vmc_ram")
+    if value.endswith(".toml") or "/" in value or os.sep in value:
+        path = (base_dir / value).resolve()       # an absolute value stays itself
+        if not path.is_file():
+            raise head.error("machine", f"names a machine file that does not exist: {path} (a relative path is "
+                             f"read from the scenario file's folder{_moved_hint(value, base_dir)})", value)
+        return str(path)
+    try:
+        resolve_definition(value, MACHINES_DIR, "machine")
+    except DefinitionError:
+        known = sorted(p.stem for p in MACHINES_DIR.glob("*.toml"))
+        raise head.error("machine", f"names an unknown machine {value!r}; available: {known} "
+                         f"(or the path of a machine .toml file)") from None
+    return value
+
+
+def _moved_hint(value: str, base_dir: Path) -> str:
+    """How to write a machine path that was read from the current folder before paths became scenario-relative."""
+    old = Path(value)
+    if old.is_absolute() or not old.is_file():
+        return ""
+    fixed = Path(os.path.relpath(old.resolve(), base_dir.resolve())).as_posix()
+    return f"; {value} is found from the current folder: write {fixed!r}"
 
 
 def _time_grid(head: Table, cycle_end: float):
