@@ -681,3 +681,20 @@ def test_two_step_sizes_factorise_twice_and_are_reused():
     assert solver.factorisations == 2
     solver.run(30.0, [0, 600], schedule, max_step_s=10.0)             # sub-steps of 10 s: cached too
     assert solver.factorisations == 2
+
+
+@pytest.mark.parametrize("conductivity, level", [(50.0, 30.0), (1e4, 80.0)], ids=["cast-iron-30C", "stiff-80C"])
+@pytest.mark.parametrize("theta", [1.0, 0.5], ids=["backward-Euler", "Crank-Nicolson"])
+def test_a_day_at_rest_passes_the_energy_balance(theta, conductivity, level):
+    """A box held at its ambient for a day moves no heat: the solver's round-off (1e-12 to 1e-9 K) is not
+    judged as heat lost or created (against a 1 µK floor it read 5e-6 to 5e-3)."""
+    mesh = box_mesh(np.linspace(0, 0.4, 9), np.linspace(0, 0.3, 7), np.linspace(0, 0.5, 11))
+    mesh.add_facet_group("skin", fea.Everything())
+    problem = fea.HeatProblem(mesh, {0: fea.Material(conductivity, 7200.0, 500.0)})
+    problem.add_convection("skin", 10.0, ambient="air")
+    system = problem.assemble()
+    times = np.arange(0.0, 86400.0 + 1.0, 600.0)
+    result = fea.ThermalSolver(system, theta=theta).run(level, times, fea.InputSchedule(system, {"air": level}),
+                                                        max_step_s=60.0, energy=True)
+    assert np.abs(result.final_temperature - level).max() < 1e-8          # K: nothing happened
+    assert result.energy.relative_error() < 1e-6

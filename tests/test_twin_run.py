@@ -8,6 +8,7 @@ from twin.cli import main
 from twin.core.dataset import Dataset
 from twin.core.scenario import load_scenario
 from twin.core.simulate import simulate
+from twin.run.summary import format_summary, run_summary
 
 
 def _scenario(tmp_path, body, name="probe"):
@@ -89,7 +90,8 @@ def test_cli_run_writes_dataset_plots_and_summary(tmp_path, capsys):
         assert (out / name).exists(), name
     ds = Dataset.read(out / "heat_cool_9000.csv")
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["drift"]["Z"]["peak_um"] == pytest.approx(ds["Z"][np.argmax(np.abs(ds["Z"]))])
+    change = ds["Z"] - ds["Z"][0]                                   # ISO 230-3: the change since the first reading
+    assert summary["drift"]["Z"]["peak_um"] == pytest.approx(change[np.argmax(np.abs(change))])
     assert "Z_um" in (out / "heat_cool_9000.csv").read_text().splitlines()[0]
 
 
@@ -116,3 +118,26 @@ def test_cli_bad_input_is_one_clear_line(args, message, capsys):
     assert main(args) == 2
     err = capsys.readouterr().err.strip()
     assert message in err and len(err.splitlines()) == 1
+
+
+def test_reported_time_step_is_the_one_taken(machine, tmp_path):
+    """A 70 s limit on a 300 s sampling interval gives five equal 60 s steps: the metadata and the summary
+    say 60 s, and the run equals one with 60 s asked for."""
+    body = """
+[scenario]
+duration_h = 1
+sample_interval_s = 300
+time_step_s = {step}
+[ambient]
+kind = "constant"
+temperature_C = 20.0
+[[segments]]
+duration_h = 1
+spindle_rpm = 6000
+"""
+    runs = {step: simulate(_scenario(tmp_path, body.format(step=step), f"dt{step}"), machine, noise=False,
+                           step_error=False).dataset for step in (70, 60)}
+    meta = runs[70].metadata
+    assert (meta["time_step_s"], meta["time_step_limit_s"]) == (60.0, 70.0)
+    assert np.array_equal(runs[70]["Z"], runs[60]["Z"])
+    assert "60 s steps (time_step_s = 70 s is a limit" in format_summary(run_summary(runs[70], 1.0))

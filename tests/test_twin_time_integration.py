@@ -108,7 +108,7 @@ def test_energy_balance_is_small_for_normal_runs(machine, tmp_path, body):
     ds = simulate(sc, machine, noise=False).dataset
     balance = ds.metadata["energy_balance"]
     assert balance["ok"]
-    # Round-off only: ~1e-14 K of the whole machine when idle (against the 1 µK floor), ~1e-13 otherwise.
+    # Round-off only: ~1e-14 K of the whole machine when idle (against the 10 mK floor), ~1e-13 otherwise.
     assert balance["stored_vs_loads"] < 1e-7 and balance["sources_vs_scenario"] < 1e-12
     assert ds.metadata["energy_balance_relative_error"] < 1e-7
     assert "FAILED" not in format_summary(run_summary(ds, 0.0))

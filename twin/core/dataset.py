@@ -28,6 +28,7 @@ import numpy as np
 from ..errors import TwinInputError
 from .clock import seconds_since_first_stamp, stamp
 from .files import write_text_atomic
+from .plausible import PLAUSIBLE, check_plausible
 
 FORMAT = "thermal-twin-dataset"
 FORMAT_VERSION = 1
@@ -350,7 +351,8 @@ class Dataset:
         Raises
         ------
         TwinInputError
-            One line naming the file, the column and the row of the first bad value.
+            One line naming the file, the column and the row of the first bad value; a sensor value outside
+            :data:`~twin.core.plausible.PLAUSIBLE` (kelvin under ``_degC``, nm under ``_um``) is one.
         """
         path = Path(path)
         if nan_policy not in NAN_POLICIES:
@@ -373,11 +375,20 @@ class Dataset:
         if any(channels[k].name in report["nan_counts"] for k in about):
             time_s, values = _apply_nan_policy(path, time_s, values, channels, nan_policy, report, about)
         report.update(_sampling_report(time_s))
-        return cls(time_s, values, channels, {"source": str(path), "kind": "measured", "import": report})
+        return _checked_sensors(cls(time_s, values, channels, {"source": str(path), "kind": "measured",
+                                                              "import": report}))
 
     def __repr__(self):
         span = f"{self.time_s[0]:g}–{self.time_s[-1]:g} s" if len(self) else "empty"
         return f"Dataset({len(self)} rows, {span}, channels {self.names[:8]}{'…' if len(self.names) > 8 else ''})"
+
+
+def _checked_sensors(dataset):
+    """The dataset, once every sensor channel's values are plausible for its kind (a unit error stops here)."""
+    for channel in dataset.channels:
+        if channel.kind in PLAUSIBLE:
+            check_plausible(dataset, channel, channel.kind, dataset[channel.name])
+    return dataset
 
 
 def _time_column(path, header, data, time_column, origin):

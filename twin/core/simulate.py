@@ -20,6 +20,7 @@ import numpy as np
 
 import fea
 from fea.inputs import interval_means
+from fea.transient import step_grid
 
 from .dataset import ChannelInfo, Dataset, project_version
 from .machine import Channel, Machine, build_machine, power_input
@@ -170,7 +171,7 @@ def energy_balance(ledger: fea.energy.EnergyLedger, machine: Machine, scenario: 
     run; ``sources_vs_scenario``: max over the heat sources of |energy
     injected − energy the scenario asks for| (None when ``modified``: the
     inputs were changed on purpose); both relative to ``throughput_J``, the
-    gross energy through all loads (at least 1 µK of the whole machine).
+    gross energy through all loads (at least 10 mK of the whole machine, :data:`fea.energy.ENERGY_FLOOR_K`).
 
     Parameters
     ----------
@@ -187,7 +188,7 @@ def energy_balance(ledger: fea.energy.EnergyLedger, machine: Machine, scenario: 
     -------
     dict
         ``relative_error``, ``stored_vs_loads``, ``sources_vs_scenario``,
-        ``throughput_J``, ``sources_injected_J``, ``sources_requested_J``, ``tolerance``, ``ok``.
+        ``throughput_J``, ``loads_gross_J`` (the loads' own throughput, J), ``sources_injected_J``, ``sources_requested_J``, ``tolerance``, ``ok``.
     """
     scale = ledger.scale_J()
     injected = {src.name: float(ledger.energy_of(power_input(src.name))[-1]) for src in machine.definition.sources}
@@ -197,7 +198,7 @@ def energy_balance(ledger: fea.energy.EnergyLedger, machine: Machine, scenario: 
         max([abs(injected[n] - requested[n]) / scale for n in injected], default=0.0)
     worst = max(stored_error, source_error or 0.0)
     return {"relative_error": worst, "stored_vs_loads": stored_error, "sources_vs_scenario": source_error,
-            "throughput_J": scale, "sources_injected_J": sum(injected.values()),
+            "throughput_J": scale, "loads_gross_J": float(ledger.gross_J[-1]), "sources_injected_J": sum(injected.values()),
             "sources_requested_J": None if requested is None else sum(requested.values()),
             "tolerance": ENERGY_TOLERANCE, "ok": bool(worst <= ENERGY_TOLERANCE)}
 
@@ -367,6 +368,13 @@ def _field_times(scenario, fields):
     return list(fields) if fields else list(scenario.camera_image_times_s)
 
 
+def _longest_step(scenario):
+    """The longest time step (s) the solver takes: each sampling interval is split into equal steps of at most
+    the scenario's ``time_step_s``, so the step taken can be shorter than the one asked for."""
+    step_times, _ = step_grid(scenario.times(), scenario.time_step_s)
+    return float(np.diff(step_times).max()) if len(step_times) > 1 else scenario.time_step_s
+
+
 def _run_metadata(machine, scenario, seed, noise, balance, step_errors):
     """The metadata of a synthetic dataset: what was run, on which mesh, and the checks of the integration."""
     return {
@@ -378,7 +386,8 @@ def _run_metadata(machine, scenario, seed, noise, balance, step_errors):
         "noise": scenario.noise if noise else "none",
         "effects": [],
         "mesh": {"nodes": machine.mesh.n_nodes, "tetrahedra": machine.mesh.n_tets, "file": str(machine.mesh_path)},
-        "time_step_s": scenario.time_step_s,
+        "time_step_s": _longest_step(scenario),
+        "time_step_limit_s": scenario.time_step_s,
         "scheme": "backward Euler" if scenario.theta == 1.0 else "Crank-Nicolson",
         "energy_balance_relative_error": balance["relative_error"],
         "energy_balance": balance,
