@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ..errors import TwinInputError
 from ..infra.cli_common import (
     add_cluster_options,
     add_overwrite,
@@ -82,6 +83,9 @@ def cmd_study(args: argparse.Namespace) -> None:
     args : argparse.Namespace
         The parsed command line.
     """
+    if args.physics is not None and args.study != "hybrid":
+        # the other studies have no physics half: a silently ignored --physics would look as if it had been used
+        raise TwinInputError(f"--physics applies to the hybrid study only, not to {args.study}")
     from . import studies
 
     common = dict(machine=args.machine, mesh_size_m=args.mesh_size, scheduler=args.scheduler,
@@ -99,7 +103,7 @@ def cmd_study(args: argparse.Namespace) -> None:
     else:
         out = args.out or "runs/study_hybrid"
         res = studies.hybrid_study(axes=axes, model=args.model or "anfis", inputs=inputs, k=args.k,
-                                   physics_backend=args.physics, out_dir=out, **common)
+                                   physics_backend=args.physics or "fe", out_dir=out, **common)
     print(res.markdown)
     print(f"results in {res.out_dir}/")
 
@@ -168,9 +172,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("study", choices=("cross-condition", "thesis", "hybrid"))
     s.add_argument("--model", help="model name (cross-condition: mlr; thesis: anfis,mlr; hybrid: anfis)")
     s.add_argument("--inputs", action="append", help="fixed input channels (default: chosen per training set)")
-    s.add_argument("--k", type=int, default=4, help="number of inputs chosen when --inputs is not given")
+    s.add_argument("--k", type=int, default=4, help="number of inputs chosen when --inputs is not given (1 to the "
+                   "machine's installed thermometers; fewer where fewer move on the training records)")
     s.add_argument("--axes", default="Z,Y", help="drift axes (default Z,Y)")
-    s.add_argument("--physics", default="fe", choices=("fe", "rom"), help="hybrid: physics backend")
+    # default None, not "fe": a --physics given to another study is refused, so "given" must be visible
+    s.add_argument("--physics", choices=("fe", "rom"), help="hybrid: physics backend (default fe)")
     s.add_argument("--out", help="result folder (default runs/study_<name>)")
     add_overwrite(s)
     add_cluster_options(s)

@@ -34,7 +34,7 @@ from ..errors import TwinInputError
 from ..infra.outdir import check_output_folder
 from ..infra.sweep import run_tasks
 from .records import dataset_label
-from .store import fit_compensation_model
+from .store import fit_compensation_model, make_estimator
 from .study_report import (
     StudyResult,
     cross_condition_markdown,
@@ -185,6 +185,89 @@ def select_inputs(datasets: Sequence[Dataset], target: str, k: int = 4, method: 
     return [candidates[i] for i in sel.indices]
 
 
+def check_study_options(axes: Sequence[str], models: Sequence[str], k: int, physics_backend: str = "fe") -> None:
+    """Refuse study options that are wrong whatever the machine, before it is built or anything simulated.
+
+    The studies fit their models only after minutes of simulation; a typo found there costs all of it.
+
+    Parameters
+    ----------
+    axes : sequence of str
+        Drift axes: at least one, none twice.
+    models : sequence of str
+        Model names: at least one, none twice, each known to :mod:`models.registry`.
+    k : int
+        Inputs to choose: a whole number ≥ 1.
+    physics_backend : str, default "fe"
+        ``fe`` or ``rom``.
+
+    Raises
+    ------
+    TwinInputError
+        One line naming the option and the value.
+    """
+    _check_names("--axes", axes, "drift axis")
+    _check_names("--model", models, "model")
+    for model in models:
+        make_estimator(model)           # an unknown name: the registry's one-line error listing the models
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
+        raise TwinInputError(f"--k must be a whole number of inputs, at least 1, got {k!r}")
+    if physics_backend not in ("fe", "rom"):
+        raise TwinInputError(f"--physics must be fe or rom, got {physics_backend!r}")
+
+
+def _check_names(option, names, what):
+    """Refuse an empty list option, or one naming an item twice (its table would be computed twice)."""
+    names = [str(n) for n in names]
+    if not names:
+        raise TwinInputError(f"{option} must name at least one {what}, got none")
+    repeated = [n for i, n in enumerate(names) if n in names[:i]]
+    if repeated:
+        raise TwinInputError(f"{option} names {what} {repeated[0]!r} more than once")
+
+
+def study_machine(spec: MachineSpec, axes: Sequence[str], k: int, inputs: Sequence[str] | None) -> None:
+    """Build the study's machine and refuse ``axes`` and ``k`` it cannot serve, before any simulation.
+
+    Building is cheap from the mesh and operator caches, and the simulations build it anyway (once per process).
+
+    Parameters
+    ----------
+    spec : MachineSpec
+        The nominal machine.
+    axes : sequence of str
+        Drift axes: each must be a displacement channel of the machine (X, Y, Z, Y_top).
+    k : int
+        Inputs to choose when ``inputs`` is None: at most the machine's installed thermometers.
+    inputs : sequence of str or None
+        Fixed inputs (``k`` is then unused).
+
+    Raises
+    ------
+    TwinInputError
+        An axis that is not a drift axis, or ``k`` above the number of installed thermometers (both numbers named).
+    """
+    machine = spec.build()
+    drift = [c.name for c in machine.channels if c.kind == "displacement"]
+    bad = [a for a in axes if a not in drift]
+    if bad:
+        raise TwinInputError(f"--axes {','.join(axes)}: {bad[0]!r} is not a drift axis of {machine.name!r}; "
+                             f"drift axes: {','.join(drift)}")
+    # the candidates of select_inputs: the records' thermometers, which are the machine's (air sensors are not)
+    installed = sum(c.kind == "temperature" for c in machine.channels)
+    if not inputs and k > installed:
+        raise TwinInputError(f"--k {k} exceeds the {installed} installed thermometers of {machine.name!r} "
+                             "(the candidate inputs)")
+
+
+def _chosen_inputs(datasets, axis, k, select_method, where, log):
+    """``select_inputs``, with a note when fewer than ``k`` candidates move in ``datasets`` (fewer are chosen)."""
+    ins = select_inputs(datasets, axis, k, select_method)
+    if log and len(ins) < k:
+        log(f"{axis}: only {len(ins)} thermometers move {where}: {len(ins)} inputs chosen, not {k}")
+    return ins
+
+
 # ----------------------------------------------------------------------------- cross-condition
 def _family_scenarios(families, log):
     """Family → its first available scenario; families without one are left out (noted)."""
@@ -201,12 +284,12 @@ def _family_scenarios(families, log):
     return chosen
 
 
-def _transfer(data, axis, model, inputs, k, select_method, params):
+def _transfer(data, axis, model, inputs, k, select_method, params, log):
     """Rows of one axis's transfer matrix, the matrix (improvement %) and the inputs per training family."""
     M = np.full((len(data), len(data)), np.nan)
     rows, used = [], {}
     for i, (train_fam, train_ds) in enumerate(data.items()):
-        ins = list(inputs) if inputs else select_inputs([train_ds], axis, k, select_method)
+        ins = list(inputs) if inputs else _chosen_inputs([train_ds], axis, k, select_method, f"on {train_fam}", log)
         used[(train_fam, axis)] = ins
         cm = fit_compensation_model([train_ds], ins, axis, model, params)
         for j, (test_fam, test_ds) in enumerate(data.items()):
@@ -251,14 +334,22 @@ def cross_condition_study(families: dict | None = None, axes: tuple = ("Z", "Y")
     StudyResult
         Cells are the held-out max |residual| (µm), RMSE (µm) and improvement %; the diagonal is the
         training fit.
+
+    Raises
+    ------
+    TwinInputError
+        Fewer than 2 families with an available scenario, an unusable ``out_dir``, or before any simulation an
+        option :func:`check_study_options` or :func:`study_machine` refuses.
     """
     check_output_folder(out_dir, overwrite, inputs=(machine,))
+    check_study_options(axes, (model,), k)
     chosen = _family_scenarios(dict(families or FAMILIES), log)
     spec = MachineSpec(machine, mesh_size_m)
+    study_machine(spec, axes, k, inputs)
     data = dict(zip(chosen, simulate_many(list(chosen.values()), spec, scheduler, progress=progress)))
     rows, matrices, used_inputs = [], {}, {}
     for axis in axes:
-        axis_rows, matrices[axis], used = _transfer(data, axis, model, inputs, k, select_method, params)
+        axis_rows, matrices[axis], used = _transfer(data, axis, model, inputs, k, select_method, params, log)
         rows += axis_rows
         used_inputs.update(used)
     md = cross_condition_markdown(rows, matrices, chosen, used_inputs, axes, model, inputs, k, select_method)
@@ -313,20 +404,23 @@ def thesis_protocol_study(axes: tuple = ("Z", "Y"), models: tuple = ("anfis", "m
     Raises
     ------
     TwinInputError
-        Test IV or all the other tests unavailable, or an unusable ``out_dir``.
+        Test IV or all the other tests unavailable, an unusable ``out_dir``, or before any simulation an option
+        :func:`check_study_options` or :func:`study_machine` refuses.
     """
     check_output_folder(out_dir, overwrite, inputs=(machine,))
+    check_study_options(axes, models, k)
     tests = _available(THESIS_TEST)
     if not _available([THESIS_TRAIN]) or not tests:
         raise TwinInputError(f"the thesis protocol needs {THESIS_TRAIN} and some of {list(THESIS_TEST)}")
     if log and len(tests) < len(THESIS_TEST):
         log(f"missing thesis tests left out: {sorted(set(THESIS_TEST) - set(tests))}")
     spec = MachineSpec(machine, mesh_size_m)
+    study_machine(spec, axes, k, inputs)
     sims = simulate_many([THESIS_TRAIN] + tests, spec, scheduler, progress=progress)
     train_ds, test_ds = sims[0], sims[1:]
     rows, plots = [], {}
     for axis in axes:
-        ins = list(inputs) if inputs else select_inputs([train_ds], axis, k, select_method)
+        ins = list(inputs) if inputs else _chosen_inputs([train_ds], axis, k, select_method, "on Test IV", log)
         for model in models:
             cm = fit_compensation_model([train_ds], ins, axis, model)
             for ds in [train_ds] + test_ds:
@@ -421,8 +515,8 @@ def hybrid_study(train: tuple = HYBRID_TRAIN, test: tuple = HYBRID_TEST, axes: t
     progress : callable, optional
         ``progress(done, total)`` of the simulations.
     log : callable or None, default print
-        Not used: this study leaves unavailable scenarios out silently (the parameter keeps the
-        studies' signatures alike).
+        Receives a note when fewer than ``k`` thermometers move on the training records (unavailable
+        scenarios are left out silently).
     physics_backend : {"fe", "rom"}, default "fe"
         See :func:`twin.compensation.train.physics_prediction`.
     out_dir : Path or str, optional
@@ -438,17 +532,20 @@ def hybrid_study(train: tuple = HYBRID_TRAIN, test: tuple = HYBRID_TEST, axes: t
     Raises
     ------
     TwinInputError
-        No training or no held-out scenario available, or an unusable ``out_dir``.
+        No training or no held-out scenario available, an unusable ``out_dir``, or before any simulation an
+        option :func:`check_study_options` or :func:`study_machine` refuses.
     """
     check_output_folder(out_dir, overwrite, inputs=(machine,))
-
+    check_study_options(axes, (model,), k, physics_backend)
+    study_machine(MachineSpec(machine, mesh_size_m), axes, k, inputs)
     gap = dict(DEFAULT_GAP if gap is None else gap)
     t0 = time.perf_counter()
     measured, physics, train, test = hybrid_records(train, test, axes, gap, machine, mesh_size_m, physics_backend,
                                                     scheduler, progress)
     sim_s = time.perf_counter() - t0
     tr, te = list(range(len(train))), list(range(len(train), len(measured)))
-    used = {axis: list(inputs) if inputs else select_inputs([measured[i] for i in tr], axis, k, select_method)
+    used = {axis: list(inputs) if inputs else _chosen_inputs([measured[i] for i in tr], axis, k, select_method,
+                                                             "on the training records", log)
             for axis in axes}
     rows, curves, pooled = hybrid_scores(measured, physics, len(train), axes, model, used)
     md = hybrid_markdown(rows, pooled, gap, train, test, used, model, k, select_method, physics_backend)

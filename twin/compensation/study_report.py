@@ -67,8 +67,21 @@ def write_study(result: StudyResult, out_dir: Path | str, overwrite: bool = Fals
     result.out_dir = Path(out_dir)
 
 
-def _inputs_text(inputs, k, select_method, where):
-    return "fixed " + ", ".join(inputs) if inputs else f"{k} installed thermometers chosen by {select_method} {where}"
+def _inputs_text(inputs, k, select_method, where, counts=()):
+    """The header's account of the inputs; ``counts``: how many were chosen on each training set."""
+    if inputs:
+        return "fixed " + ", ".join(inputs)
+    return f"{k} installed thermometers chosen by {select_method} {where}{_fewer_text(k, counts)}"
+
+
+def _fewer_text(k, counts):
+    """`` (only n move there: that many chosen)`` when some count of chosen inputs is below ``k``, else ``""``.
+
+    A thermometer that never moves on a training record is no candidate, so fewer than ``k`` may be chosen there:
+    the report says so rather than claim ``k``.
+    """
+    fewer = sorted({n for n in counts if n < k})
+    return f" (only {' or '.join(map(str, fewer))} move there: that many chosen)" if fewer else ""
 
 
 # ----------------------------------------------------------------------------- cross-condition
@@ -102,7 +115,7 @@ def cross_condition_markdown(rows: list[dict], matrices: dict, chosen: dict, use
     """
     fams = list(chosen)
     md = [f"# Cross-condition transfer ({model}, inputs: "
-          f"{_inputs_text(inputs, k, select_method, 'on the training family')})",
+          f"{_inputs_text(inputs, k, select_method, 'on the training family', map(len, used_inputs.values()))})",
           "", "Scenarios: " + ", ".join(f"{f} = `{s}`" for f, s in chosen.items()) + ".",
           "Rows: trained on; columns: tested on. Cell: improvement % = (1 − max|residual| / max|drift change|) × 100 "
           "(max |residual| in µm in brackets); the diagonal is the training fit.", ""]
@@ -183,7 +196,7 @@ def thesis_markdown(rows: list[dict], axes: tuple, models: tuple, inputs: Sequen
         Markdown, ending with a newline.
     """
     md = ["# Thesis protocol: train on Test IV, test on Tests I, II, III, V, VI", "",
-          f"Inputs: {_inputs_text(inputs, k, select_method, 'on Test IV')}; "
+          f"Inputs: {_inputs_text(inputs, k, select_method, 'on Test IV', [len(r['inputs'].split()) for r in rows])}; "
           "metrics on the change since the start of each test (µm).", ""]
     cols = ["dataset", "role", "rmse", "nse", "max_residual", "improvement_percent", "uncompensated_max"]
     for axis in axes:
@@ -249,7 +262,8 @@ def hybrid_markdown(rows: list[dict], pooled: list[dict], gap: dict, train: list
           f"coefficient ×{gap.get('convection_scale', 1.0):g} — with instrument noise (DS18S20, NCDT). The physics "
           f"model is the *nominal* twin driven by the records' spindle speed, feeds and ambient "
           f"({physics_backend.upper()} backend), started at rest. Data-driven and the residual model of the hybrid: "
-          f"{model} on {k} thermometers chosen on the training records ({select_method}); the hybrid predicts "
+          f"{model} on {k} thermometers chosen on the training records ({select_method}){_fewer_text(k, map(len, used.values()))}; "
+          "the hybrid predicts "
           "physics + the learned residual (measured − physics)."]
     md += ["", f"Training records: {', '.join(train)}; held-out: {', '.join(test)}.", "",
            "## Held-out, pooled (µm)", "",

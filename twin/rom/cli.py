@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 
 from ..core.files import write_text_atomic
 from ..errors import TwinInputError
-from ..infra.cli_common import add_overwrite, check_out_file, mesh_size
+from ..infra.cli_common import add_overwrite, check_out_file, mesh_size, split_names
 
 if TYPE_CHECKING:
     from ..core.machine import Machine
@@ -99,16 +99,23 @@ def cmd_rom_report(args: argparse.Namespace) -> None:
         The parsed command line.
     """
     from ..core.machine import build_machine
-    from .report import error_report, format_markdown, format_summary
+    from .report import (
+        check_report_options,
+        error_report,
+        format_markdown,
+        format_summary,
+    )
 
     check_out_file(args)
+    # orders and methods before the machine is built; error_report checks the named scenarios against the
+    # machine before its FE runs (minutes)
+    orders, methods = check_report_options(_orders(args.orders), split_names(args.methods))
     machine = build_machine(args.machine, args.mesh_size)
-    scenarios = args.scenarios.split(",") if args.scenarios else None
-    report = error_report(machine, _orders(args.orders), args.methods.split(","), scenarios, progress=print)
+    report = error_report(machine, orders, methods, split_names(args.scenarios) or None, progress=print)
     text = format_summary(report) + "\n\n" + format_markdown(report)
     print()
     print(text)
-    best = report.passes("krylov") if "krylov" in args.methods else None
+    best = report.passes("krylov") if "krylov" in methods else None
     print(f"\nsmallest Krylov order meeting TCP ≤ 0.05 µm and T ≤ 0.01 K on every scenario: {best}")
     if args.out:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
@@ -136,9 +143,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     report = rsub.add_parser("report", help="error vs order against the full FE over scenarios (slow)")
     report.add_argument("--machine", default="vmc_ram")
     report.add_argument("--mesh-size", type=mesh_size, help="target tetrahedron edge length, m")
-    report.add_argument("--orders", default="10,20,30,40,60,80,100", help="comma-separated orders")
-    report.add_argument("--methods", default="krylov,modal", help="comma-separated: krylov,modal")
-    report.add_argument("--scenarios", help="comma-separated scenarios (default: all shipped)")
+    report.add_argument("--orders", default="10,20,30,40,60,80,100", help="comma-separated orders, none twice")
+    report.add_argument("--methods", default="krylov,modal", help="comma-separated: krylov,modal, none twice")
+    report.add_argument("--scenarios", help="comma-separated scenarios of the machine, none twice (default: all "
+                        "shipped; those of another machine are left out)")
     report.add_argument("--out", help="write the Markdown table here")
     add_overwrite(report, "file")
     report.set_defaults(func=cmd_rom_report)

@@ -28,14 +28,18 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from meshes.tomlspec import DefinitionError
+
 from ..core.scenario import SCENARIOS_DIR, load_scenario
 from ..core.simulate import simulate
+from ..errors import TwinInputError
 from ..infra.tables import markdown_table
-from .reduction import compute_basis, reduce_with_basis, simulate_rom
+from .reduction import METHODS, compute_basis, reduce_with_basis, simulate_rom
 
 if TYPE_CHECKING:
     from ..core.dataset import Dataset
     from ..core.machine import Machine
+    from ..core.scenario import Scenario
 
 GROUPS = (("temperature", "K"), ("displacement", "um"), ("strain", "ue"))
 #: The issue's goals: largest TCP drift and sensor temperature errors with r ≤ 100.
@@ -155,25 +159,148 @@ def max_errors(rom_dataset: Dataset, fe_dataset: Dataset) -> dict[str, float]:
     return out
 
 
+def check_report_options(orders: Sequence[int], methods: Sequence[str]) -> tuple[list[int], list[str]]:
+    """Refuse orders and methods the report cannot use, before any FE run (the FE runs take minutes).
+
+    Parameters
+    ----------
+    orders : sequence of int
+        ROM orders: at least one, each a whole number ≥ 1, none twice (it would be run and counted twice).
+    methods : sequence of str
+        Reduction methods of :data:`twin.rom.reduction.METHODS`: at least one, none twice.
+
+    Returns
+    -------
+    orders : list of int
+        Ascending.
+    methods : list of str
+        As given.
+
+    Raises
+    ------
+    TwinInputError
+        One line naming the option and the value.
+    """
+    if any(isinstance(r, bool) or int(r) != r or r < 1 for r in orders):
+        raise TwinInputError(f"--orders must be positive integers, got {list(orders)}")
+    _check_list("--orders", [int(r) for r in orders], "order")
+    _check_list("--methods", list(methods), "method")
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown:
+        raise TwinInputError(f"--methods: unknown ROM method {unknown[0]!r}; methods: {','.join(METHODS)}")
+    return sorted(int(r) for r in orders), list(methods)
+
+
+def _check_list(option, items, what):
+    """Refuse an empty list option, or one naming an item twice."""
+    if not items:
+        raise TwinInputError(f"{option} must name at least one {what}, got none")
+    repeated = [x for i, x in enumerate(items) if x in items[:i]]
+    if repeated:
+        raise TwinInputError(f"{option} names {what} {repeated[0]!r} more than once")
+
+
+def named_scenarios(machine: Machine, names: Sequence[str]) -> dict[str, Scenario]:
+    """The scenarios a user named, loaded and checked before any FE run.
+
+    Unlike the default list (every shipped scenario, where one of another machine is left out and noted),
+    a named scenario the report cannot run is a mistake of the user: refused at once.
+
+    Parameters
+    ----------
+    machine : Machine
+        The built machine.
+    names : sequence of str
+        Scenario names or TOML paths.
+
+    Returns
+    -------
+    dict of str to Scenario
+        In the order given.
+
+    Raises
+    ------
+    TwinInputError
+        A scenario named twice, an unknown name (the message lists the shipped scenarios), a bad scenario file,
+        one the machine cannot run (speeds, feeds, zones), or one of another machine (both machines named).
+    """
+    _check_list("--scenarios", [str(n) for n in names], "scenario")
+    loaded = {}
+    for name in map(str, names):
+        try:
+            loaded[name] = _named_scenario(machine, name)
+        except DefinitionError as exc:    # its message lists the shipped scenarios for an unknown name
+            raise TwinInputError(f"--scenarios {name}: {exc}") from None
+    return loaded
+
+
+def _named_scenario(machine, name):
+    """One named scenario, loaded; refused unless it is of ``machine`` and within its limits."""
+    scenario = load_scenario(name)
+    if scenario.machine != machine.name:
+        raise TwinInputError(f"--scenarios {name}: runs on machine {scenario.machine!r}, not on "
+                             f"{machine.name!r} (--machine)")
+    scenario.check_machine(machine.definition)    # speeds, feeds, zones: else its FE run fails
+    return scenario
+
+
+def _default_scenarios(machine, failures):
+    """Every shipped scenario the machine runs; the others go to ``failures`` with why (another machine, a bad
+    file)."""
+    loaded = {}
+    for name in shipped_scenarios():
+        try:
+            scenario = load_scenario(name)
+        except Exception as exc:  # noqa: BLE001 - a shipped file may be broken in any way; the report goes on
+            failures[name] = f"{type(exc).__name__}: {exc}"
+            continue
+        if scenario.machine != machine.name:
+            failures[name] = f"runs on machine {scenario.machine!r}, not {machine.name!r}"
+        else:
+            loaded[name] = scenario
+    return loaded
+
+
+def _fe_references(machine, scenarios, failures, say):
+    """The full FE run of each scenario (name → (scenario, dataset)) and its wall time, s; a failed one goes to
+    ``failures``."""
+    references, fe_seconds = {}, {}
+    for name, scenario in scenarios.items():
+        try:
+            start = time.perf_counter()
+            references[name] = (scenario, simulate(scenario, machine, noise=False).dataset)
+            fe_seconds[name] = time.perf_counter() - start
+            say(f"FE {name}: {fe_seconds[name]:.1f} s")
+        except Exception as exc:  # noqa: BLE001 - a scenario may fail in any way (FE input, solver);
+            # the report names it in ``failures`` and goes on with the others
+            failures[name] = f"{type(exc).__name__}: {exc}"
+            say(f"FE {name}: failed ({failures[name]})")
+    if not references:         # a report of nothing would read as a result (and exit 0)
+        raise TwinInputError(f"no scenario could be run on {machine.name!r}: "
+                             + "; ".join(f"{n}: {m}" for n, m in failures.items()))
+    return references, fe_seconds
+
+
 def error_report(machine: Machine, orders: Sequence[int] = (10, 20, 30, 40, 60, 80, 100),
                  methods: Sequence[str] = ("krylov", "modal"), scenarios: Sequence[str] | None = None,
                  points: Sequence[float] | None = None, progress: Callable[[str], object] | None = None
                  ) -> ErrorReport:
     """Run the report; ``progress(message)`` is called as it goes (e.g. ``print``).
 
-    A scenario that cannot be run on ``machine`` (another machine, a bad file, a failed FE run) is left out
-    and its reason kept in ``failures``.
+    Orders, methods and named scenarios are checked before any FE run (:func:`check_report_options`,
+    :func:`named_scenarios`).  Of the default scenarios, one that cannot be run on ``machine`` (another machine,
+    a bad file) is left out and its reason kept in ``failures``; so is any scenario whose FE run fails.
 
     Parameters
     ----------
     machine : Machine
         A built machine.
     orders : sequence of int
-        ROM orders.
+        ROM orders, none twice.
     methods : sequence of str
-        ``krylov`` and/or ``modal``.
+        ``krylov`` and/or ``modal``, none twice.
     scenarios : sequence of str, optional
-        Scenario names or paths (default :func:`shipped_scenarios`).
+        Scenario names or paths of ``machine``, none twice (default :func:`shipped_scenarios`).
     points : sequence of float, optional
         Krylov expansion points, 1/s.
     progress : callable, optional
@@ -182,25 +309,17 @@ def error_report(machine: Machine, orders: Sequence[int] = (10, 20, 30, 40, 60, 
     Returns
     -------
     ErrorReport
+
+    Raises
+    ------
+    TwinInputError
+        A bad order, method or named scenario (before any FE run), or no scenario could be run.
     """
     say = progress or (lambda message: None)
-    orders = sorted(int(r) for r in orders)
-    scenarios = shipped_scenarios() if scenarios is None else list(scenarios)
-    references, fe_seconds, failures = {}, {}, {}
-    for name in scenarios:
-        try:
-            scenario = load_scenario(name)
-            if scenario.machine != machine.name:
-                failures[name] = f"runs on machine {scenario.machine!r}, not {machine.name!r}"
-                continue
-            start = time.perf_counter()
-            references[name] = (scenario, simulate(scenario, machine, noise=False).dataset)
-            fe_seconds[name] = time.perf_counter() - start
-            say(f"FE {name}: {fe_seconds[name]:.1f} s")
-        except Exception as exc:  # noqa: BLE001 - a scenario may fail in any way (bad file, FE input, solver);
-            # the report names it in ``failures`` and goes on with the others
-            failures[name] = f"{type(exc).__name__}: {exc}"
-            say(f"FE {name}: failed ({failures[name]})")
+    orders, methods = check_report_options(orders, methods)
+    failures = {}
+    loaded = _default_scenarios(machine, failures) if scenarios is None else named_scenarios(machine, scenarios)
+    references, fe_seconds = _fe_references(machine, loaded, failures, say)
     rows, basis_seconds, zoh = [], {}, {}
     for method in methods:
         start = time.perf_counter()
