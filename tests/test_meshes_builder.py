@@ -71,3 +71,29 @@ def test_missing_stl_file_is_a_clear_error(tmp_path):
     broken.write_text(MINI.read_text().replace("pedestal_mm.stl", "missing.stl"))
     with pytest.raises(DefinitionError, match=r"parts\[0\]\.file names an STL file that does not exist"):
         load_machine(broken)
+
+
+def test_a_sensor_outside_the_mesh_names_the_machine_file_and_field(tmp_path, monkeypatch):
+    """The solver's message names its output ("T05 at … lies outside the mesh"); the twin's names the file and
+    the field that placed it (the shipped mesh is reused: sensors are not part of the geometry)."""
+    monkeypatch.setenv("THERMAL_TWIN_CACHE", str(tmp_path / "cache"))
+    text = (Path(__file__).parents[1] / "meshes" / "machines" / "vmc_ram.toml").read_text()
+    moved = tmp_path / "vmc_ram_moved.toml"
+    moved.write_text(text.replace('label = "carrier strip 1 (B5)"\nposition = [0.18, 0.2, 1]',
+                                  'label = "carrier strip 1 (B5)"\nposition = [0.18, 0.2, 3]'))
+    with pytest.raises(DefinitionError) as exc:
+        build_machine(moved)
+    assert str(exc.value).startswith(f"{moved}: sensors (name = 'T05').position: T05 at (0.18, 0.2, 3.0) m lies "
+                                     "outside the mesh")
+
+
+@pytest.mark.parametrize("label, field", [
+    ("T05", "sensors (name = 'T05').position"), ("FBG1 end", "sensors (name = 'FBG1').end"),
+    ("X", "tcp.tool_point"), ("Z reference", "tcp.workpiece_point"),
+    ("Y_top", "tcp.tool_point + tcp.tilt_probe_offset (0.0, 0.0, 0.1) m (the upper Y probe)"),
+    ("cam012", "camera (its spots)"),
+])
+def test_each_output_point_is_traced_to_its_field(label, field):
+    from twin.core.machine import _point_field
+
+    assert _point_field(load_machine("vmc_ram"), label) == field

@@ -38,6 +38,7 @@ import dataclasses
 import hashlib
 import json
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -448,7 +449,8 @@ def _compute_outputs(definition, mesh, thermal, materials, specs):
     """Thermometer rows at once, then one adjoint elastic solve per drift or strain output, reporting progress."""
     snap = definition.snap_distance_m
     temps = [s for s in specs if isinstance(s, fea.PointTemperature)]
-    blocks = [fea.build_output_operator(temps, thermal, snap_distance=snap)]
+    with _named_in_file(definition):
+        blocks = [fea.build_output_operator(temps, thermal, snap_distance=snap)]
     mech = [s for s in specs if not isinstance(s, fea.PointTemperature)]
     if mech:
         elastic = elastic_problem(definition, mesh, materials)
@@ -458,13 +460,41 @@ def _compute_outputs(definition, mesh, thermal, materials, specs):
                  f"{elastic.n_dofs:,}", duration_text(estimate))
         start = time.perf_counter()
         for k, spec in enumerate(mech, 1):      # one at a time: the factorisation is kept, progress is shown
-            blocks.append(fea.build_output_operator([spec], thermal, elastic, snap_distance=snap))
+            with _named_in_file(definition):
+                blocks.append(fea.build_output_operator([spec], thermal, elastic, snap_distance=snap))
             if estimate > 60:
                 log.info("output operator of %s: %d/%d elastic solves done (%s)", definition.name, k, len(mech),
                          duration_text(time.perf_counter() - start))
     whole = fea.OutputOperator([n for b in blocks for n in b.names], [u for b in blocks for u in b.units],
                                sp.vstack([b.matrix for b in blocks]), np.concatenate([b.offset for b in blocks]))
     return whole.subset([s.name for s in specs])
+
+
+@contextmanager
+def _named_in_file(definition):
+    """Turn the solver's "<output> at (x, y, z) m lies outside the mesh" into an error naming the machine file and
+    the field that placed the point (the outputs' names are the twin's, not the file's)."""
+    try:
+        yield
+    except fea.FEAInputError as exc:
+        if "lies outside the mesh" not in str(exc):
+            raise
+        label = str(exc).split(" at (", 1)[0]
+        raise DefinitionError(f"{definition.source}: {_point_field(definition, label)}: {exc}") from None
+
+
+def _point_field(definition, label):
+    """The machine-file field of an output point's label (``T05``, ``X reference``, ``FBG1 end``, ``cam012``)."""
+    name, _, end = label.partition(" ")
+    if name in {s.name for s in definition.sensors}:
+        return f"sensors (name = {name!r}).{end or 'position'}"     # a strain line's end or start
+    if name.startswith("cam"):
+        return "camera (its spots)"
+    if end == "reference":
+        return "tcp.workpiece_point"
+    if name == "Y_top":
+        return f"tcp.tool_point + tcp.tilt_probe_offset {tuple(definition.tilt_probe_offset)} m (the upper Y probe)"
+    return "tcp.tool_point"
 
 
 def _air_feedthrough(definition, thermal):
