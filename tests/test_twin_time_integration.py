@@ -162,3 +162,17 @@ def test_only_recorded_outputs_are_computed(machine, tmp_path, monkeypatch, came
     assert (set(spots) <= set(computed[0])) == camera
     assert set(computed[0]) <= set(ds.names)                           # nothing computed that is not recorded
     assert ("cam000" in ds.names) == camera
+
+
+def test_twin_run_exits_1_on_a_failed_energy_balance(tmp_path, monkeypatch, capsys):
+    """The results are written and marked, but a script must not take them for good ones."""
+    from twin.cli import main
+
+    monkeypatch.delattr(ScenarioInputs, "means")
+    path = tmp_path / "lossy.toml"
+    path.write_text(NC_CYCLE.format(extra=""))
+    with pytest.warns(RuntimeWarning, match="energy balance fails"):
+        code = main(["run", str(path), "--out", str(tmp_path / "out"), "--no-views"])
+    assert code == 1
+    assert "the energy balance FAILED" in capsys.readouterr().err
+    assert "**FAILED**" in (tmp_path / "out" / "summary.md").read_text()

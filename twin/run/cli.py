@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 from ..infra.cli_common import add_overwrite, mesh_size, read_column_map
 from ..infra.progress import progress_bar
@@ -9,13 +10,19 @@ from ..infra.progress import progress_bar
 # Handlers import the library inside them, never up here: start-up time (`twin --help` must not load scipy).
 
 
-def cmd_run(args: argparse.Namespace) -> None:
+def cmd_run(args: argparse.Namespace) -> int:
     """``twin run``: simulate a scenario, write the result folder, print the summary.
 
     Parameters
     ----------
     args : argparse.Namespace
         The parsed command line.
+
+    Returns
+    -------
+    int
+        0, or 1 when the run's energy balance failed (its results are written and marked, but a script must
+        not take them for good ones).
     """
     from .workflows import run_scenario
 
@@ -26,6 +33,10 @@ def cmd_run(args: argparse.Namespace) -> None:
 
     print(format_summary(out.summary))
     print(f"results in {out.out_dir}/")
+    if out.summary.get("energy_balance", {}).get("ok", True):
+        return 0
+    print("twin run: the energy balance FAILED (see summary.md): heat was lost or created", file=sys.stderr)
+    return 1
 
 
 def cmd_mesh(args: argparse.Namespace) -> None:

@@ -152,7 +152,8 @@ def format_summary(summary: dict) -> str:
                   if summary["run_seconds"] else [])
     if "hottest_sensor" in summary:
         h = summary["hottest_sensor"]
-        lines.append(f"- hottest sensor: {h['name']} at {h['max_C']:.2f} °C (rise {h['rise_K']:.2f} K)")
+        lines.append(f"- hottest sensor: {h['name']} at {h['max_C']:.2f} °C ({h['rise_K']:+.2f} K since the first "
+                     "sample)")
     if "time_integration" in summary:
         lines.append(_time_integration_line(summary["time_integration"]))
     if "energy_balance" in summary:
