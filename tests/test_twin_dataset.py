@@ -92,6 +92,9 @@ def test_measured_nan_policies(tmp_path):
     ("time_s,T01_degC,Z_um,T01_degC\n0,20,1,21\n", r"column 'T01_degC' appears 2 times \(columns 2, 4\); give each"),
     # the map's example named another channel (Z_mm → T01_degC); a map renames, it cannot convert mm
     ("time_s,Z_mm\n0,0.001\n", r"e.g. \{'Z_mm': 'Z_<unit>'\} \(a map renames, it does not convert"),
+    # a spreadsheet's export with ';' (and decimal commas) read as one column: "'0,0;20,5' is not a number"
+    ("time_s;T01_degC\n0,0;20,5\n", r"the header 'time_s;T01_degC' is separated by ';'; the twin reads comma"),
+    ("time_s\tT01_degC\n0\t20.5\n", r"is separated by '\\t'"),
 ])
 def test_measured_bad_input(tmp_path, text, message):
     with pytest.raises(TwinInputError, match=message):

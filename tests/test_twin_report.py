@@ -53,6 +53,13 @@ def test_drift_and_times_count_from_the_first_sample(tmp_path):
     assert iso["max_abs_tilt_yz_urad"] == pytest.approx(4.0)          # (0.4 µm more) / 0.1 m, not the 10 µm offset
 
 
+def test_a_record_without_drift_says_so(tmp_path):
+    path = _record(tmp_path, "temperatures", _logger_rows()[:, :3], header="time_s,spindle_rpm,T01_degC")
+    out = tmp_path / "r"
+    assert main(["report", str(path), "--out", str(out)]) == 0
+    assert "- no drift channel (µm)" in (out / "summary.md").read_text()
+
+
 def test_iso_spindle_without_the_upper_probe_reports_the_drifts(tmp_path):
     rows = _logger_rows()[:, :6]
     out = tmp_path / "r"

@@ -538,8 +538,13 @@ def _read_utf8(path):
 
 
 def _check_header_once(path, text):
-    """Refuse a header that names a column twice (pandas would rename the second ``X.1`` and read both)."""
+    """Refuse a header that names a column twice (pandas would rename the second ``X.1`` and read both), or that
+    is one column holding semicolons or tabs (a spreadsheet's export in another separator)."""
     named = [h.strip() for h in next(csv.reader(io.StringIO(text)), [])]
+    other = next((sep for sep in (";", "\t") if len(named) == 1 and sep in named[0]), None)
+    if other is not None:
+        raise TwinInputError(f"{path}: the header {named[0]!r} is separated by {other!r}; the twin reads comma-separated "
+                             "files with '.' as the decimal mark: export the file so")
     twice = next((h for i, h in enumerate(named) if h in named[:i]), None)
     if twice is not None:
         where = [i + 1 for i, h in enumerate(named) if h == twice]

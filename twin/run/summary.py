@@ -163,7 +163,7 @@ def format_summary(summary: dict) -> str:
                      f"{summary['energy_balance_relative_error']:.1e}")
     drift = [(axis, d["peak_um"], d["at_h"], d["range_um"]) for axis, d in summary["drift"].items()]
     lines += ["", markdown_table(drift, ["channel", "peak drift since start (µm)", "at (h)", "range (µm)"],
-                                 formats=[None, ".2f", ".2f", ".2f"])]
+                                 formats=[None, ".2f", ".2f", ".2f"]) if drift else "- no drift channel (µm)"]
     if "iso230_3_etve" in summary:
         e = summary["iso230_3_etve"]
         lines += ["", "## ISO 230-3 ETVE", "",
