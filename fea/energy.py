@@ -28,7 +28,7 @@ if TYPE_CHECKING:
 #: Energy below which a balance counts as zero: that of this many kelvin over the whole body's heat capacity
 #: (0.01 K, a good thermometer's resolution).  With a relative tolerance of 1e-6 an error then counts from
 #: 10 nK of the whole body up.  A 1 µK floor judged the solver's round-off: a cast-iron box held at 30 °C
-#: with nothing on for a day drifts by 1e-12 K, which read 5e-6 of 1 µK.
+#: with nothing on for a day drifts by about 1e-12 K, and its balance read 5e-6 against that floor.
 ENERGY_FLOOR_K = 1e-2
 
 

@@ -173,7 +173,7 @@ def test_a_relative_machine_path_is_read_from_the_scenario_folder(tmp_path, else
 def test_a_missing_machine_file_names_the_scenario_field_value_and_path(tmp_path, elsewhere):
     path = write(tmp_path / "sc", BASE.replace("[scenario]\n", "[scenario]\nmachine = \"../mach/none.toml\"\n"))
     with pytest.raises(DefinitionError) as excinfo:
-        load_scenario(path)
+        load_scenario(path).machine_definition()
     message = str(excinfo.value)
     assert "\n" not in message
     assert_fragments(message, f"{path}: scenario.machine", "'../mach/none.toml'",
@@ -187,7 +187,7 @@ def test_a_machine_path_found_only_from_the_current_folder_says_how_to_write_it(
     path = write(tmp_path / "sc", BASE.replace("[scenario]\n", "[scenario]\nmachine = \"mach/pillar.toml\"\n"))
     monkeypatch.chdir(tmp_path)
     with pytest.raises(DefinitionError, match=r"sc\.toml: scenario\.machine .*write '\.\./mach/pillar\.toml'"):
-        load_scenario(path)
+        load_scenario(path).machine_definition()
 
 
 def test_a_bare_machine_name_stays_a_name(tmp_path, elsewhere):
@@ -213,7 +213,7 @@ def test_the_machines_folder_is_the_meshes_one():
 def test_an_unknown_machine_name_names_the_scenario_and_the_field(tmp_path):
     path = write(tmp_path, BASE.replace("[scenario]\n", "[scenario]\nmachine = \"vmc_rma\"\n"))
     with pytest.raises(DefinitionError) as excinfo:
-        load_scenario(path)
+        load_scenario(path).machine_definition()
     message = str(excinfo.value)
     assert "\n" not in message
     assert_fragments(message, f"{path}: scenario.machine names an unknown machine 'vmc_rma'", "'vmc_ram'")
@@ -224,6 +224,24 @@ def test_twin_run_unknown_machine_in_a_scenario_is_one_line(tmp_path, capsys, no
     assert main(["run", str(path), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and f"{path}: scenario.machine" in err and "'vmc_rma'" in err
+
+
+class _Built(Exception):
+    """Raised in place of building the machine: the run got past every check."""
+
+
+@pytest.mark.parametrize("written", ["acme_lathe", "../elsewhere/acme.toml"])
+def test_the_machine_option_replaces_a_scenario_machine_this_install_lacks(tmp_path, monkeypatch, written):
+    """A scenario shared from another site names its machine; --machine replaces it, so it is not checked."""
+    from twin.run import workflows
+
+    def built(*args, **kwargs):
+        raise _Built
+
+    monkeypatch.setattr(workflows, "build_machine", built)
+    path = write(tmp_path, BASE.replace("[scenario]\n", f"[scenario]\nmachine = \"{written}\"\n"))
+    with pytest.raises(_Built):
+        main(["run", str(path), "--machine", "vmc_ram", "--out", str(tmp_path / "out")])
 
 
 def test_an_unknown_machine_option_is_not_blamed_on_the_scenario(tmp_path, capsys, no_mesh):

@@ -1,7 +1,9 @@
-"""`twin study` and `twin rom report` refuse bad options in one line before any simulation (review I, D5–D8).
+"""`twin study` and `twin rom report` refuse bad options in one line before any simulation.
 
 Every test replaces the simulation entry points with one that fails the test: a refusal must come first.
 """
+from pathlib import Path
+
 import pytest
 
 from twin.cli import main
@@ -127,3 +129,18 @@ def test_rom_report_where_no_scenario_ran_is_an_error(monkeypatch, capsys, tmp_p
     assert err == ("twin rom report: error: no scenario could be run on 'vmc_ram': "
                    "iso230_3_spindle_short: RuntimeError: solver diverged")
     assert not out.exists()
+
+
+def test_a_scenario_naming_its_machine_by_path_runs_on_that_machine(tmp_path):
+    """A scenario's machine path is resolved (absolute); it is the same machine as the one built from that file."""
+    from twin.core.machine import build_machine
+    from twin.core.scenario import MACHINES_DIR, load_scenario
+    from twin.rom.report import runs_on
+
+    machine = build_machine("vmc_ram")
+    text = (Path(__file__).parents[1] / "scenarios" / "iso230_3_spindle_short.toml").read_text()
+    by_path = tmp_path / "by_path.toml"
+    by_path.write_text(text.replace('machine = "vmc_ram"', f'machine = "{MACHINES_DIR / "vmc_ram.toml"}"'))
+    assert runs_on(load_scenario(by_path), machine)
+    assert runs_on(load_scenario("iso230_3_spindle_short"), machine)
+    assert not runs_on(load_scenario("machine_a_heat_cool"), machine)

@@ -155,3 +155,34 @@ def test_real_recording_imports(fl_thermal_csv):
     ds = Dataset.from_measured_csv(fl_thermal_csv)
     assert len(ds) == 7711 and ds.info("t1").kind == "temperature" and ds.info("ch3").unit == "um"
     assert ds.metadata["import"]["n_gaps"] == 0
+
+
+SPARE = "time_s,T01_degC,T_spare_degC,Z_um\n0,20.0,1372,0.0\n60,20.5,1372,1.0\n120,21.0,1372,2.0\n"
+
+
+def test_an_open_thermocouple_stops_only_what_reads_it(tmp_path):
+    """A spare type K thermocouple left open reads 1372 °C: refused when read, not when nothing reads it."""
+    path = _write(tmp_path, SPARE)
+    with pytest.raises(TwinInputError, match=r"'T_spare_degC' has value 1372 .* map its column to null"):
+        Dataset.from_measured_csv(path)
+    kept = Dataset.from_measured_csv(path, nan_channels=["T01", "Z"])        # what a model of T01 → Z reads
+    assert list(kept["T_spare"]) == [1372.0] * 3
+    with pytest.raises(TwinInputError, match="'T_spare_degC' has value 1372"):
+        Dataset.from_measured_csv(path, nan_channels=["T_spare", "Z"])
+
+
+def test_a_column_mapped_to_null_is_left_out(tmp_path):
+    ds = Dataset.from_measured_csv(_write(tmp_path, SPARE), column_map={"T_spare_degC": None})
+    assert ds.names == ["T01", "Z"]
+
+
+def test_training_on_a_file_with_an_open_spare_thermocouple(tmp_path, capsys):
+    from twin.cli import main
+
+    path = _write(tmp_path, SPARE.replace("120,21.0,1372,2.0\n", "".join(
+        f"{60 * k},{20 + 0.5 * k},1372,{1.0 * k}\n" for k in range(2, 40))))
+    args = ["train", str(path), "--inputs", "T01", "--target", "Z", "--model", "mlr"]
+    assert main([*args, "--out", str(tmp_path / "m.json")]) == 0
+    assert main(["report", str(path), "--out", str(tmp_path / "r")]) == 2
+    assert "map its column to null" in capsys.readouterr().err
+    assert main(["report", str(path), "--column-map", '{"T_spare_degC": null}', "--out", str(tmp_path / "r")]) == 0

@@ -109,7 +109,7 @@ def cmd_study(args: argparse.Namespace) -> None:
 
 
 def _add_data_options(p):
-    p.add_argument("--column-map", help="JSON file or inline JSON mapping measured CSV columns to <name>_<unit>")
+    p.add_argument("--column-map", help="JSON file or inline JSON mapping measured CSV columns to <name>_<unit> (null leaves a column out)")
     p.add_argument("--nan-policy", default="error", choices=("error", "interpolate", "drop", "keep"),
                    help="NaNs in the channels the model reads from a measured CSV (default: error; NaNs in "
                    "other columns are kept and harm nothing); keep: missing readings of the thermometers the "

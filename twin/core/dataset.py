@@ -325,9 +325,9 @@ class Dataset:
         ----------
         path : str or Path
             The CSV file: a header row, then one row per sample.
-        column_map : dict of str to str, optional
-            ``csv column → "<name>_<unit>"`` (e.g. ``{"t1": "T01_degC"}``);
-            unmapped columns must already be named ``<name>_<unit>`` with a
+        column_map : dict of str to str or None, optional
+            ``csv column → "<name>_<unit>"`` (e.g. ``{"t1": "T01_degC"}``), or to None to leave the column
+            out (a spare or broken channel); unmapped columns must already be named ``<name>_<unit>`` with a
             unit from :data:`UNITS`.
         time_column : str
             Name of the time column: s, or ISO 8601 date-times (``2026-11-23 14:05:00``, with or without a
@@ -340,8 +340,9 @@ class Dataset:
         channel_kinds : dict of str to str, optional
             Channel name → kind, overriding the unit-based default.
         nan_channels : sequence of str, optional
-            The channels ``nan_policy`` is about (those a model reads); default every channel. NaNs in the
-            others are kept (a dead thermometer that nothing reads drops no row).
+            The channels ``nan_policy`` and the plausibility check are about (those a model reads); default
+            every channel. NaNs and implausible values in the others are kept (a dead thermometer that nothing
+            reads drops no row and stops nothing).
 
         Returns
         -------
@@ -375,18 +376,19 @@ class Dataset:
         if any(channels[k].name in report["nan_counts"] for k in about):
             time_s, values = _apply_nan_policy(path, time_s, values, channels, nan_policy, report, about)
         report.update(_sampling_report(time_s))
-        return _checked_sensors(cls(time_s, values, channels, {"source": str(path), "kind": "measured",
-                                                              "import": report}))
+        dataset = cls(time_s, values, channels, {"source": str(path), "kind": "measured", "import": report})
+        return _checked_sensors(dataset, [channels[k].name for k in about])
 
     def __repr__(self):
         span = f"{self.time_s[0]:g}–{self.time_s[-1]:g} s" if len(self) else "empty"
         return f"Dataset({len(self)} rows, {span}, channels {self.names[:8]}{'…' if len(self.names) > 8 else ''})"
 
 
-def _checked_sensors(dataset):
-    """The dataset, once every sensor channel's values are plausible for its kind (a unit error stops here)."""
+def _checked_sensors(dataset, names):
+    """The dataset, once the sensor channels ``names`` (those a command reads) hold values plausible for their
+    kind: a unit error stops here, a spare or broken channel that nothing reads does not."""
     for channel in dataset.channels:
-        if channel.kind in PLAUSIBLE:
+        if channel.kind in PLAUSIBLE and channel.name in names:
             check_plausible(dataset, channel, channel.kind, dataset[channel.name])
     return dataset
 
@@ -408,7 +410,7 @@ def _measured_channels(path, header, t_index, column_map, channel_kinds):
     """The channels of a measured CSV's value columns and their column indices, from the names or the map."""
     channels, cols = [], []
     for j, col in enumerate(header):
-        if j == t_index:
+        if j == t_index or (col in column_map and column_map[col] is None):    # mapped to null: left out
             continue
         parts = split_column(column_map.get(col, col))
         if parts is None:

@@ -52,4 +52,5 @@ def check_plausible(dataset: Dataset, channel: ChannelInfo, kind: str, values: n
         raise TwinInputError(
             f"{source}: column {channel.column!r} has value {values[k]:g} at "
             f"t = {dataset.time_s[k]:g} s, outside the plausible {lo:g} … {hi:g} {channel.unit} of {article} {kind} "
-            f"sensor{_hint(kind, float(values[k]))}")
+            f"sensor{_hint(kind, float(values[k]))} (a spare or broken channel: map its column to null to leave "
+            "it out)")

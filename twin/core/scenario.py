@@ -157,6 +157,7 @@ class Scenario:
     field_times_s: list = field(default_factory=list)
     camera_image_times_s: list = field(default_factory=list)
     iso_test: str | None = None
+    machine_as_written: str = ""
 
     def times(self) -> np.ndarray:
         """The output (sampling) times.
@@ -287,6 +288,31 @@ class Scenario:
 
             out[zone] = first_order_lag(raw, t, tau) if tau > 0 else raw(t)
         return out
+
+    def machine_definition(self) -> MachineDefinition:
+        """The definition of the machine the scenario names (``[scenario] machine``), read.
+
+        The field is a default that ``--machine`` replaces, so it is checked
+        here, where it is used, not when the scenario is read.
+
+        Returns
+        -------
+        MachineDefinition
+            The machine.
+
+        Raises
+        ------
+        DefinitionError
+            Naming the scenario file, ``scenario.machine`` and the value: an unknown name (with the shipped
+            machines) or a missing file (with the path it was looked for at); or the machine file's own error.
+        """
+        from .machine_definition import load_machine   # a scenario is read without its machine
+
+        problem = _unknown_machine(self.source, self.machine_as_written or self.machine, self.machine)
+        if problem:
+            raise DefinitionError(f"{self.source}: scenario.machine {problem}, got "
+                                  f"{self.machine_as_written or self.machine!r}")
+        return load_machine(self.machine)
 
     def check_machine(self, definition: MachineDefinition) -> None:
         """Validate the scenario against a machine: speeds and feeds within limits, event zones known, air plausible.
@@ -688,6 +714,7 @@ def load_scenario(scenario: str | Path) -> Scenario:
         description=head.string("description", ""),
         source=str(path),
         machine=_machine_reference(head, path.parent),
+        machine_as_written=head.string("machine", "vmc_ram"),
         duration_s=duration,
         sample_interval_s=sample,
         time_step_s=step,
@@ -706,37 +733,39 @@ def load_scenario(scenario: str | Path) -> Scenario:
 
 
 def _machine_reference(head: Table, base_dir: Path) -> str:
-    """``[scenario] machine``: a shipped machine's name, or the path of a machine file.
+    """``[scenario] machine``: a shipped machine's name, or the path of a machine file (not read here).
 
     A value ending in ``.toml`` or holding a path separator is a path and, as
     ``ambient.file``, a relative one is read from the scenario file's folder
-    (``base_dir``), whatever the current folder; anything else is a name.
+    (``base_dir``), whatever the current folder; anything else is a name.  It
+    is only a default (``--machine`` replaces it), so it is checked when it is
+    used (:meth:`Scenario.machine_definition`).
 
     Returns
     -------
     str
         The name, or the absolute path of the file.
-
-    Raises
-    ------
-    DefinitionError
-        Naming the scenario file, ``scenario.machine`` and the value: an unknown name (with the shipped
-        machines) or a missing file (with the path it was looked for at).
     """
     value = head.string("machine", "vmc_ram")
     if value.endswith(".toml") or "/" in value or os.sep in value:
-        path = (base_dir / value).resolve()       # an absolute value stays itself
-        if not path.is_file():
-            raise head.error("machine", f"names a machine file that does not exist: {path} (a relative path is "
-                             f"read from the scenario file's folder{_moved_hint(value, base_dir)})", value)
-        return str(path)
+        return str((base_dir / value).resolve())       # an absolute value stays itself
+    return value
+
+
+def _unknown_machine(source: str, written: str, machine: str) -> str | None:
+    """Why the machine a scenario names (``written`` in ``source``, resolved to ``machine``) cannot be read, or
+    None: an unknown name (with the shipped machines) or a missing file (with where it was looked for)."""
+    if Path(machine).is_absolute():
+        if Path(machine).is_file():
+            return None
+        return (f"names a machine file that does not exist: {machine} (a relative path is read from the scenario "
+                f"file's folder{_moved_hint(written, Path(source).parent)})")
     try:
-        resolve_definition(value, MACHINES_DIR, "machine")
+        resolve_definition(machine, MACHINES_DIR, "machine")
     except DefinitionError:
         known = sorted(p.stem for p in MACHINES_DIR.glob("*.toml"))
-        raise head.error("machine", f"names an unknown machine {value!r}; available: {known} "
-                         f"(or the path of a machine .toml file)") from None
-    return value
+        return f"names an unknown machine {machine!r}; available: {known} (or the path of a machine .toml file)"
+    return None
 
 
 def _moved_hint(value: str, base_dir: Path) -> str:

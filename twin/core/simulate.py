@@ -314,7 +314,7 @@ def simulate(scenario: str | Path | Scenario, machine: Machine | None = None, me
         (°C) and the wall time (s).
     """
     scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
-    machine = machine or build_machine(scenario.machine, mesh_size_m)
+    machine = machine or build_machine(scenario.machine, mesh_size_m, definition=scenario.machine_definition())
     scenario.check_machine(machine.definition)
     start = time.perf_counter()
     schedule = ScenarioInputs(machine, scenario, modify)

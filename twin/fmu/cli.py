@@ -129,7 +129,7 @@ def _check_options(args, identity, scenario):
     from ..core.machine_definition import load_machine
     from ..rom.reduction import DEFAULT_ORDER
 
-    named = load_machine(args.machine or scenario.machine).name     # a TOML read, before any build
+    named = (load_machine(args.machine) if args.machine else scenario.machine_definition()).name   # no build yet
     if named != identity.machine:
         which = (f"--machine {args.machine} is machine {named!r}" if args.machine else
                  f"{scenario.source}: scenario {scenario.name!r} is written for machine {named!r}")

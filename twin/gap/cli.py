@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from ..errors import TwinInputError
-from ..infra.cli_common import add_overwrite, read_column_map, split_names
+from ..infra.cli_common import add_overwrite, mesh_size, read_column_map, split_names
 from ..infra.outdir import check_output_file, check_output_folder
 from ..infra.progress import progress_bar
 
@@ -113,6 +113,11 @@ def cmd_truth(args: argparse.Namespace) -> None:
           f"hidden truth in {truth.name}: {json.dumps(data.metadata['effects'])}")
 
 
+def _truth_mesh_size(text: str) -> float:
+    """``--truth-mesh-size``: 0 (the nominal mesh) or a mesh size, m (argparse ``type``)."""
+    return 0.0 if text.strip() in ("0", "0.0") else mesh_size(text)
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``gap`` command with its ``diagnose``, ``truth`` and ``benchmark`` subcommands.
 
@@ -128,7 +133,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="measured CSV (<name>_<unit> columns, or with --column-map) or a twin dataset CSV")
     d.add_argument("--machine", default="vmc_ram", help="machine name or TOML path (default vmc_ram)")
     d.add_argument("--scenario", help="scenario for missing inputs (spindle, feeds, ambient) and the initial state")
-    d.add_argument("--column-map", help='JSON file or inline JSON mapping CSV columns, e.g. {"t1": "T01_degC"}')
+    d.add_argument("--column-map", help='JSON file or inline JSON mapping CSV columns, e.g. {"t1": "T01_degC", "spare": null} (null leaves a column out)')
     d.add_argument("--holdout", type=float, default=0.3, help="held-out last fraction of the record (default 0.3)")
     d.add_argument("--effects", help="comma list of candidate effects (default: the whole library)")
     d.add_argument("--pairs", type=int, default=3, help="pairs: the leading effect with every other, and pairs of the top N (default 3; 0 none)")
@@ -146,7 +151,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="effect of the library at its benchmark value, an a+b pair, or 'none'")
     t.add_argument("--scenario", default=SCENARIO, help=f"truth scenario (default {SCENARIO})")
     t.add_argument("--machine", default="vmc_ram")
-    t.add_argument("--truth-mesh-size", type=float, default=TRUTH_MESH_SIZE_M,
+    t.add_argument("--truth-mesh-size", type=_truth_mesh_size, default=TRUTH_MESH_SIZE_M,
                    help=f"truth mesh size, m (default {TRUTH_MESH_SIZE_M}; 0 = the nominal mesh)")
     t.add_argument("--out", required=True, help="CSV to write (the truth goes to <stem>.truth.json beside it)")
     add_overwrite(t, "file")
@@ -161,7 +166,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "| checks | all | comma list of case names")
     b.add_argument("--scenario", help=f"truth scenario (default {SCENARIO}; with --independent "
                                       f"{INDEPENDENT_SCENARIO})")
-    b.add_argument("--truth-mesh-size", type=float,
+    b.add_argument("--truth-mesh-size", type=_truth_mesh_size,
                    help=f"truth mesh size, m (default {TRUTH_MESH_SIZE_M}; 0 = the nominal mesh; not with "
                         "--independent)")
     b.add_argument("--holdout", type=float, help="held-out last fraction (default 0.3; not with --independent)")

@@ -21,9 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from ..core.dataset import ChannelInfo, Dataset, sidecar_path
-from ..core.plausible import check_plausible
 from ..core.machine import Machine
 from ..core.machine_definition import MachineDefinition
+from ..core.plausible import check_plausible
 from ..errors import TwinInputError
 
 SENSOR_KINDS = ("temperature", "air", "displacement", "strain")

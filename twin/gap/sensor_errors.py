@@ -22,7 +22,7 @@ import numpy as np
 from scipy.signal import lsim
 
 from ..core.dataset import Dataset
-from ..core.machine_definition import load_machine, room_zone
+from ..core.machine_definition import room_zone
 from ..core.scenario import Scenario
 from ..errors import TwinInputError
 
@@ -209,7 +209,7 @@ def _thermometers(dataset):
 
 
 def _room_air(scenario, t):
-    room = room_zone(load_machine(scenario.machine).zones)
+    room = room_zone(scenario.machine_definition().zones)
     return scenario.zone_ambient(t, [room])[room]
 
 

@@ -82,7 +82,10 @@ def mesh_size(text: str) -> float:
     float
         The length, m, at least :data:`meshes.builder.MIN_MESH_SIZE_M`.
     """
-    from meshes.builder import MIN_MESH_SIZE_M, check_mesh_size   # heavy (pyvista): only when the option is given
+    from meshes.builder import (  # heavy (pyvista): only when the option is given
+        MIN_MESH_SIZE_M,
+        check_mesh_size,
+    )
 
     try:
         return check_mesh_size(float(text))
@@ -116,7 +119,7 @@ def read_column_map(value: str | None) -> dict[str, str] | None:
     Returns
     -------
     dict of str to str or None
-        CSV column → ``<name>_<unit>``; None without a value.
+        CSV column → ``<name>_<unit>``, or to None (JSON null: the column is left out); None without a value.
     """
     if value is None:
         return None

@@ -24,6 +24,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -234,10 +235,31 @@ def named_scenarios(machine: Machine, names: Sequence[str]) -> dict[str, Scenari
     return loaded
 
 
+def runs_on(scenario: Scenario, machine: Machine) -> bool:
+    """Whether a scenario names this machine, by name or by the path of its file.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Its ``machine`` is a name, or the absolute path of a machine file.
+    machine : Machine
+        The built machine.
+
+    Returns
+    -------
+    bool
+        True when the scenario's machine is this one.
+    """
+    named = Path(scenario.machine)
+    if named.is_absolute():
+        return named == Path(machine.definition.source).resolve()
+    return scenario.machine == machine.name
+
+
 def _named_scenario(machine, name):
     """One named scenario, loaded; refused unless it is of ``machine`` and within its limits."""
     scenario = load_scenario(name)
-    if scenario.machine != machine.name:
+    if not runs_on(scenario, machine):
         raise TwinInputError(f"--scenarios {name}: runs on machine {scenario.machine!r}, not on "
                              f"{machine.name!r} (--machine)")
     scenario.check_machine(machine.definition)    # speeds, feeds, zones: else its FE run fails
@@ -254,7 +276,7 @@ def _default_scenarios(machine, failures):
         except Exception as exc:  # noqa: BLE001 - a shipped file may be broken in any way; the report goes on
             failures[name] = f"{type(exc).__name__}: {exc}"
             continue
-        if scenario.machine != machine.name:
+        if not runs_on(scenario, machine):
             failures[name] = f"runs on machine {scenario.machine!r}, not {machine.name!r}"
         else:
             loaded[name] = scenario

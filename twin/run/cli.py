@@ -120,7 +120,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     report = sub.add_parser("report", help="plots and summary of an existing (twin or measured) dataset")
     report.add_argument("dataset", help="CSV file (with or without a JSON sidecar)")
     report.add_argument("--out", help="folder (default runs/report_<name>)")
-    report.add_argument("--column-map", help="JSON file or inline JSON mapping CSV columns to <name>_<unit>")
+    report.add_argument("--column-map", help="JSON file or inline JSON mapping CSV columns to <name>_<unit> (null leaves a column out)")
     report.add_argument("--nan-policy", default="error", choices=["error", "interpolate", "drop"])
     report.add_argument("--iso", choices=["spindle", "etve"], help="also report the ISO 230-3 quantities")
     add_overwrite(report)

@@ -75,7 +75,7 @@ def run_scenario(scenario: str | Path, machine: str | Path | None = None, mesh_s
         sc.machine = str(machine)
     if camera is not None:
         sc.record_camera = bool(camera)
-    definition = load_machine(sc.machine)
+    definition = load_machine(machine) if machine is not None else sc.machine_definition()
     sc.check_machine(definition)      # fail on bad speeds before any meshing
     out_dir = Path(out_dir or Path("runs") / sc.name)
     check_output_folder(out_dir, overwrite, inputs=(sc.source, definition.source))
