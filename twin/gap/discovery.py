@@ -466,7 +466,12 @@ class _Projector:
         N = [self._split(X) for X in nuisance]
         self.Nf = np.column_stack([f for f, _ in N]) if N else np.zeros((len(self.fit_col), 0))
         self.Nh = np.column_stack([h for _, h in N]) if N else np.zeros((len(self.hold_col), 0))
-        self.pinv = np.linalg.pinv(self.Nf) if N else None
+        if N:
+            weighted = [(X - ev._centre(X)) * ev.sqrt_w for X in nuisance]
+            self.state = ev.nuisance_entries(weighted)[ev.fit_mask]     # the entries the evaluator fits them on
+            self.pinv = np.linalg.pinv(self.Nf[self.state])
+        else:
+            self.pinv = None
 
     def _split(self, X):
         ev = self.ev
@@ -477,7 +482,7 @@ class _Projector:
         """(fit vector, held-out vector) of a response (n_times, p_eval)."""
         f, h = self._split(np.nan_to_num(X))
         if self.pinv is not None:
-            c = self.pinv @ f
+            c = self.pinv @ f[self.state]
             f, h = f - self.Nf @ c, h - self.Nh @ c
         return f, h
 

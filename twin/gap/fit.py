@@ -5,7 +5,14 @@ eliminated on the *fit* rows in every model, the nominal included: a
 constant offset per channel (thermometer accuracy, probe zero) and the
 free response of the initial-state shapes (:data:`~twin.gap.structure.NUISANCE_FIELDS`;
 the start of a record is never known exactly).  Held-out rows use the
-offsets and nuisance coefficients of the fit rows.
+offsets and nuisance coefficients of the fit rows.  The initial state is a
+temperature field, so its coefficients are fitted on the surface
+thermometers (:data:`STATE_GROUPS`) when their fit entries determine every
+coefficient, else on every channel (:meth:`Evaluator.nuisance_entries`):
+fitted on every channel, one faulty displacement probe moved them and so
+spread its error into every thermometer's residual.  Air sensors do not
+count: they are the twin's input, and the initial state gives them no
+response.
 
 Weights.  Channels are grouped by kind (surface thermometers, air
 sensors, drift, strain); w = 1 / (σ_g² n_g) with σ_g the group's scale: the
@@ -50,6 +57,11 @@ GROUPS = ("temperature", "air", "displacement", "strain")
 #: this and the group's measured noise level.
 GROUP_FLOOR = {"temperature": 0.05, "air": 0.05, "displacement": 0.1, "strain": 0.3}
 GROUP_UNIT = {"temperature": "K", "air": "K", "displacement": "µm", "strain": "µε"}
+#: Groups that observe the initial temperature field directly; its nuisance coefficients are fitted on them.
+STATE_GROUPS = ("temperature",)
+#: Smallest singular value, relative to the largest, of the column-normalised nuisance responses on the state
+#: groups' entries for those entries to determine the coefficients (else every channel's entries are used).
+STATE_CONDITION = 1e-6
 
 
 @dataclass
@@ -104,6 +116,8 @@ class Evaluator:
         self.fit_mask = self.mask & self.fit_rows[:, None]
         self.hold_mask = self.mask & self.hold_rows[:, None]
         self.n_fit = self.fit_mask.sum(axis=0)
+        #: Fit entries of the surface thermometers, which the initial-state nuisance is fitted on when they can be.
+        self.state_mask = self.fit_mask & np.isin(self.kinds, STATE_GROUPS)
         self.noise = np.zeros(len(self.cols)) if noise is None else np.nan_to_num(np.asarray(noise, float))
         self.weights = np.ones(len(self.cols))
         self.sqrt_w = np.ones(len(self.cols))
@@ -153,9 +167,10 @@ class Evaluator:
         beta = {}
         if names:
             N = [prediction.nuisance[n][:, self.cols] for n in names]
-            cols = [self._flat_fit((X - self._centre(X)) * self.sqrt_w) for X in N]
-            A = np.column_stack(cols)
-            b = self._flat_fit((R0 - self._centre(R0)) * self.sqrt_w)
+            weighted = [(X - self._centre(X)) * self.sqrt_w for X in N]
+            rows = self.nuisance_entries(weighted)
+            A = np.column_stack([X[rows] for X in weighted])
+            b = ((R0 - self._centre(R0)) * self.sqrt_w)[rows]
             scale = np.maximum(np.linalg.norm(A, axis=0), 1e-300)
             coef, *_ = np.linalg.lstsq(A / scale, b, rcond=None)
             coef = coef / scale
@@ -168,8 +183,27 @@ class Evaluator:
         return Residual(R, offsets, beta, float(np.sum(Rz[self.fit_mask] ** 2)),
                         float(np.sum(Rz[self.hold_mask] ** 2)))
 
-    def _flat_fit(self, X):
-        return X[self.fit_mask]
+    def nuisance_entries(self, responses: Sequence[np.ndarray]) -> np.ndarray:
+        """The entries the initial-state nuisance coefficients are fitted on (see the module docstring).
+
+        Parameters
+        ----------
+        responses : sequence of ndarray, shape (n_times, n_channels)
+            Each nuisance shape's free response at the evaluator's channels, centred and weighted.
+
+        Returns
+        -------
+        ndarray of bool, shape (n_times, n_channels)
+            :attr:`state_mask` (the surface thermometers' fit entries) when the responses there have full
+            column rank (:data:`STATE_CONDITION`); else :attr:`fit_mask`: a record without surface
+            thermometers, with none valid on the fit rows, or with too few to tell the shapes apart.
+        """
+        A = np.column_stack([X[self.state_mask] for X in responses])
+        norms = np.linalg.norm(A, axis=0)
+        if len(A) < A.shape[1] or not np.all(norms > 0):
+            return self.fit_mask
+        singular = np.linalg.svd(A / norms, compute_uv=False)
+        return self.state_mask if singular[-1] > STATE_CONDITION * singular[0] else self.fit_mask
 
     def fit_vector(self, prediction: Prediction) -> np.ndarray:
         """Weighted residual entries on the valid fit rows (for least squares).
