@@ -31,6 +31,7 @@ from ..core.scenario import available_scenarios
 from ..core.simulate import simulate
 from ..core.variants import MachineSpec, as_scenario, zero_referenced
 from ..errors import TwinInputError
+from ..infra.cli_common import check_distinct
 from ..infra.outdir import check_output_folder
 from ..infra.sweep import run_tasks
 from .records import dataset_label
@@ -206,24 +207,14 @@ def check_study_options(axes: Sequence[str], models: Sequence[str], k: int, phys
     TwinInputError
         One line naming the option and the value.
     """
-    _check_names("--axes", axes, "drift axis")
-    _check_names("--model", models, "model")
+    check_distinct("--axes", [str(a) for a in axes], "drift axis")
+    check_distinct("--model", [str(m) for m in models], "model")
     for model in models:
         make_estimator(model)           # an unknown name: the registry's one-line error listing the models
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
         raise TwinInputError(f"--k must be a whole number of inputs, at least 1, got {k!r}")
     if physics_backend not in ("fe", "rom"):
         raise TwinInputError(f"--physics must be fe or rom, got {physics_backend!r}")
-
-
-def _check_names(option, names, what):
-    """Refuse an empty list option, or one naming an item twice (its table would be computed twice)."""
-    names = [str(n) for n in names]
-    if not names:
-        raise TwinInputError(f"{option} must name at least one {what}, got none")
-    repeated = [n for i, n in enumerate(names) if n in names[:i]]
-    if repeated:
-        raise TwinInputError(f"{option} names {what} {repeated[0]!r} more than once")
 
 
 def study_machine(spec: MachineSpec, axes: Sequence[str], k: int, inputs: Sequence[str] | None) -> None:

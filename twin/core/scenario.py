@@ -306,12 +306,12 @@ class Scenario:
             Naming the scenario file, ``scenario.machine`` and the value: an unknown name (with the shipped
             machines) or a missing file (with the path it was looked for at); or the machine file's own error.
         """
-        from .machine_definition import load_machine   # a scenario is read without its machine
+        from .machine_definition import load_machine  # a scenario is read without its machine
 
-        problem = _unknown_machine(self.source, self.machine_as_written or self.machine, self.machine)
+        written = self.machine_as_written or self.machine
+        problem = _unknown_machine(self.source, written, self.machine)
         if problem:
-            raise DefinitionError(f"{self.source}: scenario.machine {problem}, got "
-                                  f"{self.machine_as_written or self.machine!r}")
+            raise DefinitionError(f"{self.source}: scenario.machine {problem}, got {written!r}")
         return load_machine(self.machine)
 
     def check_machine(self, definition: MachineDefinition) -> None:
@@ -709,12 +709,13 @@ def load_scenario(scenario: str | Path) -> Scenario:
     out.check_keys({"camera", "fields_at_h", "camera_images_at_h"})
     iso = root.table("iso230_3")
     iso.check_keys({"test"})
+    machine = head.string("machine", "vmc_ram")
     return Scenario(
         name=head.string("name", path.stem),
         description=head.string("description", ""),
         source=str(path),
-        machine=_machine_reference(head, path.parent),
-        machine_as_written=head.string("machine", "vmc_ram"),
+        machine=_machine_reference(machine, path.parent),
+        machine_as_written=machine,
         duration_s=duration,
         sample_interval_s=sample,
         time_step_s=step,
@@ -732,7 +733,7 @@ def load_scenario(scenario: str | Path) -> Scenario:
     )
 
 
-def _machine_reference(head: Table, base_dir: Path) -> str:
+def _machine_reference(value: str, base_dir: Path) -> str:
     """``[scenario] machine``: a shipped machine's name, or the path of a machine file (not read here).
 
     A value ending in ``.toml`` or holding a path separator is a path and, as
@@ -746,7 +747,6 @@ def _machine_reference(head: Table, base_dir: Path) -> str:
     str
         The name, or the absolute path of the file.
     """
-    value = head.string("machine", "vmc_ram")
     if value.endswith(".toml") or "/" in value or os.sep in value:
         return str((base_dir / value).resolve())       # an absolute value stays itself
     return value

@@ -463,24 +463,23 @@ class _Projector:
         self.ev = ev
         self.fit_col = np.nonzero(ev.fit_mask)[1]
         self.hold_col = np.nonzero(ev.hold_mask)[1]
-        N = [self._split(X) for X in nuisance]
-        self.Nf = np.column_stack([f for f, _ in N]) if N else np.zeros((len(self.fit_col), 0))
-        self.Nh = np.column_stack([h for _, h in N]) if N else np.zeros((len(self.hold_col), 0))
-        if N:
-            weighted = [(X - ev._centre(X)) * ev.sqrt_w for X in nuisance]
+        weighted = [self._weighted(X) for X in nuisance]
+        self.Nf = np.column_stack([W[ev.fit_mask] for W in weighted]) if weighted else np.zeros((len(self.fit_col), 0))
+        self.Nh = np.column_stack([W[ev.hold_mask] for W in weighted]) if weighted else np.zeros((len(self.hold_col), 0))
+        if weighted:
             self.state = ev.nuisance_entries(weighted)[ev.fit_mask]     # the entries the evaluator fits them on
             self.pinv = np.linalg.pinv(self.Nf[self.state])
         else:
             self.pinv = None
 
-    def _split(self, X):
-        ev = self.ev
-        Xc = (X - ev._centre(X)) * ev.sqrt_w
-        return Xc[ev.fit_mask], Xc[ev.hold_mask]
+    def _weighted(self, X):
+        """X centred per channel on the fit rows and weighted, as the evaluator's residuals are."""
+        return (X - self.ev._centre(X)) * self.ev.sqrt_w
 
     def __call__(self, X):
         """(fit vector, held-out vector) of a response (n_times, p_eval)."""
-        f, h = self._split(np.nan_to_num(X))
+        W = self._weighted(np.nan_to_num(X))
+        f, h = W[self.ev.fit_mask], W[self.ev.hold_mask]
         if self.pinv is not None:
             c = self.pinv @ f[self.state]
             f, h = f - self.Nf @ c, h - self.Nh @ c

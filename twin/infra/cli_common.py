@@ -134,6 +134,30 @@ def read_column_map(value: str | None) -> dict[str, str] | None:
     return out
 
 
+def check_distinct(option: str, items: list, what: str) -> None:
+    """Refuse a list option that names nothing, or names an item twice (its work would be done twice).
+
+    Parameters
+    ----------
+    option : str
+        The option, e.g. ``--orders``.
+    items : list
+        Its items.
+    what : str
+        What one item is, e.g. ``"order"``.
+
+    Raises
+    ------
+    TwinInputError
+        One line naming the option and the repeated item.
+    """
+    if not items:
+        raise TwinInputError(f"{option} must name at least one {what}, got none")
+    repeated = [x for i, x in enumerate(items) if x in items[:i]]
+    if repeated:
+        raise TwinInputError(f"{option} names {what} {repeated[0]!r} more than once")
+
+
 def split_names(value: str | list[str] | None) -> list[str]:
     """Channel names from a comma-separated string or a list of them.
 

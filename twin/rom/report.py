@@ -34,6 +34,7 @@ from meshes.tomlspec import DefinitionError
 from ..core.scenario import SCENARIOS_DIR, load_scenario
 from ..core.simulate import simulate
 from ..errors import TwinInputError
+from ..infra.cli_common import check_distinct
 from ..infra.tables import markdown_table
 from .reduction import METHODS, compute_basis, reduce_with_basis, simulate_rom
 
@@ -184,21 +185,12 @@ def check_report_options(orders: Sequence[int], methods: Sequence[str]) -> tuple
     """
     if any(isinstance(r, bool) or int(r) != r or r < 1 for r in orders):
         raise TwinInputError(f"--orders must be positive integers, got {list(orders)}")
-    _check_list("--orders", [int(r) for r in orders], "order")
-    _check_list("--methods", list(methods), "method")
+    check_distinct("--orders", [int(r) for r in orders], "order")
+    check_distinct("--methods", list(methods), "method")
     unknown = [m for m in methods if m not in METHODS]
     if unknown:
         raise TwinInputError(f"--methods: unknown ROM method {unknown[0]!r}; methods: {','.join(METHODS)}")
     return sorted(int(r) for r in orders), list(methods)
-
-
-def _check_list(option, items, what):
-    """Refuse an empty list option, or one naming an item twice."""
-    if not items:
-        raise TwinInputError(f"{option} must name at least one {what}, got none")
-    repeated = [x for i, x in enumerate(items) if x in items[:i]]
-    if repeated:
-        raise TwinInputError(f"{option} names {what} {repeated[0]!r} more than once")
 
 
 def named_scenarios(machine: Machine, names: Sequence[str]) -> dict[str, Scenario]:
@@ -225,7 +217,7 @@ def named_scenarios(machine: Machine, names: Sequence[str]) -> dict[str, Scenari
         A scenario named twice, an unknown name (the message lists the shipped scenarios), a bad scenario file,
         one the machine cannot run (speeds, feeds, zones), or one of another machine (both machines named).
     """
-    _check_list("--scenarios", [str(n) for n in names], "scenario")
+    check_distinct("--scenarios", [str(n) for n in names], "scenario")
     loaded = {}
     for name in map(str, names):
         try:
