@@ -246,6 +246,25 @@ def test_cli_build_saves_into_a_new_folder(rom, tmp_path):
     assert ReducedModel.load(out).digest == rom.digest
 
 
+def test_cli_build_refuses_a_file_name_that_is_not_npz_before_building(tmp_path, capsys, monkeypatch):
+    from twin.cli import main
+    from twin.rom import cli
+
+    monkeypatch.setattr(cli, "machine_and_rom", lambda args: pytest.fail("built before the --out check"))
+    assert main(["rom", "build", "--out", str(tmp_path / "rom.txt")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"twin rom build: error: {tmp_path / 'rom.txt'}: the file is written as .npz; its name must end in .npz"
+    assert not (tmp_path / "rom.txt").exists()
+
+
+def test_cli_build_of_order_one_prints_its_one_time_constant(capsys):
+    from twin.cli import main
+
+    assert main(["rom", "build", "--order", "1"]) == 0
+    line = capsys.readouterr().out.splitlines()[1]
+    assert "1 states; time constant " in line and "…" not in line, line
+
+
 def test_error_report_tables_name_units_worst_errors_and_missing_cells():
     from twin.rom.report import ErrorReport, ReportRow, format_markdown, format_summary
     good = {"temperature": 0.5 * GOAL_TEMPERATURE_K, "displacement": 0.5 * GOAL_TCP_UM}

@@ -68,6 +68,9 @@ def test_study_options_wrong_on_any_machine_are_refused_first(args, says, tmp_pa
     (["thesis", "--k", "30", "--model", "mlr", "--axes", "Z"],                                                # D7
      "--k 30 exceeds the 25 installed thermometers of 'vmc_ram'"),
     (["cross-condition", "--k", "26"], "--k 26 exceeds the 25 installed thermometers"),
+    (["hybrid", "--inputs", "T01,T99"], ("--inputs T01,T99: 'T99' is not a channel of 'vmc_ram''s records; "
+                                          "channels: spindle,feed_x")),
+    (["cross-condition", "--inputs", "spindel"], "'spindel' is not a channel of 'vmc_ram''s records"),
 ])
 def test_study_options_wrong_for_the_machine_are_refused_before_simulating(args, says, tmp_path,
                                                                            no_study_simulation, capsys):
@@ -82,6 +85,8 @@ def test_k_up_to_the_installed_thermometers_and_fixed_inputs_pass_the_checks(tmp
         study(tmp_path, "thesis", "--k", "25", "--model", "mlr", "--axes", "Z,Y_top")
     with pytest.raises(AssertionError, match="a simulation ran"):
         study(tmp_path, "hybrid", "--physics", "rom", "--inputs", "T01,T02", "--k", "99", "--model", "mlr")
+    with pytest.raises(AssertionError, match="a simulation ran"):
+        study(tmp_path, "cross-condition", "--inputs", "spindle,ambient_room,T05", "--model", "mlr")
 
 
 def test_the_report_says_when_fewer_inputs_than_k_were_chosen():

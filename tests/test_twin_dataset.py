@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from twin.core.dataset import ChannelInfo, Dataset, sidecar_path
+from twin.core.dataset import ChannelInfo, Dataset, name_listing, sidecar_path
 from twin.errors import TwinInputError
 
 
@@ -186,3 +186,17 @@ def test_training_on_a_file_with_an_open_spare_thermocouple(tmp_path, capsys):
     assert main(["report", str(path), "--out", str(tmp_path / "r")]) == 2
     assert "map its column to null" in capsys.readouterr().err
     assert main(["report", str(path), "--column-map", '{"T_spare_degC": null}', "--out", str(tmp_path / "r")]) == 0
+
+
+def test_a_message_lists_channels_with_numbered_runs_shortened():
+    """A simulated record has 525 camera spots: a message names the run, not every spot."""
+    names = ["spindle", *[f"T{i:02d}" for i in range(1, 15)], "T16", *[f"cam{i:03d}" for i in range(525)],
+             "X", "T15", "T16", "T17"]
+    assert name_listing(names) == "spindle,T01…T14,T16,cam000…cam524,X,T15,T16,T17"
+    # a gap, another digit count or another prefix ends a run
+    assert name_listing(["T1", "T2", "T3", "T5", "T6", "T7", "T8"]) == "T1,T2,T3,T5…T8"
+    assert name_listing(["T8", "T9", "T10", "T11"]) == "T8,T9,T10,T11"
+    ds = Dataset(np.arange(3.0), np.zeros((3, 600)), [ChannelInfo(f"cam{i:03d}", "degC", "temperature")
+                                                      for i in range(600)])
+    with pytest.raises(TwinInputError, match=r"^unknown channel 'cam600'; available: cam000…cam599$"):
+        ds.index("cam600")

@@ -14,6 +14,8 @@ def test_report_on_measured_recording(fl_thermal_csv, tmp_path, capsys):
     assert set(summary["drift"]) == {"ch1", "ch2", "ch3", "ch4", "ch5"}
     assert summary["drift"]["ch3"]["peak_um"] == pytest.approx(-71.12, abs=0.01)   # −71.02 from its first 0.10 µm
     assert json.loads((out / "import_report.json").read_text())["rows"] == 7711
+    assert summary["run_seconds"] is None                  # nothing was simulated: no run time, not 0.0 s
+    assert "run time" not in (out / "summary.md").read_text()
     assert (out / "drift.png").exists() and (out / "temperatures.png").exists()
     assert "| ch3 |" in capsys.readouterr().out
 

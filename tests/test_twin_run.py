@@ -7,7 +7,7 @@ import pytest
 from twin.cli import main
 from twin.core.dataset import Dataset
 from twin.core.scenario import load_scenario
-from twin.core.simulate import simulate
+from twin.core.simulate import record_channel_names, simulate
 from twin.run.summary import format_summary, run_summary
 
 
@@ -42,6 +42,10 @@ spindle_rpm = 0
     hottest = max(ds.names_of_kind("temperature"), key=lambda n: ds[n].max())
     assert np.argmax(ds[hottest]) == np.flatnonzero(heating)[-1]  # hottest at the moment the spindle stops
     assert ds.metadata["energy_balance_relative_error"] < 1e-8
+    # the channels a study checks its --inputs against before simulating are the record's, in its order
+    assert record_channel_names(machine) == ds.names
+    cameras = [c.name for c in machine.channels if c.kind == "camera"]
+    assert [n for n in record_channel_names(machine, camera=True) if n not in cameras] == ds.names
 
 
 def test_ambient_sine_gives_drift_at_the_same_period(machine, tmp_path):
@@ -90,6 +94,7 @@ def test_cli_run_writes_dataset_plots_and_summary(tmp_path, capsys):
         assert (out / name).exists(), name
     ds = Dataset.read(out / "heat_cool_9000.csv")
     summary = json.loads((out / "summary.json").read_text())
+    assert summary["run_seconds"] > 0 and "- run time: " in (out / "summary.md").read_text()
     change = ds["Z"] - ds["Z"][0]                                   # ISO 230-3: the change since the first reading
     assert summary["drift"]["Z"]["peak_um"] == pytest.approx(change[np.argmax(np.abs(change))])
     assert "Z_um" in (out / "heat_cool_9000.csv").read_text().splitlines()[0]

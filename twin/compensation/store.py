@@ -41,7 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 from models.persistence import model_from_document, model_to_document
 from models.registry import model_traits, registered_models
 
-from ..core.dataset import UNITS, Dataset, finite_or_none, json_default, project_version
+from ..core.dataset import UNITS, Dataset, finite_or_none, json_default, name_listing, project_version
 from ..core.files import write_text_atomic
 from ..errors import TwinInputError
 from .records import (
@@ -139,7 +139,7 @@ def check_channels(dataset: Dataset, names: Sequence[str], units: Sequence[str] 
     missing = [n for n in names if n not in dataset]
     if missing:
         raise TwinInputError(f"{dataset_label(dataset)}: lacks {role} channel(s) {missing}; it has "
-                             f"{dataset.names}")
+                             f"{name_listing(dataset.names)}")
     if units is not None:
         bad = [(n, u, dataset.info(n).unit) for n, u in zip(names, units) if dataset.info(n).unit != u]
         if bad:

@@ -26,9 +26,9 @@ import numpy as np
 
 from models import select_sensors
 
-from ..core.dataset import ChannelInfo, Dataset
+from ..core.dataset import ChannelInfo, Dataset, name_listing
 from ..core.scenario import available_scenarios
-from ..core.simulate import simulate
+from ..core.simulate import record_channel_names, simulate
 from ..core.variants import MachineSpec, as_scenario, zero_referenced
 from ..errors import TwinInputError
 from ..infra.cli_common import check_distinct
@@ -231,14 +231,21 @@ def study_machine(spec: MachineSpec, axes: Sequence[str], k: int, inputs: Sequen
     k : int
         Inputs to choose when ``inputs`` is None: at most the machine's installed thermometers.
     inputs : sequence of str or None
-        Fixed inputs (``k`` is then unused).
+        Fixed inputs (``k`` is then unused): each must be a channel of the machine's records.
 
     Raises
     ------
     TwinInputError
-        An axis that is not a drift axis, or ``k`` above the number of installed thermometers (both numbers named).
+        An axis that is not a drift axis, ``k`` above the number of installed thermometers (both numbers named),
+        or an input that is not a channel of the records (the channels listed).
     """
     machine = spec.build()
+    # camera spots too: some of the studies' scenarios record them
+    channels = record_channel_names(machine, camera=True)
+    unknown = [name for name in inputs or () if name not in channels]
+    if unknown:
+        raise TwinInputError(f"--inputs {','.join(inputs)}: {unknown[0]!r} is not a channel of {machine.name!r}'s "
+                             f"records; channels: {name_listing(channels)}")
     drift = [c.name for c in machine.channels if c.kind == "displacement"]
     bad = [a for a in axes if a not in drift]
     if bad:

@@ -31,7 +31,7 @@ import fea
 from models import metrics
 
 from ..core.clock import on_one_clock
-from ..core.dataset import Dataset, finite_or_none, sidecar_path
+from ..core.dataset import Dataset, finite_or_none, name_listing, sidecar_path
 from ..core.scenario import available_scenarios
 from ..core.simulate import simulate
 from ..errors import TwinInputError
@@ -509,7 +509,7 @@ class RecordSchedule:
         self.t = dataset.time_s
         if "spindle" not in dataset:
             raise TwinInputError(f"{dataset_label(dataset)}: the twin needs a 'spindle' channel (rpm); "
-                                 f"channels: {dataset.names}")
+                                 f"channels: {name_listing(dataset.names)}")
         self.spindle = dataset["spindle"]
         self.feeds = {a: dataset[f"feed_{a}"] if f"feed_{a}" in dataset else np.zeros(len(dataset)) for a in "xyz"}
         zones = machine.zones
@@ -521,7 +521,7 @@ class RecordSchedule:
             if not air:
                 raise TwinInputError(f"{dataset_label(dataset)}: the twin needs the ambient: channels "
                                      f"{[f'ambient_{z}' for z in zones]} or an air/ambient thermometer; "
-                                     f"channels: {dataset.names}")
+                                     f"channels: {name_listing(dataset.names)}")
             mean = dataset.matrix(air).mean(axis=1)
             self.ambient = {z: mean for z in zones}
         self.gradient = dataset["ambient_gradient"] if "ambient_gradient" in dataset else np.zeros(len(dataset))

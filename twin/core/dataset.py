@@ -18,6 +18,7 @@ import csv
 import hashlib
 import io
 import json
+import re
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from importlib.metadata import PackageNotFoundError, version
@@ -72,6 +73,42 @@ class ChannelInfo:
     def column(self) -> str:
         """The CSV column name, ``<name>_<unit>`` (e.g. ``T01_degC``)."""
         return f"{self.name}_{self.unit}"
+
+
+def name_listing(names: Sequence[str]) -> str:
+    """Channel names for a message: comma-separated, a run of numbered names shortened (``cam000…cam524``).
+
+    Parameters
+    ----------
+    names : sequence of str
+        E.g. a dataset's channels.
+
+    Returns
+    -------
+    str
+        ``spindle,T01,…`` with each run of more than three names that differ only in a consecutive number
+        (same prefix, same digit count) written as ``first…last``.
+    """
+    parts, run = [], []
+
+    def close():
+        parts.extend([f"{run[0]}…{run[-1]}"] if len(run) > 3 else run)
+        run.clear()
+
+    for name in names:
+        if run and _follows(run[-1], name):
+            run.append(name)
+            continue
+        close()
+        run.append(name)
+    close()
+    return ",".join(parts)
+
+
+def _follows(previous, name):
+    """Whether ``name`` is ``previous`` with its trailing number one higher, written with as many digits."""
+    a, b = re.fullmatch(r"(.*?)(\d+)", previous), re.fullmatch(r"(.*?)(\d+)", name)
+    return bool(a and b and a[1] == b[1] and len(a[2]) == len(b[2]) and int(b[2]) == int(a[2]) + 1)
 
 
 def split_column(column: str) -> tuple[str, str] | None:
@@ -150,7 +187,7 @@ class Dataset:
         names = self.names
         if name in names:
             return names.index(name)
-        raise TwinInputError(f"unknown channel {name!r}; available: {names}")
+        raise TwinInputError(f"unknown channel {name!r}; available: {name_listing(names)}")
 
     def info(self, name: str) -> ChannelInfo:
         """The description (unit, kind, label, position) of a channel.

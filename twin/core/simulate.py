@@ -396,6 +396,28 @@ def _run_metadata(machine, scenario, seed, noise, balance, step_errors):
     }
 
 
+def condition_channel_infos(zones: list[str], sources: list[tuple[str, str]]) -> list[ChannelInfo]:
+    """The dataset channels of the operating conditions, in the order :func:`condition_channels` writes them.
+
+    Parameters
+    ----------
+    zones : list of str
+        Convection zones (one ambient channel each).
+    sources : list of tuple of str
+        ``(name, label)`` of the heat sources.
+
+    Returns
+    -------
+    list of ChannelInfo
+        Spindle (rpm), feeds (mm/min), ambients (°C), gradient (K/m), powers (W).
+    """
+    return ([ChannelInfo("spindle", "rpm", "spindle_speed", "spindle speed")]
+            + [ChannelInfo(f"feed_{axis}", "mm_min", "feed", f"{axis.upper()} axis feed") for axis in "xyz"]
+            + [ChannelInfo(f"ambient_{zone}", "degC", "ambient", f"ambient of zone {zone} (true)") for zone in zones]
+            + [ChannelInfo("ambient_gradient", "K_m", "ambient_gradient", "vertical ambient gradient")]
+            + [ChannelInfo(f"P_{name}", "W", "power", label) for name, label in sources])
+
+
 def condition_channels(cond: Conditions, zones: list[str], sources: list[tuple[str, str]],
                        input_names: list[str], inputs: np.ndarray) -> tuple[list[ChannelInfo], list[np.ndarray]]:
     """Dataset channels and columns of the operating conditions.
@@ -416,24 +438,38 @@ def condition_channels(cond: Conditions, zones: list[str], sources: list[tuple[s
     Returns
     -------
     channels : list of ChannelInfo
-        Spindle (rpm), feeds (mm/min), ambients (°C), gradient (K/m), powers (W).
+        As :func:`condition_channel_infos`.
     columns : list of ndarray
         Their values.
     """
-    channels = [ChannelInfo("spindle", "rpm", "spindle_speed", "spindle speed")]
-    columns = [cond.spindle_rpm]
-    for axis in "xyz":
-        channels.append(ChannelInfo(f"feed_{axis}", "mm_min", "feed", f"{axis.upper()} axis feed"))
-        columns.append(cond.feed_mm_min[axis])
-    for zone in zones:
-        channels.append(ChannelInfo(f"ambient_{zone}", "degC", "ambient", f"ambient of zone {zone} (true)"))
-        columns.append(cond.ambient_C[zone])
-    channels.append(ChannelInfo("ambient_gradient", "K_m", "ambient_gradient", "vertical ambient gradient"))
-    columns.append(cond.gradient_K_per_m)
-    for name, label in sources:
-        channels.append(ChannelInfo(f"P_{name}", "W", "power", label))
-        columns.append(inputs[:, list(input_names).index(f"power:{name}")])
-    return channels, columns
+    columns = ([cond.spindle_rpm] + [cond.feed_mm_min[axis] for axis in "xyz"]
+               + [cond.ambient_C[zone] for zone in zones] + [cond.gradient_K_per_m]
+               + [inputs[:, list(input_names).index(f"power:{name}")] for name, _ in sources])
+    return condition_channel_infos(zones, sources), columns
+
+
+def _machine_sources(machine: Machine) -> list[tuple[str, str]]:
+    """``(name, label)`` of a built machine's heat sources."""
+    return [(s.name, s.label) for s in machine.definition.sources]
+
+
+def record_channel_names(machine: Machine, camera: bool = False) -> list[str]:
+    """The channel names of a record :func:`simulate` makes on ``machine``: conditions, then sensors.
+
+    Parameters
+    ----------
+    machine : Machine
+        A built machine.
+    camera : bool, default False
+        With the camera spots (recorded when a scenario asks, :func:`recorded_channels`).
+
+    Returns
+    -------
+    list of str
+        E.g. ``spindle``, ``ambient_<zone>``, ``P_<source>``, ``T01``, ``Z``.
+    """
+    return ([c.name for c in condition_channel_infos(machine.zones, _machine_sources(machine))]
+            + [c.name for c in machine.channels if c.kind != "camera" or camera])
 
 
 def machine_condition_channels(machine: Machine,
@@ -454,5 +490,5 @@ def machine_condition_channels(machine: Machine,
     columns : list of ndarray
         Their values.
     """
-    return condition_channels(cond, machine.zones, [(s.name, s.label) for s in machine.definition.sources],
+    return condition_channels(cond, machine.zones, _machine_sources(machine),
                               machine.thermal.input_names, cond.inputs)

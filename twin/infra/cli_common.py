@@ -94,7 +94,7 @@ def mesh_size(text: str) -> float:
                                          f"{MIN_MESH_SIZE_M:g} m ({MIN_MESH_SIZE_M * 1e3:g} mm)") from None
 
 
-def check_out_file(args: argparse.Namespace, inputs: tuple = ()) -> None:
+def check_out_file(args: argparse.Namespace, inputs: tuple = (), suffix: str | None = None) -> None:
     """Check ``args.out`` (a file, if given) before any work; ``args.overwrite`` allows replacing it.
 
     Parameters
@@ -103,9 +103,11 @@ def check_out_file(args: argparse.Namespace, inputs: tuple = ()) -> None:
         With ``out`` and ``overwrite``.
     inputs : tuple of str or Path
         The command's input files, which the output must not be.
+    suffix : str, optional
+        The ending the file's name must have (:func:`twin.infra.outdir.check_output_file`).
     """
     if args.out is not None:
-        check_output_file(args.out, args.overwrite, inputs)
+        check_output_file(args.out, args.overwrite, inputs, suffix)
 
 
 def read_column_map(value: str | None) -> dict[str, str] | None:

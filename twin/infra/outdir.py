@@ -116,7 +116,8 @@ def check_output_folder(path: str | Path | None, overwrite: bool = False, inputs
     return out
 
 
-def check_output_file(path: str | Path, overwrite: bool = False, inputs: tuple = ()) -> Path:
+def check_output_file(path: str | Path, overwrite: bool = False, inputs: tuple = (),
+                      suffix: str | None = None) -> Path:
     """Check an output file before the work.
 
     Parameters
@@ -127,6 +128,8 @@ def check_output_file(path: str | Path, overwrite: bool = False, inputs: tuple =
         Accept an existing file (it is replaced).
     inputs : tuple of str or Path
         The command's inputs, which the file must not be.
+    suffix : str, optional
+        The ending the file's name must have (e.g. ``.npz``), when its format has one.
 
     Returns
     -------
@@ -136,12 +139,14 @@ def check_output_file(path: str | Path, overwrite: bool = False, inputs: tuple =
     Raises
     ------
     TwinInputError
-        ``path`` is a folder, is one of ``inputs``, cannot be created, or
+        ``path`` is a folder, is one of ``inputs``, does not end in ``suffix``, cannot be created, or
         exists and ``overwrite`` is false.
     """
     out = Path(path).expanduser().resolve()
     if out.is_dir():
         raise TwinInputError(f"{out}: is a folder; the output must be a file")
+    if suffix is not None and out.suffix != suffix:
+        raise TwinInputError(f"{out}: the file is written as {suffix}; its name must end in {suffix}")
     _check_inputs(out, inputs)
     if out.exists() and not overwrite:
         raise TwinInputError(f"{out}: exists; pass --overwrite (overwrite=True) to replace it")

@@ -79,13 +79,15 @@ def cmd_rom_build(args: argparse.Namespace) -> None:
     args : argparse.Namespace
         The parsed command line.
     """
-    check_out_file(args)
+    check_out_file(args, suffix=".npz")
     machine, rom = machine_and_rom(args)
     i = rom.info
     where = f"read from {i['from_cache']}" if i.get("from_cache") else f"built in {i['build_seconds']:.1f} s"
     print(f"{rom}: {where}")
-    print(f"  {i['n_nodes']} thermal unknowns → {rom.order} states; time constants "
-          f"{i['fastest_time_constant_s']:.3g} s … {i['slowest_time_constant_s'] / 3600:.3g} h")
+    slowest = f"{i['slowest_time_constant_s'] / 3600:.3g} h"
+    times = (f"time constant {slowest}" if rom.order == 1
+             else f"time constants {i['fastest_time_constant_s']:.3g} s … {slowest}")
+    print(f"  {i['n_nodes']} thermal unknowns → {rom.order} states; {times}")
     if args.out:
         print(f"  saved to {rom.save(args.out)}")
 

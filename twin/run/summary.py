@@ -5,7 +5,7 @@ import numpy as np
 
 from fea.energy import ENERGY_FLOOR_K
 
-from ..core.dataset import Dataset
+from ..core.dataset import Dataset, name_listing
 from ..errors import TwinInputError
 from ..infra.tables import markdown_table
 
@@ -28,7 +28,7 @@ def tilt_urad(dataset: Dataset, probe_spacing_m: float) -> np.ndarray:
     return (dataset["Y_top"] - dataset["Y"]) / probe_spacing_m
 
 
-def run_summary(dataset: Dataset, wall_seconds: float, probe_spacing_m: float = 0.1,
+def run_summary(dataset: Dataset, wall_seconds: float | None, probe_spacing_m: float = 0.1,
                 iso_test: str | None = None) -> dict:
     """The key figures of a run.
 
@@ -36,8 +36,8 @@ def run_summary(dataset: Dataset, wall_seconds: float, probe_spacing_m: float = 
     ----------
     dataset : Dataset
         The run's (or a measured) dataset.
-    wall_seconds : float
-        Simulation wall time, s (0 for a measured dataset).
+    wall_seconds : float or None
+        Simulation wall time, s; None for a dataset this process did not simulate (``run_seconds`` is then null).
     probe_spacing_m : float
         Distance of the two Y probes, m (for the tilt).
     iso_test : str, optional
@@ -61,7 +61,7 @@ def run_summary(dataset: Dataset, wall_seconds: float, probe_spacing_m: float = 
     elapsed = dataset.time_s - dataset.time_s[0]          # a logger's clock need not start at 0
     out = {"scenario": dataset.metadata.get("scenario"), "machine": dataset.metadata.get("machine"),
            "duration_h": float(elapsed[-1] / 3600.0), "samples": len(dataset),
-           "run_seconds": float(wall_seconds)}
+           "run_seconds": None if wall_seconds is None else float(wall_seconds)}
     drift = {}
     for axis in dataset.names_of_kind("displacement"):
         v = change_since_start(dataset[axis])
@@ -118,7 +118,7 @@ def _iso230_3(dataset, drift, iso_test, probe_spacing_m):
         ambient = [n for n in dataset.names if n.startswith("ambient_") and dataset.info(n).unit == "degC"]
         if not ambient:
             raise TwinInputError(f"{dataset.metadata.get('source', 'the dataset')}: the ISO 230-3 ETVE summary needs "
-                                 f"the room air: an ambient_<zone>_degC column; columns: {dataset.names}")
+                                 f"the room air: an ambient_<zone>_degC column; columns: {name_listing(dataset.names)}")
         out["iso230_3_etve"] = {
             "drift_range_um": {a: drift[a]["range_um"] for a in axes},
             "ambient_range_K": float(max(np.ptp(dataset[n]) for n in ambient)),
@@ -149,7 +149,7 @@ def format_summary(summary: dict) -> str:
     lines = [f"# Run summary: {summary['scenario']}{on}", "",
              f"- duration: {summary['duration_h']:.2f} h, {summary['samples']} samples",
              ] + ([f"- run time: {summary['run_seconds']:.1f} s (wall clock, simulation only)"]
-                  if summary["run_seconds"] else [])
+                  if summary["run_seconds"] is not None else [])
     if "hottest_sensor" in summary:
         h = summary["hottest_sensor"]
         lines.append(f"- hottest sensor: {h['name']} at {h['max_C']:.2f} °C ({h['rise_K']:+.2f} K since the first "

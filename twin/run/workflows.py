@@ -156,7 +156,7 @@ def report_dataset(path: str | Path, out_dir: str | Path | None = None, column_m
     else:
         dataset = Dataset.read(path)
     dataset.metadata.setdefault("scenario", path.stem)
-    summary = run_summary(dataset, 0.0, probe_spacing_m, iso_test)
+    summary = run_summary(dataset, None, probe_spacing_m, iso_test)
     with atomic_directory(out_dir, overwrite) as tmp:
         if dataset.names_of_kind("temperature", "air"):
             plots.plot_temperatures(dataset, tmp / "temperatures.png")
