@@ -541,6 +541,11 @@ def _margin(ranking, chosen, fold_rmse, floor) -> str:
     return text + "."
 
 
+def _rmse_text(value) -> str:
+    """An RMSE for the reason: two decimals, or three significant digits below 1 (0.305, not 0.31)."""
+    return f"{value:.2f}" if abs(value) >= 1 else f"{value:.3g}"
+
+
 def _reason(ranking, chosen, score, worst, folds, schemes, unit) -> str:
     n_lobo = sum(f.scheme == "leave-one-block-out" for f in folds)
     n_rolling = len(folds) - n_lobo
@@ -549,17 +554,18 @@ def _reason(ranking, chosen, score, worst, folds, schemes, unit) -> str:
         kinds += (f", {n_rolling} more rolling-origin" if n_rolling else "") + \
             "; the last block's fold is rolling-origin too"
     best = ranking[0]
-    over = f"over {len(folds)} folds ({kinds}), worst fold {worst[chosen]:.2f} {unit}"
+    over = f"over {len(folds)} folds ({kinds})"
     if chosen == best:
         text = (f"chose {best}: lowest geometric-mean RMSE on operating-regime blocks it did not see, "
-                f"{score[best]:.2f} {unit} {over}")
+                f"{_rmse_text(score[best])} {unit} {over}, worst fold {_rmse_text(worst[best])} {unit}")
         if len(ranking) > 1:
             second = ranking[1]
-            text += f"; runner-up {second} {score[second]:.2f} {unit}"
+            text += f"; runner-up {second} {_rmse_text(score[second])} {unit}"
     else:
         text = (f"chose {chosen}: the lowest order within one standard error of {best}, whose geometric-mean "
-                f"RMSE on operating-regime blocks it did not see is the lowest ({score[best]:.2f} against "
-                f"{score[chosen]:.2f} {unit} {over})")
+                f"RMSE on operating-regime blocks it did not see is the lowest ({_rmse_text(score[best])} against "
+                f"{_rmse_text(score[chosen])} {unit} {over}; worst fold {_rmse_text(worst[best])} against "
+                f"{_rmse_text(worst[chosen])} {unit})")
     diverged = [k for k in ranking if not np.isfinite(score[k])]
     if diverged:
         text += f"; failed or diverged on some block: {', '.join(diverged)}"

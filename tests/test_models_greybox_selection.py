@@ -247,6 +247,12 @@ def test_a_second_pole_must_earn_more_than_the_folds_scatter():
     assert faint.reason.endswith("folds, and the two are within one standard error: these folds do not tell them "
                                  "apart.")
     assert " It beats 2 poles on " in faint.reason
+    # each worst fold is its own model's, and RMSEs under 1 keep three significant digits
+    def rmse(value):
+        return f"{value:.2f}" if value >= 1 else f"{value:.3g}"
+    assert (f"({rmse(faint.score['2 poles'])} against {rmse(faint.score['1 poles'])} " in faint.reason)
+    assert (f"; worst fold {rmse(faint.worst_rmse['2 poles'])} against {rmse(faint.worst_rmse['1 poles'])} "
+            in faint.reason)
     # a 30 % slow mode: two poles win by far more than the scatter and are kept
     clear = select_by_blocked_cv(_orders(), *_record(seed=0, slow_share=0.3))
     assert clear.ranking[0] == clear.chosen == "2 poles"
