@@ -5,37 +5,50 @@ import argparse
 from pathlib import Path
 
 from ..errors import TwinInputError
-from ..infra.cli_common import add_overwrite, check_out_file, existing_fmu
+from ..infra.cli_common import (
+    add_overwrite,
+    check_distinct,
+    check_out_file,
+    existing_fmu,
+    split_names,
+)
 from ..rom.cli import add_rom_options, machine_and_rom
 
 # Handlers import the library inside them, never up here: start-up time (`twin --help` must not load scipy).
 
 
 def cmd_fmu_export(args: argparse.Namespace) -> None:
-    """``twin fmu export``: write an FMU of the machine's ROM (or FE), validate it with fmpy, print what it is.
+    """``twin fmu export``: write an FMU of the machine's ROM (or FE), validated with fmpy, and print what it is.
 
     Parameters
     ----------
     args : argparse.Namespace
         The parsed command line.
     """
-    from .export import export_fmu, validate
+    from .export import export_fmu, model_name
 
     check_out_file(args)
+    outputs = _output_names(args.outputs)
     machine, rom = machine_and_rom(args)
-    outputs = args.outputs.split(",") if args.outputs else None
     fe = dict(machine=args.machine, mesh_size_m=args.mesh_size) if args.engine == "fe" else None
     path = export_fmu(rom, args.out, kind=args.kind, engine=args.engine, outputs=outputs,
                       default_temperature_C=args.initial_temperature, step_s=args.step, fe_options=fe,
                       compiler=args.compiler, fmi_version=args.fmi_version)
-    problems = validate(path)
     print(f"{path}: FMI {args.fmi_version}.0 Co-Simulation, {args.kind} FMU, engine {args.engine} "
-          f"({rom.method} ROM of order {rom.order}, {rom.n_outputs if outputs is None else len(outputs)} outputs)")
-    if problems:
-        for p in problems:
-            print(f"  problem: {p}")
-        raise TwinInputError(f"{path}: fmpy found {len(problems)} problem(s) in the FMU")
+          f"({model_name(rom, args.engine)}, {rom.n_outputs if outputs is None else len(outputs)} outputs)")
     print("fmpy.validate_fmu: no problems")
+
+
+def _output_names(text):
+    """``--outputs``: the names, or None (all but the camera spots) when the option is not given.
+
+    Refused before any work when it names no output (``--outputs ""`` is not "all") or one twice.
+    """
+    if text is None:
+        return None
+    names = split_names(text)
+    check_distinct("--outputs", names, "output")
+    return names
 
 
 def cmd_fmu_validate(args: argparse.Namespace) -> None:
@@ -48,7 +61,7 @@ def cmd_fmu_validate(args: argparse.Namespace) -> None:
     """
     from .export import validate
 
-    problems = validate(existing_fmu(args.fmu))
+    problems = validate(existing_fmu(args.fmu))   # fmpy's checks, then the files it needs to run here
     for p in problems:
         print(f"  problem: {p}")
     if problems:
@@ -81,6 +94,7 @@ def cmd_fmu_simulate(args: argparse.Namespace) -> None:
     from .export import (
         fmu_identity,
         input_table,
+        missing_parts,
         scenario_start,
         simulate,
         simulate_table,
@@ -88,6 +102,9 @@ def cmd_fmu_simulate(args: argparse.Namespace) -> None:
 
     existing_fmu(args.fmu)
     identity = fmu_identity(args.fmu)
+    missing = missing_parts(args.fmu)
+    if missing:
+        raise TwinInputError(f"{args.fmu}: cannot run here: " + "; ".join(missing))
     scenario = load_scenario(args.scenario)
     args.out = args.out or f"runs/fmu_{scenario.name}.csv"
     check_out_file(args, inputs=(args.fmu, scenario.source))
@@ -108,17 +125,17 @@ def cmd_fmu_simulate(args: argparse.Namespace) -> None:
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     text = io.StringIO()
+    header = ["time_s"] + [f"{n}_{rom.output_units[rom.output_index(n)]}" for n in names]   # as datasets name them
     np.savetxt(text, np.column_stack([result[n] for n in result.dtype.names]), delimiter=",",
-               header=",".join(result.dtype.names), comments="", fmt="%.17g")
+               header=",".join(header), comments="", fmt="%.17g")
     write_text_atomic(out, text.getvalue())
-    print(f"{args.fmu}: {len(result)} samples of {scenario.name} in {out}")
+    print(f"{args.fmu} (it runs {identity}): {len(result)} samples of {scenario.name} in {out}")
     ref = simulate_table(rom, table, T0, steady)
     worst = 0.0
     for n in names:
-        if n in rom.output_names:
-            j = rom.output_index(n)
-            scale = max(float(np.abs(ref[:, j]).max()), 1e-30)
-            worst = max(worst, float(np.abs(result[n] - ref[:, j]).max()) / scale)
+        j = rom.output_index(n)
+        scale = max(float(np.abs(ref[:, j]).max()), 1e-30)
+        worst = max(worst, float(np.abs(result[n] - ref[:, j]).max()) / scale)
     print(f"largest relative difference from the in-process {rom.method} ROM of order {rom.order}: {worst:.2e}")
 
 
@@ -164,7 +181,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="rom (default) or fe: the full FE model inside a Python FMU (slow)")
     export.add_argument("--out", default="twin.fmu", help="FMU file (default twin.fmu)")
     add_overwrite(export, "file")
-    export.add_argument("--outputs", help="comma-separated output names (default: all but camera spots)")
+    export.add_argument("--outputs", help="comma-separated output names, each once (default: all but camera spots)")
     export.add_argument("--initial-temperature", type=float, default=20.0, help="start value of T_initial, °C")
     export.add_argument("--step", type=float, default=10.0, help="default experiment step size, s")
     export.add_argument("--compiler", default="cc", help="C compiler for --kind native (default cc)")

@@ -43,6 +43,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..core.machine_definition import room_zone
 from ..core.scenario import Scenario, load_scenario
+from ..infra.cli_common import check_distinct
 from ..rom.reduction import ReducedModel, scenario_conditions
 from . import spec
 from .native_source import c_sources, model_data_header
@@ -58,6 +59,7 @@ C_FILE = "thermal_twin_rom.c"
 def _output_rows(rom, outputs):
     if outputs is None:
         return list(range(rom.n_outputs))
+    check_distinct("outputs", list(outputs), "output")    # one variable per name, or the FMU is invalid
     return [rom.output_index(n) for n in outputs]
 
 
@@ -74,11 +76,28 @@ def _subset(rom, rows):
     return view
 
 
+def model_name(rom: ReducedModel, engine: str) -> str:
+    """What an FMU of ``rom`` with ``engine`` runs, in words: ``krylov ROM of order 80`` or the full FE model.
+
+    Parameters
+    ----------
+    rom : ReducedModel
+        The machine's ROM (for the FE engine, only its machine matters).
+    engine : str
+        ``rom`` or ``fe``.
+
+    Returns
+    -------
+    str
+    """
+    return "full finite-element model" if engine == "fe" else f"{rom.method} ROM of order {rom.order}"
+
+
 def _description(rom, engine):
     """The model description's text; it names what the FMU runs, read back by :func:`fmu_identity`."""
-    what = "full finite-element model" if engine == "fe" else f"{rom.method} ROM of order {rom.order}"
-    return (f"Thermal twin of machine {json.dumps(rom.machine)} ({what}; machine digest {rom.digest}): spindle "
-            f"speed, feeds and ambient in; temperatures (degC), TCP drift (um) and strains (ue) out")
+    return (f"Thermal twin of machine {json.dumps(rom.machine)} ({model_name(rom, engine)}; machine digest "
+            f"{rom.digest}): spindle speed, feeds and ambient in; temperatures (degC), TCP drift (um) and strains "
+            "(ue) out")
 
 
 #: :func:`_description` read back; the machine's name is a JSON string (any name a TOML file can give).
@@ -138,7 +157,8 @@ def export_fmu(rom: ReducedModel, out: Path | str, kind: Literal["python", "nati
                fe_options: dict | None = None, compiler: str = "cc", fmi_version: int = 2) -> Path:
     """Write an FMI 2.0 Co-Simulation FMU of ``rom`` to ``out``; return its path.
 
-    The file is written as ``<out>.fmu.partial`` and renamed when complete; its folder is created.
+    The file is written as ``<out>.fmu.partial``, checked by :func:`validate` and renamed only when complete and
+    valid; a failed export leaves neither file behind.  Its folder is created.
 
     Parameters
     ----------
@@ -146,7 +166,7 @@ def export_fmu(rom: ReducedModel, out: Path | str, kind: Literal["python", "nati
     out : the ``.fmu`` file
     kind : ``"python"`` (PythonFMU) or ``"native"`` (compiled C)
     engine : ``"rom"`` or, for the Python kind only, ``"fe"`` (the full model; slow)
-    outputs : ROM output names to expose (default: all of the ROM's)
+    outputs : ROM output names to expose, each once (default: all of the ROM's)
     default_temperature_C : start value of ``T_initial`` and the ambient inputs
     step_s : the DefaultExperiment step size (any step works)
     fe_options : for ``engine="fe"``: dict(machine=name or TOML path, mesh_size_m=..., max_step_s=...)
@@ -161,9 +181,40 @@ def export_fmu(rom: ReducedModel, out: Path | str, kind: Literal["python", "nati
     Raises
     ------
     FMUError
-        An unknown kind or engine, a combination not offered, a name not ending in ``.fmu``, or a failed build
-        (compiler missing or failing).
+        An unknown kind or engine, a combination not offered, a name not ending in ``.fmu``, a failed build
+        (compiler missing or failing), or an FMU in which :func:`validate` finds a problem.
+    TwinInputError
+        ``outputs`` empty or naming an output twice.
     """
+    _check_options(kind, engine, step_s, default_temperature_C, fmi_version)
+    out = Path(out)
+    if out.suffix != ".fmu":
+        raise FMUError(f"{out}: the FMU file name must end in .fmu")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    rows = _output_rows(rom, outputs)
+    view = _subset(rom, rows)
+    variables = spec.interface(view, default_temperature_C)
+    partial = out.with_suffix(".fmu.partial")
+    try:
+        if kind == "python":
+            _export_python(rom, view, variables, partial, engine, step_s, fe_options or {})
+        elif int(fmi_version) == 3:
+            _export_native3(rom, view, variables, rows, partial, step_s, compiler)
+        else:
+            _export_native(rom, view, variables, rows, partial, step_s, compiler)
+        problems = validate(partial)
+        if problems:
+            raise FMUError(f"{out}: not written: the exported FMU has {len(problems)} problem(s): "
+                           + " | ".join(problems))
+    except BaseException:                 # an interrupted or refused export leaves no file that looks valid
+        partial.unlink(missing_ok=True)
+        raise
+    partial.replace(out)
+    return out
+
+
+def _check_options(kind, engine, step_s, default_temperature_C, fmi_version):
+    """Refuse an export option the FMU cannot be built or run with (FMUError, naming the option)."""
     if kind not in KINDS:
         raise FMUError(f"unknown FMU kind {kind!r}; kinds: {list(KINDS)}")
     if not 0.0 < step_s < np.inf:
@@ -180,18 +231,6 @@ def export_fmu(rom: ReducedModel, out: Path | str, kind: Literal["python", "nati
     if int(fmi_version) not in (2, 3) or (kind == "python" and int(fmi_version) != 2):
         raise FMUError(f"FMI version {fmi_version!r} is not available for the {kind} kind "
                        f"(python: 2; native: 2 or 3)")
-    out = Path(out)
-    if out.suffix != ".fmu":
-        raise FMUError(f"{out}: the FMU file name must end in .fmu")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    rows = _output_rows(rom, outputs)
-    view = _subset(rom, rows)
-    variables = spec.interface(view, default_temperature_C)
-    if kind == "python":
-        return _export_python(rom, view, variables, out, engine, step_s, fe_options or {})
-    if int(fmi_version) == 3:
-        return _export_native3(rom, view, variables, rows, out, step_s, compiler)
-    return _export_native(rom, view, variables, rows, out, step_s, compiler)
 
 
 # ----------------------------------------------------------------------------- model description
@@ -273,13 +312,14 @@ def _native_model_description(view, variables, guid, step_s):
     return _pretty(root)
 
 
-def _patch_python_description(xml_bytes, view, variables, step_s, guid):
-    """Declare units, ranges, InitialUnknowns and the default experiment in PythonFMU's description.
+def _patch_python_description(xml_bytes, view, variables, step_s, guid, engine):
+    """Declare units, ranges, InitialUnknowns, the default experiment and what ``engine`` runs in PythonFMU's
+    description.
 
     ``guid`` replaces PythonFMU's (a new uuid1 on every build) with one derived from the content.
     """
     root = fromstring(xml_bytes)
-    root.set("description", _description(view, "rom"))
+    root.set("description", _description(view, engine))
     root.set("guid", guid)
     by_name = {v.name: v for v in variables}
     mv = root.find("ModelVariables")
@@ -313,7 +353,8 @@ def _patch_python_description(xml_bytes, view, variables, step_s, guid):
 
 
 # ----------------------------------------------------------------------------- python kind
-def _export_python(rom, view, variables, out, engine, step_s, fe_options):
+def _export_python(rom, view, variables, partial, engine, step_s, fe_options):
+    """Build the Python FMU into the file ``partial``."""
     from pythonfmu.builder import FmuBuilder
 
     config = {"engine": engine, "description": _description(view, engine), "outputs": view.output_names,
@@ -340,17 +381,14 @@ def _export_python(rom, view, variables, out, engine, step_s, fe_options):
         # A stable GUID: the ROM, the kind, the slave's code and its configuration (not the build time).
         content = hashlib.sha256(script.read_bytes() + json.dumps(config, sort_keys=True).encode()).hexdigest()
         guid = spec.guid(view, f"python|{engine}|{content}")
-        with zipfile.ZipFile(built) as zin, zipfile.ZipFile(out.with_suffix(".fmu.partial"), "w",
-                                                           zipfile.ZIP_DEFLATED) as zout:
+        with zipfile.ZipFile(built) as zin, zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zout:
             for item in zin.infolist():
                 data = zin.read(item.filename)
                 if item.filename == "modelDescription.xml":
-                    data = _patch_python_description(data, view, variables, step_s, guid)
+                    data = _patch_python_description(data, view, variables, step_s, guid, engine)
                 zout.writestr(item.filename, data)
             if "documentation/index.html" not in zin.namelist():
                 zout.writestr("documentation/index.html", documentation_html(view, variables, engine))
-    out.with_suffix(".fmu.partial").replace(out)
-    return out
 
 
 # ----------------------------------------------------------------------------- native kind
@@ -443,23 +481,18 @@ def compile_native(source: Path | str, library: Path | str, compiler: str = "cc"
     return library
 
 
-def _zip_fmu(folder, out):
-    """Zip every file below ``folder`` (paths relative to it) into the FMU ``out``.
+def _zip_fmu(folder, partial):
+    """Zip every file below ``folder`` (paths relative to it) into ``partial`` (renamed by :func:`export_fmu`).
 
-    The archive is written as ``<out>.fmu.partial`` and renamed onto ``out``
-    only when complete, so an interrupted export never leaves a truncated FMU
-    that looks valid.  Files are added in sorted order, so the archive lists
-    them the same way on every run.
+    Files are added in sorted order, so the archive lists them the same way on every run.
     """
-    partial = out.with_suffix(".fmu.partial")
     with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as z:
         for f in sorted(folder.rglob("*")):
             if f.is_file():
                 z.write(f, f.relative_to(folder).as_posix())
-    partial.replace(out)
 
 
-def _export_native(rom, view, variables, rows, out, step_s, compiler):
+def _export_native(rom, view, variables, rows, partial, step_s, compiler):
     guid = spec.guid(view, "native")
     with tempfile.TemporaryDirectory(prefix="twin_fmu_native_") as tmp:
         tmp = Path(tmp)
@@ -472,8 +505,7 @@ def _export_native(rom, view, variables, rows, out, step_s, compiler):
             "Rebuild on another platform: <code>cc -shared -fPIC -O2 -I sources sources/" + C_FILE +
             " -o binaries/&lt;platform&gt;/" + NATIVE_IDENTIFIER + ".&lt;so|dll|dylib&gt; -lm</code>.")),
             encoding="utf-8")
-        _zip_fmu(tmp, out)
-    return out
+        _zip_fmu(tmp, partial)
 
 
 # ----------------------------------------------------------------------------- native kind, FMI 3.0
@@ -531,7 +563,7 @@ def _build_description3():
     return _pretty(root)
 
 
-def _export_native3(rom, view, variables, rows, out, step_s, compiler):
+def _export_native3(rom, view, variables, rows, partial, step_s, compiler):
     token = spec.guid(view, "native-fmi3")
     with tempfile.TemporaryDirectory(prefix="twin_fmu_native3_") as tmp:
         tmp = Path(tmp)
@@ -543,13 +575,12 @@ def _export_native3(rom, view, variables, rows, out, step_s, compiler):
         (tmp / "modelDescription.xml").write_bytes(_native_model_description3(view, variables, token, step_s))
         (tmp / "documentation").mkdir()
         (tmp / "documentation" / "index.html").write_text(documentation_html(view, variables, "rom"), encoding="utf-8")
-        _zip_fmu(tmp, out)
-    return out
+        _zip_fmu(tmp, partial)
 
 
 # ----------------------------------------------------------------------------- checks and runs
 def validate(path: Path | str) -> list[str]:
-    """Problems fmpy finds in the FMU (an empty list when it is valid).
+    """Problems fmpy finds in the FMU, else the parts it lacks to run here (:func:`missing_parts`); empty when valid.
 
     Parameters
     ----------
@@ -562,7 +593,54 @@ def validate(path: Path | str) -> list[str]:
     """
     from fmpy.validation import validate_fmu
 
-    return list(validate_fmu(str(path)))
+    problems = list(validate_fmu(str(path)))
+    return problems or missing_parts(path)
+
+
+def missing_parts(path: Path | str) -> list[str]:
+    """What a readable FMU needs to run on this platform and does not hold, one line each (empty when complete).
+
+    Its shared library for this platform (fmpy's ``binaries/<platform>/<modelIdentifier>.so`` …) and, for a
+    thermal-twin Python FMU, the slave, its interface and, for the ROM engine, the ROM data.
+
+    Parameters
+    ----------
+    path : Path or str
+        The FMU (its model description must read).
+
+    Returns
+    -------
+    list of str
+        ``"<member> is missing: <what it is>"``.
+    """
+    from fmpy import (
+        platform,
+        platform_tuple,
+        read_model_description,
+        sharedLibraryExtension,
+    )
+
+    md = read_model_description(str(path), validate=False)
+    folder = platform_tuple if md.fmiVersion.startswith("3") else platform
+    with zipfile.ZipFile(path) as z:
+        names = set(z.namelist())
+        rebuild = "; its sources/ can rebuild it" if any(n.startswith("sources/") for n in names) else ""
+        needed = {f"binaries/{folder}/{kind.modelIdentifier}{sharedLibraryExtension}":
+                  f"the shared library for this platform ({folder}){rebuild}"
+                  for kind in (md.coSimulation, md.modelExchange) if kind is not None}
+        if md.coSimulation is not None and md.coSimulation.modelIdentifier == PYTHON_IDENTIFIER:
+            needed.update(_python_resources(z, names))
+    return [f"{name} is missing: {what}" for name, what in needed.items() if name not in names]
+
+
+def _python_resources(z, names):
+    """Member → what it is, for the resources the Python slave of the open FMU archive ``z`` reads."""
+    needed = {"resources/slavemodule.txt": "PythonFMU's name of the slave module",
+              "resources/thermal_twin_slave.py": "the Python slave",
+              "resources/interface.json": "the slave's variables and engine"}
+    if "resources/interface.json" in names and json.loads(z.read("resources/interface.json"))["engine"] == "rom":
+        needed["resources/rom.npz"] = "the reduced model the slave runs"
+    return needed
 
 
 def input_table(rom: ReducedModel, scenario: Scenario | Path | str, times: ArrayLike | None = None) -> np.ndarray:
@@ -739,18 +817,36 @@ def simulate(path: Path | str, table: np.ndarray, T_initial: float = 20.0, stead
     outputs : sequence of str, optional
         Outputs recorded (default fmpy's: all).
     **kwargs
-        Passed to :func:`fmpy.simulate_fmu`.
+        Passed to :func:`fmpy.simulate_fmu` (by default its log goes to the error message only, with debug
+        logging on, as a Python FMU forwards its messages only then).
 
     Returns
     -------
     ndarray
         Structured: ``time`` (s) and one field per output (°C, µm, µε).
+
+    Raises
+    ------
+    FMUError
+        The FMU refused a call (a value out of its range, say), with the errors it logged.
     """
     from fmpy import simulate_fmu
+    from fmpy.fmi1 import FMICallException
 
+    errors = []
+
+    def keep_errors(*args):               # FMI 2 passes (env, instance, status, category, message), FMI 3 no instance
+        status, message = args[-3], args[-1]
+        if status >= 3:                   # Error, Fatal: what the error message needs
+            errors.append(" ".join(message.decode(errors="replace").split()))
+
+    kwargs = {"debug_logging": True, "logger": keep_errors, **kwargs}
     t = np.asarray(table["time"], float)
     t = np.unique(t[_start_index(t):])
     step = float(t[1] - t[0])
-    return simulate_fmu(str(path), start_time=float(t[0]), stop_time=float(t[-1]), output_interval=step,
-                        input=table, output=outputs, validate=True,
-                        start_values={"T_initial": T_initial, "steady_start": bool(steady_start)}, **kwargs)
+    try:
+        return simulate_fmu(str(path), start_time=float(t[0]), stop_time=float(t[-1]), output_interval=step,
+                            input=table, output=outputs, validate=True,
+                            start_values={"T_initial": T_initial, "steady_start": bool(steady_start)}, **kwargs)
+    except FMICallException as exc:
+        raise FMUError(f"{path}: {exc}" + (" The FMU logged: " + " | ".join(errors) if errors else "")) from None

@@ -69,11 +69,12 @@ DRIVERS = {"constant": 0, "spindle": 1, "feed_x": 2, "feed_y": 3, "feed_z": 4, "
 
 def _parameter_lines(variables, params, inputs, outputs):
     """Value references, starts and bounds of the parameters, and the first input and output references."""
-    factor = params["spindle_factor"]
+    factor, t_initial = params["spindle_factor"], params["T_initial"]
     return [
         f"#define VR_T_INITIAL {params['T_initial'].vr}", f"#define VR_STEADY_START {params['steady_start'].vr}",
         f"#define VR_INPUT0 {inputs[0].vr}", f"#define VR_OUTPUT0 {outputs[0].vr}",
-        f"#define T_INITIAL_START {params['T_initial'].start:.17g}",
+        f"#define T_INITIAL_START {t_initial.start:.17g}",
+        f"#define T_INITIAL_MIN {t_initial.min:.17g}", f"#define T_INITIAL_MAX {t_initial.max:.17g}",
         f"#define VR_SPINDLE_FACTOR {factor.vr}",
         f"#define SPINDLE_FACTOR_START {factor.start:.17g}",
         f"#define SPINDLE_FACTOR_MIN {factor.min:.17g}",

@@ -15,7 +15,7 @@ from .spec import FMUError
 
 
 class FMUStepError(FMUError):
-    """The FMU rejected a call (``fmi2Error``); ``messages`` holds what it logged.
+    """The FMU rejected a call (``fmi2Error``; a Python FMU's ``fmi2Fatal``); ``messages`` holds what it logged.
 
     Parameters
     ----------
@@ -44,7 +44,7 @@ class FMUSession:
     Raises
     ------
     FMUStepError
-        If the FMU refuses to leave initialisation (an input or parameter out of range).
+        If the FMU refuses a start value (an input or parameter out of range or not finite).
     """
 
     def __init__(self, path: Path | str, T_initial: float = 20.0, steady_start: bool = False,
@@ -82,12 +82,18 @@ class FMUSession:
                              instanceName="twin")
         self.fmu.instantiate(callbacks=callbacks, loggingOn=bool(logging_on))
         self.time = float(start_time)
+        try:
+            self._initialise({k: v for k, v in (("T_initial", T_initial), ("steady_start", steady_start))
+                              if k in self.vr}, inputs or {})
+        except FMUError:
+            self.close()
+            raise
+
+    def _initialise(self, parameters, inputs):
         self.fmu.setupExperiment(startTime=self.time)
-        self._set_values({k: v for k, v in (("T_initial", T_initial), ("steady_start", steady_start))
-                          if k in self.vr})
+        self._set_values(parameters)
         self.fmu.enterInitializationMode()
-        if inputs:
-            self.set(**inputs)
+        self._set_values(inputs)
         self._call(self.fmu.exitInitializationMode, "exitInitializationMode")
 
     # ---------------------------------------------------------------- values
@@ -96,12 +102,12 @@ class FMUSession:
             if name not in self.vr:
                 raise FMUError(f"the FMU has no variable {name!r}; inputs: {self.inputs}")
             if self.types[name] == "Boolean":
-                self.fmu.setBoolean([self.vr[name]], [bool(value)])
+                self._call(self.fmu.setBoolean, f"setting {name}", [self.vr[name]], [bool(value)])
             else:
-                self.fmu.setReal([self.vr[name]], [float(value)])
+                self._call(self.fmu.setReal, f"setting {name}", [self.vr[name]], [float(value)])
 
     def set(self, **inputs: float) -> None:
-        """Set input values by name (checked by the FMU at the next step).
+        """Set input values by name (the FMU checks each against its range as it is set).
 
         Parameters
         ----------
@@ -112,6 +118,8 @@ class FMUSession:
         ------
         FMUError
             For a name the FMU does not have.
+        FMUStepError
+            For a value the FMU refuses (not finite, out of range, a fixed parameter after initialisation).
         """
         self._set_values(inputs)
 

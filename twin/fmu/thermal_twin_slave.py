@@ -9,7 +9,14 @@ communication step (zero-order hold in reduced modal coordinates, any step
 size); ``fe`` rebuilds the full finite-element twin from the ``twin`` package
 of the importing Python (slow, for reference) and integrates it by backward
 Euler with the inputs held over the step.
+
+Refusals (a value out of range or not finite, a fixed parameter set after initialisation, a step that is
+not positive and finite or does not start at the FMU's time) raise :class:`Refused`: PythonFMU 0.7
+reports any exception as fmi2Fatal, the only failing status it lets a Python slave return besides a
+doStep's fmi2Discard — which it pairs with fmi2Terminated, so that masters end the run early without
+an error.  The instance is left as it was and stays usable (see :func:`_keeping_alive`).
 """
+import ctypes
 import json
 import math
 import os
@@ -17,6 +24,68 @@ import os
 import numpy as np
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
 from pythonfmu.enums import Fmi2Initial, Fmi2Status
+
+#: Values this far outside a bound, relative to the range, are rounding — fmpy's interpolation of a
+#: constant 12000 rpm gives 12000.000000000002 — and are taken as the bound.
+RANGE_TOLERANCE = 1e-9
+
+
+class Refused(Exception):
+    """A call the FMU refuses; the message names the variable and the value (logged first)."""
+
+
+def _exact(x):
+    """``x`` in as few digits as read back to it (15, else 17), as the native FMU prints it."""
+    text = f"{x:.15g}"
+    return text if float(text) == x else f"{x:.17g}"
+
+
+def _range_problem(name, x, lo, hi):
+    """What is wrong with value ``x`` of variable ``name`` (range [lo, hi], its unit); None if within rounding."""
+    if not math.isfinite(x):
+        return f"{name} = {_exact(x)} is not a finite number"
+    margin = RANGE_TOLERANCE * (hi - lo)
+    if not lo - margin <= x <= hi + margin:
+        return f"{name} = {_exact(x)} is outside [{_exact(lo)}, {_exact(hi)}]"
+    return None
+
+
+def _at_current_time(t, now, h):
+    """Whether a step of ``h`` s may start at ``t`` s when the FMU is at ``now`` s.
+
+    The slack is rounding in the master's own sum of steps: 1e-6 of the step, and 1e-12 of t for long runs.
+    """
+    return abs(t - now) <= 1e-6 * h + 1e-12 * abs(now)
+
+
+#: What PythonFMU 0.7 calls on a slave instance (any of them may raise).
+_ENTRY_POINTS = ("setup_experiment", "enter_initialization_mode", "exit_initialization_mode", "do_step",
+                 "terminate", "set_real", "set_integer", "set_boolean", "set_string", "get_real", "get_integer",
+                 "get_boolean", "get_string", "_get_fmu_state", "_set_fmu_state")
+
+
+def _keeping_alive(cls):
+    """``cls`` whose entry points, when they raise, give back the references PythonFMU 0.7 then drops.
+
+    Its exception handler releases the slave instance, its class and its log queue, yet keeps using them
+    and releases them again when the instance is freed: the next call, or the garbage collector, touched
+    freed memory (a segfault after two refused sets).  ``Py_IncRef`` restores the reference the C++ side
+    still counts on; a Python container holding them instead would be one owner too many for the
+    collector, which then frees them under it.
+    """
+    def guarded(method):
+        def call(self, *args, **kwargs):
+            try:
+                return method(self, *args, **kwargs)
+            except Exception:
+                for obj in (self, type(self), self.log_queue):
+                    ctypes.pythonapi.Py_IncRef(ctypes.py_object(obj))
+                raise
+        return call
+
+    for name in _ENTRY_POINTS:
+        setattr(cls, name, guarded(getattr(cls, name)))
+    return cls
 
 
 def _source_power(src, rpm, feed):
@@ -151,6 +220,7 @@ class _FeEngine(_Lags):
         self.T, self.w = np.array(state["T"]), np.array(state["w"])
 
 
+@_keeping_alive
 class ThermalTwin(Fmi2Slave):
     """Thermal twin of a machine tool: heat sources and ambients in, temperatures and TCP drift out."""
 
@@ -165,7 +235,7 @@ class ThermalTwin(Fmi2Slave):
         self.config = config
         self.engine = (_FeEngine if config["engine"] == "fe" else _RomEngine)(self.resources, config)
         self.values = {}
-        self.checks = []                 # (name, min, max) of the inputs
+        self.ranges = {}                 # name → (min, max) of the parameters and inputs that have one
         self.input_roles = {}
         self.output_vars = []
         causality = {"parameter": Fmi2Causality.parameter, "input": Fmi2Causality.input,
@@ -188,8 +258,8 @@ class ThermalTwin(Fmi2Slave):
             setter = (lambda value, n=name: self._set(n, value))
             cls = Boolean if v["type"] == "Boolean" else Real
             self.register_variable(cls(name, start=v["start"], getter=getter, setter=setter, **kw))
-            if v["causality"] == "input" or v["variability"] == "tunable":    # checked at each step
-                self.checks.append((name, v.get("min"), v.get("max")))
+            if v.get("min") is not None:
+                self.ranges[name] = (v["min"], v["max"])
             if v["causality"] == "input":
                 self.input_roles[v["role"]] = name
         self.parameters = {v["name"] for v in config["variables"]        # fixed: settable until initialised
@@ -198,13 +268,26 @@ class ThermalTwin(Fmi2Slave):
         self._cache = None
         self._phase = "instantiated"     # → initialization → step → terminated
         self._start_key = None
+        self._time = 0.0                 # s: where the next step starts
 
     # -------------------------------------------------------------- helpers
+    def _refuse(self, message):
+        """Log ``message`` as an error and raise :class:`Refused`: the call fails, the FMU is unchanged."""
+        self.log(message, Fmi2Status.error)
+        raise Refused(message)
+
     def _set(self, name, value):
+        """Set a parameter or input, refusing a fixed parameter after initialisation and a value out of range
+        (one within rounding of a bound is taken as the bound)."""
+        api = "fmi2SetBoolean" if isinstance(value, bool) else "fmi2SetReal"
         if name in self.parameters and self._phase not in ("instantiated", "initialization"):
-            self.log(f"{name} is a fixed parameter: it can only be set before initialisation ends",
-                     Fmi2Status.error)
-            raise ValueError(f"{name} cannot be set after initialisation")
+            self._refuse(f"{api}: {name} is a fixed parameter: it can only be set before initialisation ends")
+        if name in self.ranges:
+            lo, hi = self.ranges[name]
+            problem = _range_problem(name, float(value), lo, hi)
+            if problem:
+                self._refuse(f"{api}: {problem}")
+            value = min(max(float(value), lo), hi)
         self.values[name] = value
         self._cache = None
 
@@ -232,16 +315,6 @@ class ThermalTwin(Fmi2Slave):
                 factor if src["driver"] == "spindle" else 1.0)
         return u
 
-    def _bad_inputs(self):
-        bad = []
-        for name, lo, hi in self.checks:
-            x = float(self.values[name])
-            if not math.isfinite(x):
-                bad.append(f"{name} = {x} is not a finite number")
-            elif (lo is not None and x < lo) or (hi is not None and x > hi):
-                bad.append(f"{name} = {x:g} is outside [{lo:g}, {hi:g}]")
-        return bad
-
     def _outputs(self):
         if self._cache is None:
             if self._phase in ("instantiated", "initialization"):
@@ -253,32 +326,38 @@ class ThermalTwin(Fmi2Slave):
         state = {name: self.values[name] for name in self.values}
         state["__engine__"] = self.engine.get_state()
         state["__phase__"] = self._phase
+        state["__time__"] = self._time
         return state
 
     def _set_fmu_state(self, state):
         state = dict(state)
         self.engine.set_state(state.pop("__engine__"))
         self._phase = state.pop("__phase__")
+        self._time = state.pop("__time__")
         self.values.update(state)
         self._cache = None
 
     # -------------------------------------------------------------- FMI
-    def exit_initialization_mode(self) -> bool:
-        """fmi2ExitInitializationMode: check the inputs, set the start state (uniform or steady).
+    def setup_experiment(self, start_time: float, stop_time: "float | None" = None,
+                         tolerance: "float | None" = None) -> None:
+        """fmi2SetupExperiment: the first step starts at ``start_time``.
 
-        Returns
-        -------
-        bool
-            False (fmi2Error, logged) if an input is out of range.
+        Parameters
+        ----------
+        start_time : float
+            s.
+        stop_time : float or None
+            s (unused: any stop time works).
+        tolerance : float or None
+            Unused: each step is exact for inputs held over it.
         """
-        bad = self._bad_inputs()
-        if bad:
-            self.log("initial inputs out of range: " + "; ".join(bad), Fmi2Status.error)
-            return False
+        self._time = float(start_time)
+
+    def exit_initialization_mode(self) -> None:
+        """fmi2ExitInitializationMode: set the start state (uniform or steady); each value was checked when set."""
         self._start()
         self._phase = "step"
         self._cache = None
-        return True
 
     def enter_initialization_mode(self) -> None:
         """fmi2EnterInitializationMode: parameters and inputs may now be set for the start."""
@@ -294,27 +373,26 @@ class ThermalTwin(Fmi2Slave):
         Parameters
         ----------
         current_time : float
-            Time at the start of the step, s.
+            Time at the start of the step, s: the FMU's time (where the last step ended, or that of a
+            restored FMU state).
         step_size : float
-            Step, s (> 0).
+            Step, s (positive and finite).
 
         Returns
         -------
         bool
-            False (fmi2Error, logged) before initialisation, for an input out of range or a step ≤ 0.
+            True; a refused step (before initialisation or after termination, a step size that is not positive
+            and finite, a ``current_time`` that is not the FMU's) raises :class:`Refused`, logged.
         """
+        when = f"fmi2DoStep at t = {_exact(current_time)} s"
         if self._phase != "step":
-            self.log(f"doStep at t = {current_time:g} s: the FMU is {self._phase}, not initialised for stepping",
-                     Fmi2Status.error)
-            return False
-        bad = self._bad_inputs()
-        if bad:
-            self.log(f"doStep at t = {current_time:g} s rejected: " + "; ".join(bad), Fmi2Status.error)
-            return False
-        if not step_size > 0:
-            self.log(f"doStep at t = {current_time:g} s: step size {step_size!r} must be positive",
-                     Fmi2Status.error)
-            return False
+            self._refuse(f"{when}: the FMU is {self._phase}, not initialised for stepping")
+        if not (step_size > 0 and math.isfinite(step_size)):
+            self._refuse(f"{when}: step size {_exact(step_size)} must be positive and finite")
+        if not _at_current_time(current_time, self._time, step_size):
+            self._refuse(f"{when}: the FMU is at t = {_exact(self._time)} s; a step starts where the last one "
+                         "ended (or at the time of a state restored with SetFMUstate)")
         self.engine.step(self._u(), float(step_size))
+        self._time = current_time + step_size
         self._cache = None
         return True

@@ -1,7 +1,7 @@
 /* Thermal twin ROM: FMI 3.0 Co-Simulation API (thermal-twin; machine-independent, shipped with the package).
  *
  * Same model and step as the FMI 2.0 source: reduced modal coordinates z, exact
- * zero-order hold for any communication step, inputs checked at fmi3DoStep.
+ * zero-order hold for any communication step, inputs checked when they are set.
  * In the FMU this file is sources/thermal_twin_rom.c; it includes model.c (the shared model core)
  * and the generated model_data.h.
  * Build: cc -shared -fPIC -O2 -I. thermal_twin_rom.c -o <modelIdentifier>.so -lm
@@ -105,7 +105,9 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
 
 fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {
     Instance *inst = (Instance *)instance;
-    return inst && exit_initialization(inst, "fmi3ExitInitializationMode") ? fmi3OK : fmi3Error;
+    if (!inst) return fmi3Error;
+    exit_initialization(inst);
+    return fmi3OK;
 }
 
 fmi3Status fmi3EnterStepMode(fmi3Instance instance) { return instance ? fmi3OK : fmi3Error; }
@@ -227,7 +229,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     if (earlyReturn) *earlyReturn = fmi3False;
     ok = do_step(inst, "fmi3DoStep", currentCommunicationPoint, communicationStepSize);
     if (lastSuccessfulTime) *lastSuccessfulTime = inst->time;
-    return ok == STEP_OK ? fmi3OK : ok == STEP_DISCARD ? fmi3Discard : fmi3Error;
+    return ok ? fmi3OK : fmi3Error;
 }
 
 #include "fmi3_unsupported.c"

@@ -109,20 +109,35 @@ static void compute_outputs(Instance *inst) {
     inst->y_valid = 1;
 }
 
-static int check_inputs(Instance *inst, const char *when) {
-    int i, ok = 1;
-    for (i = 0; i < N_FMU_INPUTS; i++) {
-        double x = inst->in[i];
-        if (!isfinite(x)) {
-            log_error(inst, "%s: input %s = %f is not a finite number", when, INPUT_NAME[i], x);
-            ok = 0;
-        } else if (x < INPUT_MIN[i] || x > INPUT_MAX[i]) {
-            log_error(inst, "%s: input %s = %g is outside [%g, %g]", when, INPUT_NAME[i], x, INPUT_MIN[i],
-                      INPUT_MAX[i]);
-            ok = 0;
-        }
+/* ``x`` in as few digits as read back to the same double (15, else 17): a message must not say
+   "12000 is outside [0, 12000]" of 12000.000000000002. */
+static const char *exact(char buf[32], double x) {
+    snprintf(buf, 32, "%.15g", x);
+    if (strtod(buf, NULL) != x) snprintf(buf, 32, "%.17g", x);
+    return buf;
+}
+
+/* Values this far outside a bound, relative to the range, are rounding — fmpy's interpolation of a
+   constant 12000 rpm gives 12000.000000000002 — and are taken as the bound. */
+#define RANGE_TOLERANCE 1e-9
+
+/* Whether ``*x`` may be given to ``name`` (range [lo, hi]): 1, with *x clipped onto the range when it is
+   outside by rounding only; 0 (logged, naming the variable and the value) for a non-finite value or one
+   outside the range. */
+static int accept_value(const Instance *inst, const char *api, const char *name, double *x, double lo,
+                        double hi) {
+    char v[32], a[32], b[32];
+    double margin = RANGE_TOLERANCE * (hi - lo);
+    if (!isfinite(*x)) {
+        log_error(inst, "%s: %s = %s is not a finite number", api, name, exact(v, *x));
+        return 0;
     }
-    return ok;
+    if (*x < lo - margin || *x > hi + margin) {
+        log_error(inst, "%s: %s = %s is outside [%s, %s]", api, name, exact(v, *x), exact(a, lo), exact(b, hi));
+        return 0;
+    }
+    *x = *x < lo ? lo : (*x > hi ? hi : *x);
+    return 1;
 }
 
 static void start_state(Instance *inst) {
@@ -181,40 +196,43 @@ static int parameters_settable(const Instance *inst) {
     return inst->phase == ST_INSTANTIATED || inst->phase == ST_INIT;
 }
 
-/* End of initialisation: check inputs and T_initial, set the start state; 0 (logged) on failure. */
-static int exit_initialization(Instance *inst, const char *when) {
-    if (!check_inputs(inst, when)) return 0;
-    if (!isfinite(inst->t_initial)) {
-        log_error(inst, "T_initial is not a finite number");
-        return 0;
-    }
+/* End of initialisation: set the start state (every value was checked when it was set). */
+static void exit_initialization(Instance *inst) {
     start_state(inst);
     inst->phase = ST_STEP;
-    return 1;
 }
 
-/* A communication step of h from t (``api``: the calling function, for messages).  Returns STEP_OK, or
-   (logged) STEP_DISCARD for a recoverable refusal — a non-finite or out-of-range input: the state is
-   unchanged and the master may set valid inputs and step again — or STEP_ERROR for a misuse. */
-enum { STEP_ERROR = 0, STEP_OK = 1, STEP_DISCARD = 2 };
+/* Whether a step may start at t: the FMU's time (the start time plus the steps made, or that of a
+   restored FMU state).  The slack is rounding in the master's own sum of steps: 1e-6 of the step, and
+   1e-12 of t for long runs. */
+static int at_current_time(const Instance *inst, double t, double h) {
+    return fabs(t - inst->time) <= 1e-6 * h + 1e-12 * fabs(inst->time);
+}
 
+/* A communication step of h from t (``api``: the calling function, for messages); 1 done, 0 (logged)
+   refused — before initialisation or after termination, a step that is not positive and finite, or a t
+   that is not the FMU's time.  The inputs need no check here: each was checked when it was set. */
 static int do_step(Instance *inst, const char *api, double t, double h) {
-    char when[96];
+    char when[96], a[32], b[32];
     double previous = inst->h;
-    snprintf(when, sizeof when, "%s at t = %g s", api, t);
+    snprintf(when, sizeof when, "%s at t = %s s", api, exact(a, t));
     if (inst->phase != ST_STEP) {
         log_error(inst, "%s: the FMU is not initialised", when);
-        return STEP_ERROR;
+        return 0;
     }
     if (!(h > 0.0) || !isfinite(h)) {
-        log_error(inst, "%s: step size %g must be positive and finite", when, h);
-        return STEP_ERROR;
+        log_error(inst, "%s: step size %s must be positive and finite", when, exact(a, h));
+        return 0;
     }
-    if (!check_inputs(inst, when)) return STEP_DISCARD;
+    if (!at_current_time(inst, t, h)) {
+        log_error(inst, "%s: the FMU is at t = %s s; a step starts where the last one ended (or at the time of "
+                  "a state restored with SetFMUstate)", when, exact(b, inst->time));
+        return 0;
+    }
     if (zoh_step(inst, h))   /* exact ZOH coefficients for this step size */
         log_info(inst, "%s: step size changed from %g s to %g s; ZOH coefficients recomputed", when, previous, h);
     inst->time = t + h;
-    return STEP_OK;
+    return 1;
 }
 
 /* Real (Float64) variables by value reference; 0 (logged) on failure. */
@@ -237,22 +255,25 @@ static int get_real(Instance *inst, unsigned r, double *value, const char *api, 
     return 1;
 }
 
+/* Set a Real (Float64) variable by value reference; 0 (logged) when refused: a fixed parameter after
+   initialisation, or a value ``accept_value`` refuses (the variable keeps its value). */
 static int set_real(Instance *inst, unsigned r, double value, const char *api, const char *type) {
     if (r == VR_T_INITIAL) {
         if (!parameters_settable(inst)) {
-            log_error(inst, "T_initial can only be set before initialisation ends");
+            log_error(inst, "%s: T_initial is a fixed parameter: it can only be set before initialisation ends",
+                      api);
             return 0;
         }
+        if (!accept_value(inst, api, "T_initial", &value, T_INITIAL_MIN, T_INITIAL_MAX)) return 0;
         inst->t_initial = value;
     } else if (r == VR_SPINDLE_FACTOR) {   /* tunable: any time, within its range */
-        if (!(value >= SPINDLE_FACTOR_MIN && value <= SPINDLE_FACTOR_MAX)) {
-            log_error(inst, "spindle_power_factor = %g is outside [%g, %g]", value, SPINDLE_FACTOR_MIN,
-                      SPINDLE_FACTOR_MAX);
+        if (!accept_value(inst, api, "spindle_power_factor", &value, SPINDLE_FACTOR_MIN, SPINDLE_FACTOR_MAX))
             return 0;
-        }
         inst->spindle_factor = value;
     } else if (r >= VR_INPUT0 && r < VR_INPUT0 + N_FMU_INPUTS) {
-        inst->in[r - VR_INPUT0] = value;   /* checked at the next doStep */
+        unsigned i = r - VR_INPUT0;
+        if (!accept_value(inst, api, INPUT_NAME[i], &value, INPUT_MIN[i], INPUT_MAX[i])) return 0;
+        inst->in[i] = value;
     } else {
         log_error(inst, "%s: value reference %u is not a settable %s", api, r, type);
         return 0;
