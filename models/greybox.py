@@ -49,6 +49,7 @@ exponent and the gains.
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Sequence
 from itertools import pairwise
 
@@ -63,7 +64,7 @@ from ._threads import one_blas_thread
 from ._validation import check_n_features, check_positive_int, require_parameters
 from .kalman import KalmanFilter, discretize
 from .registry import register_model
-from .speed import running
+from .speed import STANDSTILL_FRACTION, STANDSTILL_RPM, running
 
 #: relative tolerance under which the steps count as uniform (then a fast recursive filter is used)
 _UNIFORM_STEP = 1e-9
@@ -74,6 +75,12 @@ _MIN_RATIO = 2.0
 _DISTINCT_SPEEDS = 1.05
 #: start values of the time constants, s (machine-tool structures: minutes to hours); one fit per row
 _STARTS = ((1800.0, 7200.0, 21600.0, 64800.0), (600.0, 3600.0, 14400.0, 57600.0), (3600.0, 21600.0, 86400.0, 345600.0))
+#: the learned arrays a prediction reads, and their shapes: p poles, m = 1 + q inputs (the heat, then q temperatures),
+#: o outputs (y, then the observed thermometers)
+_LEARNED_SHAPES = {"time_constants_": "p", "poles_": "p", "gains_": "opm", "feedthrough_": "oq", "offset_": "o",
+                   "output_std_": "o", "input_std_": "m"}
+#: a pole may differ from −1/τ by this relative rounding: both are stored from one fit, one the reciprocal of the other
+_POLE_ROUNDING = 1e-9
 
 
 #: the largest decay exponent λ·Δt inside one closed-form stretch of :func:`_uneven_lag` (e^300 ≈ 2e130 stays
@@ -123,6 +130,26 @@ def _uneven_lag(time, rate, U, start):
         out[first + 1: stop] = (out[first] + np.cumsum(gain * U[first: stop - 1] * grow, axis=0)) / grow
         first = stop - 1
     return out
+
+
+def _check_learned_array(name, value, shape, because):
+    """Raise a ValueError unless the learned attribute ``name`` is a finite numeric array of ``shape``, which
+    ``because`` (the settings that make it) explains."""
+    if not isinstance(value, np.ndarray) or not np.issubdtype(value.dtype, np.number):
+        raise ValueError(f"GreyBoxRegressor: learned attribute {name!r} is {_shown(value)}, expected an array of "
+                         "numbers.")
+    if value.shape != shape:
+        raise ValueError(f"GreyBoxRegressor: learned attribute {name!r} has shape {value.shape}, but {because} make "
+                         f"it {shape}.")
+    if not np.all(np.isfinite(value)):
+        raise ValueError(f"GreyBoxRegressor: learned attribute {name!r} is {_shown(value.tolist())}, expected "
+                         "finite numbers.")
+
+
+def _shown(value, limit=120):
+    """``repr(value)``, cut to ``limit`` characters for a message."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 1] + "…"
 
 
 def _pair(value, name):
@@ -189,7 +216,8 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         Fit b within ``exponent_bounds``; only where the rows fitted (weight > 0) run
         (:func:`models.speed.running`) at two speeds at least :data:`_DISTINCT_SPEEDS` apart: at one speed b
         only scales the gains and cannot be identified (a free fit runs it to a bound, and the model
-        extrapolates to other speeds by an arbitrary n^b), so it stays at ``exponent``.
+        extrapolates to other speeds by an arbitrary n^b), so it stays at ``exponent``. A fit whose rows never
+        run is refused: the spindle's heat cannot be identified there.
     exponent_bounds : (float, float)
     time_constant_bounds : (float, float), s
         Every time constant stays inside; the poles are −1/τ.
@@ -429,6 +457,19 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
             raise ValueError("GreyBoxRegressor: sample_weight must be finite, >= 0 and one per row of X.")
         return X, y, w
 
+    def _fits_exponent(self, speed, used):
+        """Whether b is fitted: the fitted rows (``used``) run at two distinct speeds (rpm); a ValueError where
+        they never run (:func:`models.speed.running`), as a spindle's heat seen nowhere cannot be identified: its
+        gain and b would be fitted to the noise of a tachometer at rest and extrapolate to any real speed."""
+        speeds = speed[used & running(speed)]   # a measured standstill reads a few rpm: not a second speed
+        if not speeds.size:
+            column = self._layout()[1]
+            raise ValueError(f"GreyBoxRegressor: the spindle never runs on the rows fitted (spindle speed, column "
+                             f"{column}, at most {speed[used].max():g} rpm; it runs above {STANDSTILL_RPM:g} rpm and "
+                             f"{STANDSTILL_FRACTION:.0%} of the top speed), so the heat of the spindle cannot be "
+                             "identified: fit on rows where it runs.")
+        return bool(self.fit_exponent and speeds.max() >= _DISTINCT_SPEEDS * speeds.min())
+
     def _least_squares(self, residuals, n_poles, log_bounds, fit_exponent):
         """The best of the deterministic restarts (:data:`_STARTS`) of the bounded fit in (stick fractions, b)."""
         if n_poles > 1 and log_bounds[1] - log_bounds[0] <= (n_poles - 1) * np.log(_MIN_RATIO):
@@ -493,8 +534,7 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         outputs = np.where(present, outputs, 0.0)
         used = w > 0
         W = w[:, None] * present
-        speeds = speed[used & running(speed)]   # a measured standstill reads a few rpm: not a second speed
-        fit_exponent = bool(self.fit_exponent and speeds.size and speeds.max() >= _DISTINCT_SPEEDS * speeds.min())
+        fit_exponent = self._fits_exponent(speed, used)
 
         every_reading = bool(present[used].all())
         scale = outputs[used].std(axis=0) if every_reading else np.array(
@@ -542,7 +582,58 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         self.n_iterations_ = int(best.nfev)
         return self
 
+    def check_fitted(self) -> None:
+        """Raise a ValueError naming a learned attribute that no fit gives, as a model file edited by hand may hold.
+
+        Cheap (no data): :meth:`predict` runs it, and :func:`models.persistence.load_model` on every model it
+        reads. It checks that every learned attribute a prediction reads is there, its type, its shape
+        (``n_poles``, ``n_features_in_``, ``temperature_inputs`` and ``observed`` make it) and finite values,
+        and the physics of the fit: time constants > 0 s, poles ``−1/τ`` < 0 (1/s, a stable lag), and
+        ``exponent_`` > 0 (with b ≤ 0 a spindle at rest would heat as much as a running one, or without bound).
+        A model without any learned attribute (not fitted) passes.
+
+        Raises
+        ------
+        ValueError
+            Naming the attribute (or setting) and its value.
+        """
+        names = (*_LEARNED_SHAPES, "exponent_", "n_features_in_")
+        if not any(hasattr(self, name) for name in names):
+            return
+        missing = [name for name in names if not hasattr(self, name)]
+        if missing:
+            raise ValueError(f"GreyBoxRegressor: learned attribute {missing[0]!r} is missing; a fitted model has "
+                             f"{', '.join(names)}.")
+        n_poles, _ = self._checked_settings()
+        if isinstance(self.n_features_in_, bool) or not isinstance(self.n_features_in_, numbers.Integral):
+            raise ValueError(f"GreyBoxRegressor: learned attribute 'n_features_in_' is {self.n_features_in_!r}, "
+                             "expected a whole number of columns.")
+        inputs, observed = self._columns(self.n_features_in_)
+        sizes = {"p": n_poles, "m": 1 + len(inputs), "q": len(inputs), "o": 1 + len(observed)}
+        for name, dims in _LEARNED_SHAPES.items():
+            _check_learned_array(name, getattr(self, name), tuple(sizes[d] for d in dims),
+                                 f"n_poles = {n_poles}, n_features_in_ = {self.n_features_in_} and observed = "
+                                 f"{tuple(observed)}")
+        self._check_fitted_physics()
+
+    def _check_fitted_physics(self):
+        """Raise a ValueError for a time constant ≤ 0 s, a pole that is not ``−1/τ`` < 0, or a b ≤ 0."""
+        tau, poles, b = self.time_constants_, self.poles_, self.exponent_
+        if np.any(tau <= 0):
+            raise ValueError(f"GreyBoxRegressor: learned attribute 'time_constants_' is {tau.tolist()} s; a time "
+                             "constant must be > 0 s.")
+        if np.any(poles >= 0):
+            raise ValueError(f"GreyBoxRegressor: learned attribute 'poles_' is {poles.tolist()} 1/s; a pole >= 0 is "
+                             "an unstable lag, and a fitted model's poles are -1/tau < 0.")
+        if not np.allclose(poles, -1.0 / tau, rtol=_POLE_ROUNDING, atol=0.0):
+            raise ValueError(f"GreyBoxRegressor: learned attribute 'poles_' is {poles.tolist()} 1/s, but "
+                             f"time_constants_ {tau.tolist()} s make them {(-1.0 / tau).tolist()} (-1/tau).")
+        if isinstance(b, bool) or not isinstance(b, numbers.Real) or not 0 < b < np.inf:
+            raise ValueError(f"GreyBoxRegressor: learned attribute 'exponent_' is {b!r}, expected a finite number "
+                             "> 0 (the b of P ~ n^b).")
+
     def _fitted_inputs(self, X, allow_nan_observed=False):
+        self.check_fitted()   # first: a model missing some learned attributes is named, not called unfitted
         check_is_fitted(self, "time_constants_")
         X = check_array(X, dtype=np.float64, ensure_all_finite=False, ensure_min_samples=2)
         check_n_features(self, X)

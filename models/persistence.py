@@ -12,8 +12,11 @@ floats written by ``repr`` (shortest round-trip form), so a loaded model
 reproduces predictions bit for bit. Tuples, dicts and nested estimators
 (e.g. the ANFIS inside AGO-ANFIS) have their own tagged forms. The classes a file may name are those
 of :mod:`models.registry`. Loading checks
-the format, version and class first and raises ``ValueError`` naming the
-file, the field and the offending value.
+the format, version and class first, then every value (an array's
+``shape`` against its ``data``, the hyperparameters against the class) and,
+for an estimator that has one (the grey-box model), its ``check_fitted``
+(the learned attributes a fit can give), and raises ``ValueError`` naming
+the file, the field and the offending value.
 """
 
 from __future__ import annotations
@@ -69,7 +72,33 @@ def _decode(value, path):
         return {k: _decode(v, path) for k, v in value["__dict__"].items()}
     if "__estimator__" in value:
         return _build(value["__estimator__"], path)
-    raise ValueError(f"{path}: unknown tagged value {sorted(value)!r}.")
+    raise ValueError(f"unknown tagged value {sorted(value)!r}")
+
+
+def _decoded_field(value, path, field):
+    """``_decode(value)``, or a ValueError naming the file, the field and its value (an array whose ``data`` do
+    not fill its ``shape``, an unknown ``dtype``, a tag without its parts)."""
+    try:
+        return _decode(value, path)
+    except (KeyError, TypeError, ValueError) as exc:
+        if str(exc).startswith(f"{path}: "):   # a nested estimator's own message names its field already
+            raise
+        raise ValueError(f"{path}: field {field!r} has value {_shown(value)}, which is not a stored value: "
+                         f"{exc}.") from None
+
+
+def _shown(value, limit=160):
+    """The JSON of a value, cut to ``limit`` characters for a message."""
+    text = json.dumps(value)
+    return text if len(text) <= limit else text[: limit - 1] + "…"
+
+
+def _section(document, name, path):
+    """The ``params`` or ``learned`` object of a document ({} when absent), or a ValueError if it is no object."""
+    section = document.get(name, {})
+    if not isinstance(section, dict):
+        raise ValueError(f"{path}: field {name!r} has value {_shown(section)}, expected an object.")
+    return section
 
 
 def _model_document(estimator) -> dict:
@@ -103,10 +132,32 @@ def _build(document, path):
             f"{path}: field 'class' has value {cls_name!r}, which is not a known estimator "
             f"({', '.join(sorted(known))})."
         )
-    params = {name: _decode(value, path) for name, value in document.get("params", {}).items()}
+    params = {name: _decoded_field(value, path, f"params.{name}")
+              for name, value in _section(document, "params", path).items()}
+    unknown = sorted(set(params) - set(known[cls_name]().get_params(deep=False)))
+    if unknown:
+        raise ValueError(f"{path}: field 'params.{unknown[0]}' has value {_shown(document['params'][unknown[0]])}, "
+                         f"but {cls_name} has no parameter {unknown[0]!r}.")
     estimator = known[cls_name](**params)
-    for name, value in document.get("learned", {}).items():
-        setattr(estimator, name, _decode(value, path))
+    learned = _section(document, "learned", path)
+    # only the names _model_document writes: any other would set a private or a method of the estimator
+    for name in learned:
+        if not name.endswith("_") or name.startswith("_"):
+            raise ValueError(f"{path}: field 'learned' has an entry {name!r}; learned attributes end in '_' and "
+                             "do not start with it.")
+    for name, value in learned.items():
+        setattr(estimator, name, _decoded_field(value, path, f"learned.{name}"))
+    return _checked_fit(estimator, path)
+
+
+def _checked_fit(estimator, path):
+    """``estimator``, after its own ``check_fitted`` where it has one (a ValueError then names the file)."""
+    check = getattr(estimator, "check_fitted", None)
+    if check is not None:
+        try:
+            check()
+        except ValueError as exc:
+            raise ValueError(f"{path}: {exc}") from None
     return estimator
 
 

@@ -99,8 +99,9 @@ def regime_blocks(speed: ArrayLike, min_rows: int = 2, tolerance: float = SPEED_
     standstill at a new speed, or a speed step while running. A run that
     restarts at the last speed continues the block, and so does a speed
     still moving after a step (a ramp; the block starts at its first row).
-    Speeds below :data:`~models.speed.STANDSTILL_FRACTION` of the top speed
-    are standstill (:func:`models.speed.running`), so a measured speed's
+    Speeds below :data:`~models.speed.STANDSTILL_FRACTION` of the top speed,
+    or below :data:`~models.speed.STANDSTILL_RPM`, are standstill
+    (:func:`models.speed.running`), so a measured speed's
     noise is no regime. The block ends where the next one starts.
     Blocks shorter than ``min_rows`` are merged into the previous one.
 

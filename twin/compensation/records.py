@@ -7,7 +7,8 @@ files that continue one another (:func:`joined_when_contiguous`,
 :func:`continued_record`), or starting later than the history they continue
 (:func:`bridge_times`, :func:`linear_bridge`); a model that takes a record's
 first row as rest needs it to start with the spindle stopped
-(:func:`check_starts_at_rest`).
+(:func:`check_starts_at_rest`), which a twin record whose duty cycle starts at
+t = 0 gets as an added first row (:func:`with_rest_start`).
 """
 from __future__ import annotations
 
@@ -325,9 +326,52 @@ def repeats(first: Dataset, later: Dataset, names: Sequence[str]) -> bool:
         first.matrix(list(names))[at], later.matrix(list(names))[inside], equal_nan=True))
 
 
+def with_rest_start(dataset: Dataset, names: Sequence[str] | None = None) -> Dataset:
+    """The record with the state it started from as a first row, when the record says the machine stood in
+    other operating conditions before its first row (a twin record whose spindle starts at t = 0).
+
+    A twin run starts from a state the machine reached standing idle
+    (``metadata["before_start"]``, :func:`twin.core.simulate.before_start`),
+    while its first row already holds the duty cycle's first speed. The added
+    row, one sampling interval before the first, holds those earlier
+    conditions (spindle, feeds, powers) and every other channel as read at
+    the first row, which is the state then: a model that takes a record's
+    first row as rest (the zero reference, the grey-box model's equilibrium)
+    then starts from rest, and the first row's speed is held from the first
+    row on, as the twin ran it. A measured record has no such metadata and is
+    returned as it is, as is a twin record whose conditions do not change at
+    its start in the channels a model reads.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        A record.
+    names : sequence of str, optional
+        The channels a model reads (default: every channel): a model that reads none of those that change
+        at the start (a model on temperatures) gets the record as it is.
+
+    Returns
+    -------
+    Dataset
+        ``dataset``, or a copy with the rest row first (``metadata["rest_row_s"]``: its time, s; no
+        ``before_start`` any more, so a second call adds nothing).
+    """
+    before = {name: value for name, value in dataset.metadata.get("before_start", {}).items() if name in dataset}
+    read = before if names is None else [name for name in before if name in names]
+    if len(dataset) < 2 or all(dataset[name][0] == before[name] for name in read):
+        return dataset
+    rest = dataset.values[0].copy()
+    for name, value in before.items():
+        rest[dataset.index(name)] = value
+    t_rest = 2.0 * dataset.time_s[0] - dataset.time_s[1]
+    metadata = {k: v for k, v in dataset.metadata.items() if k != "before_start"} | {"rest_row_s": float(t_rest)}
+    return Dataset(np.r_[t_rest, dataset.time_s], np.vstack([rest, dataset.values]), list(dataset.channels),
+                   metadata)
+
+
 def starts_running(dataset: Dataset, speed: str) -> bool:
     """Whether the spindle runs at the record's first row (:func:`models.speed.running`: above 5 % of its top
-    speed, as a measured standstill reads a few rpm).
+    speed and above :data:`models.speed.STANDSTILL_RPM`, as a measured standstill reads a few rpm).
 
     Parameters
     ----------

@@ -26,7 +26,11 @@ On disk (``.json``, no pickle)::
     {"format": "thermal-twin-compensation-model", "version": 1,
      "model_name": "anfis", "inputs": [...], "input_units": [...], "target": "Z", "target_unit": "um",
      "preprocessing": {...}, "sampling_interval_s": ..., "training": [...], "project_version": ...,
-     "estimator": <models.persistence document>}
+     "estimator": <models.persistence document>,
+     "field_sha256": {<field>: <SHA-256 of its canonical JSON>, ...}}
+
+``field_sha256`` (:mod:`twin.compensation.integrity`) lets :meth:`CompensationModel.load` refuse a
+file edited after it was saved, naming the field.
 """
 from __future__ import annotations
 
@@ -41,9 +45,10 @@ from numpy.typing import ArrayLike, NDArray
 from models.persistence import model_from_document, model_to_document
 from models.registry import model_traits, registered_models
 
-from ..core.dataset import UNITS, Dataset, finite_or_none, json_default, name_listing, project_version
+from ..core.dataset import UNITS, Dataset, finite_or_none, name_listing, project_version
 from ..core.files import write_text_atomic
 from ..errors import TwinInputError
+from .integrity import check_sealed, sealed
 from .records import (
     check_complete,
     check_starts_at_rest,
@@ -439,7 +444,8 @@ class CompensationModel:
         }
 
     def save(self, path: Path | str) -> Path:
-        """Write the model as JSON (atomically); returns the path.
+        """Write the model as JSON (atomically), with the digest of each field
+        (:func:`twin.compensation.integrity.sealed`); returns the path.
 
         Parameters
         ----------
@@ -453,11 +459,12 @@ class CompensationModel:
         """
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        return write_text_atomic(path, json.dumps(self.to_document(), indent=1, default=json_default))
+        return write_text_atomic(path, json.dumps(sealed(self.to_document()), indent=1))
 
     @classmethod
     def load(cls, path: Path | str) -> CompensationModel:
-        """Read a model written by :meth:`save`; a wrong format or version is a clear error.
+        """Read a model written by :meth:`save`; a wrong format or version, or a field changed since it was saved
+        (:func:`twin.compensation.integrity.check_sealed`), is a clear error.
 
         Parameters
         ----------
@@ -471,7 +478,8 @@ class CompensationModel:
         Raises
         ------
         TwinInputError
-            Missing file, not JSON, wrong format or version, missing fields, or a bad estimator document.
+            Missing file, not JSON, wrong format or version, missing fields, a bad estimator document, or a
+            field whose digest does not match.
         """
         path = Path(path)
         doc = _read_document(path)
@@ -479,6 +487,7 @@ class CompensationModel:
             estimator = model_from_document(doc["estimator"], f"{path} [estimator]")
         except ValueError as exc:
             raise TwinInputError(str(exc)) from None
+        check_sealed(doc, path)
         return cls(estimator, doc["model_name"], list(doc["inputs"]), doc["target"], list(doc["input_units"]),
                    doc["target_unit"], dict(doc.get("preprocessing") or {}), list(doc.get("training") or []),
                    doc.get("sampling_interval_s"), dict(doc.get("metadata") or {}))

@@ -34,7 +34,7 @@ from ..errors import TwinInputError
 from ..infra.cli_common import check_distinct
 from ..infra.outdir import check_output_folder
 from ..infra.sweep import run_tasks
-from .records import dataset_label
+from .records import dataset_label, with_rest_start
 from .store import fit_compensation_model, make_estimator
 from .study_report import (
     StudyResult,
@@ -289,8 +289,9 @@ def _transfer(data, axis, model, inputs, k, select_method, params, log):
     for i, (train_fam, train_ds) in enumerate(data.items()):
         ins = list(inputs) if inputs else _chosen_inputs([train_ds], axis, k, select_method, f"on {train_fam}", log)
         used[(train_fam, axis)] = ins
-        cm = fit_compensation_model([train_ds], ins, axis, model, params)
+        cm = fit_compensation_model([with_rest_start(train_ds, [*ins, axis])], ins, axis, model, params)
         for j, (test_fam, test_ds) in enumerate(data.items()):
+            test_ds = with_rest_start(test_ds, [*ins, axis])
             s = score(cm.target_values(test_ds), cm.predict(test_ds))
             M[i, j] = s["improvement_percent"]
             rows.append({"axis": axis, "train": train_fam, "test": test_fam, "rmse": s["rmse"],
@@ -419,13 +420,14 @@ def thesis_protocol_study(axes: tuple = ("Z", "Y"), models: tuple = ("anfis", "m
     rows, plots = [], {}
     for axis in axes:
         ins = list(inputs) if inputs else _chosen_inputs([train_ds], axis, k, select_method, "on Test IV", log)
+        started = [with_rest_start(ds, [*ins, axis]) for ds in [train_ds, *test_ds]]
         for model in models:
-            cm = fit_compensation_model([train_ds], ins, axis, model)
-            for ds in [train_ds] + test_ds:
+            cm = fit_compensation_model(started[:1], ins, axis, model)
+            for ds in started:
                 y, p = cm.target_values(ds), cm.predict(ds)
                 s = score(y, p)
                 rows.append({"axis": axis, "model": model, "dataset": dataset_label(ds),
-                             "role": "training" if ds is train_ds else "test", "rmse": s["rmse"], "nse": s["nse"],
+                             "role": "training" if ds is started[0] else "test", "rmse": s["rmse"], "nse": s["nse"],
                              "max_residual": s["max_residual"], "improvement_percent": s["improvement_percent"],
                              "uncompensated_max": s["uncompensated_max"], "inputs": " ".join(ins)})
                 plots[(axis, model, dataset_label(ds))] = (ds.time_s, y, p)
@@ -439,6 +441,11 @@ def thesis_protocol_study(axes: tuple = ("Z", "Y"), models: tuple = ("anfis", "m
 # ----------------------------------------------------------------------------- hybrid
 def _hybrid_rows(measured, physics, tr, axis, model, ins):
     """Per-record scores of physics, data-driven and hybrid on one axis, and the curves (µm) for the plots."""
+    changing = [name for name in ins if any(with_rest_start(ds, [name]) is not ds for ds in measured)]
+    if changing:
+        raise TwinInputError(f"--inputs: the hybrid study's records start their duty cycle at t = 0, so "
+                             f"{changing[0]!r} changes at their start, where the twin's drift is referenced; "
+                             "give thermometers")
     data_model = fit_compensation_model([measured[i] for i in tr], ins, axis, model)
     # residual datasets: the target replaced by measured − physics (both zero-referenced)
     resid = [_with_residual(ds, axis, phys[axis]) for ds, phys in zip(measured, physics)]

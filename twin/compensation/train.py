@@ -19,6 +19,7 @@ itself, so improvement % = (1 − max|residual| / max|change|) × 100.
 from __future__ import annotations
 
 import json
+import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,6 +30,8 @@ from numpy.typing import ArrayLike, NDArray
 
 import fea
 from models import metrics
+from models.registry import model_traits
+from models.speed import STANDSTILL_RPM, running
 
 from ..core.clock import on_one_clock
 from ..core.dataset import Dataset, finite_or_none, name_listing, sidecar_path
@@ -52,13 +55,21 @@ from .records import (
     distinct_labels,
     joined_when_contiguous,
     note_long_steps,
+    with_rest_start,
 )
-from .store import CompensationModel, fit_compensation_model
+from .store import CompensationModel, fit_compensation_model, make_estimator
 
 if TYPE_CHECKING:
     from ..core.machine import Machine
 
 METRIC_COLUMNS = ("rmse", "nse", "r", "max_residual", "improvement_percent", "uncompensated_max", "rows")
+#: ``twin evaluate`` warns of a record whose spindle runs faster than this factor times the top running speed of
+#: the training records: a model there extrapolates. Up to it the grey-box heat (P ∝ n^b) is at most 2^b times the
+#: largest trained and an error δb of the fitted b an error 2^δb − 1 in it (23 % for δb = 0.3), growing without
+#: bound beyond; a speed logged in another unit (Hz under an rpm column: 60×) lands far past it
+SPEED_EXTRAPOLATION = 2.0
+
+log = logging.getLogger("thermal_twin")
 
 
 # ----------------------------------------------------------------------------- datasets
@@ -72,6 +83,8 @@ def load_dataset(spec: Dataset | Path | str, column_map: dict[str, str] | None =
     ``column_map`` and ``nan_policy``; a column mapped to ``"time_s"`` is the
     time in s), or the name of a scenario, which is
     simulated on ``machine`` (default: the scenario's) with its sensor noise.
+    A twin record whose duty cycle changes ``channels`` at its start gets the
+    state it started from as a first row (:func:`~twin.compensation.records.with_rest_start`).
 
     Parameters
     ----------
@@ -101,7 +114,7 @@ def load_dataset(spec: Dataset | Path | str, column_map: dict[str, str] | None =
         Neither a file nor a known scenario, or a bad CSV (file, field, value).
     """
     if isinstance(spec, Dataset):
-        return spec
+        return with_rest_start(spec, channels)
     path = Path(str(spec))
     if path.exists():
         if sidecar_path(path).exists() and column_map is None:
@@ -122,7 +135,7 @@ def load_dataset(spec: Dataset | Path | str, column_map: dict[str, str] | None =
         ds = simulate(str(spec), machine, noise=noise).dataset
     if label:
         ds.metadata["label"] = label
-    return ds
+    return with_rest_start(ds, channels)
 
 
 def _input_files(specs):
@@ -235,7 +248,12 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
     and the problem kept in ``model.metadata["unstable"]``).
 
     Returns the :class:`CompensationModel`; its training metrics are in
-    ``model.metadata["training_metrics"]``.
+    ``model.metadata["training_metrics"]``, and the top running speed of the
+    training records per input in rpm (for :func:`evaluate`'s warning) in
+    ``model.metadata["training_top_speed_rpm"]``. For a model that takes the
+    spindle speed as measured (the grey-box model), a negative speed, and
+    records in none of which the spindle runs (:func:`models.speed.running`),
+    are refused.
 
     Parameters
     ----------
@@ -276,16 +294,18 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
     Raises
     ------
     TwinInputError
-        Bad data, channels, model or parameters, an unusable ``out``, or an unstable fit.
+        Bad data, channels, model or parameters, an unusable ``out``, an unstable fit, or a grey-box model on
+        records where the spindle never runs.
     """
     if out is not None:
         check_output_file(out, overwrite, inputs=_input_files(datasets))
     observe = split_names(observe)
     channels = [*split_names(inputs), *observe, target]
-    loaded = joined_when_contiguous(on_one_clock([load_dataset(d, column_map, nan_policy, machine, channels=channels)
-                                                  for d in datasets]), channels)
+    records = on_one_clock([load_dataset(d, column_map, nan_policy, machine, channels=channels) for d in datasets])
+    loaded = joined_when_contiguous(records, channels)
 
     def fit(model_name, model_params):
+        _check_speed_input(records, split_names(inputs), model_name)
         return fit_compensation_model(loaded, split_names(inputs), target, model_name, model_params,
                                       zero_reference, reference_samples, observe)
 
@@ -302,6 +322,9 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
         cm, predictions, (kind, problem) = _first_sound_fit(selection, fit, loaded, params or {})
     cm.metadata["training_metrics"] = {label: score(cm.target_values(ds), predicted)
                                        for ds, label, predicted in zip(loaded, distinct_labels(loaded), predictions)}
+    # `twin evaluate` warns of a record far faster than these (SPEED_EXTRAPOLATION)
+    cm.metadata["training_top_speed_rpm"] = {name: max(_top_running_speed(ds[name]) for ds in loaded)
+                                             for name in _speed_inputs(cm)}
     if problem is not None:
         if not allow_unstable:
             raise TwinInputError(f"{kind} MODEL REFUSED (not saved): {problem}; pass --allow-unstable to save it "
@@ -310,6 +333,51 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
     if out is not None:
         cm.save(out)
     return cm
+
+
+def _check_speed_input(datasets, inputs, model):
+    """Refuse, for a model that takes the spindle speed as its first input (the grey-box model), a negative speed
+    (:func:`_check_speed_sign`), or records in none of which the spindle runs (:func:`models.speed.running`): the
+    heat of a spindle seen nowhere cannot be identified, and a gain fitted to the few rpm a tachometer reads at
+    rest would scale any real speed by that noise."""
+    first = model_traits(make_estimator(model)).first_input
+    if first is None or not inputs or any(inputs[0] not in ds or ds.info(inputs[0]).unit != first[1]
+                                          for ds in datasets):
+        return   # fit_compensation_model names a missing speed channel or its wrong unit
+    speed = inputs[0]
+    for ds in datasets:
+        _check_speed_sign(ds, speed)
+    readings = np.concatenate([ds[speed] for ds in datasets])
+    # one reading throughout (a speed of 0) is an input that never changes, which fit_compensation_model names
+    if np.ptp(readings) > 0 and not any(running(ds[speed]).any() for ds in datasets):
+        top = float(np.max(np.abs(readings), initial=0.0, where=np.isfinite(readings)))
+        raise TwinInputError(f"{', '.join(dataset_label(ds) for ds in datasets)}: the spindle never runs ({speed} at "
+                             f"most {top:g} rpm; it runs above {STANDSTILL_RPM:g} rpm), so {model} cannot identify "
+                             "the heat of the spindle, and its gain would be fitted to the speed reading's noise at "
+                             "rest: train on a record where the spindle runs")
+
+
+def _check_speed_sign(dataset, speed):
+    """Refuse a negative spindle speed, naming the file (or record), the column, the time and the value."""
+    values = dataset[speed]
+    negative = np.flatnonzero(values < 0)
+    if negative.size:
+        k = int(negative[0])
+        raise TwinInputError(f"{dataset.metadata.get('source') or dataset_label(dataset)}: column "
+                             f"{dataset.info(speed).column!r} is {values[k]:g} rpm at t = {dataset.time_s[k]:g} s "
+                             f"(data row {k + 1}); a spindle speed is >= 0 rpm, its magnitude whichever way the "
+                             "spindle turns")
+
+
+def _speed_inputs(cm):
+    """The model's input channels in rpm: spindle speeds, whatever the model."""
+    return [name for name, unit in zip(cm.inputs, cm.input_units) if unit == "rpm"]
+
+
+def _top_running_speed(values):
+    """The highest |speed| of the rows where the spindle runs (:func:`models.speed.running`), rpm; 0 if none."""
+    speed = np.abs(np.asarray(values, float))
+    return float(speed[running(speed)].max(initial=0.0))
 
 
 def _predicted_and_checked(cm, datasets):
@@ -365,7 +433,12 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
     Writes (when ``out_dir`` is given) ``evaluation.md``, ``evaluation.csv``,
     ``evaluation.json`` and ``<dataset>_<target>.png`` (measured vs predicted
     change and the residual).  A dataset whose channels do not match the
-    model's raises a :class:`TwinInputError` naming them.
+    model's raises a :class:`TwinInputError` naming them, as does a record of
+    fewer than 2 rows, or with a negative speed for a model that takes it as
+    measured. A warning on the ``thermal_twin`` logger names a model saved
+    with ``allow_unstable`` (and why its check refused it), and a record
+    whose spindle runs over :data:`SPEED_EXTRAPOLATION` times the training
+    records' top running speed (the model extrapolates).
 
     ``reference="train"``: each dataset continues the training record (it may
     start warm), so it is referenced to the training start, and time-series
@@ -410,15 +483,16 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
     _check_reference(reference, history, gap)
     check_output_folder(out_dir, overwrite, inputs=_input_files([model, *datasets]))
     cm = model if isinstance(model, CompensationModel) else CompensationModel.load(model)
+    _warn_unstable(cm, model)
     channels = [*cm.inputs, cm.target]   # the observed thermometers are among the inputs
     loaded = on_one_clock([load_dataset(d, column_map, nan_policy, machine, channels=channels)
                            for d in [*datasets, *([] if history is None else [history])]])
     past = None if history is None else loaded.pop()
     for ds in loaded + ([past] if past is not None else []):
-        cm.check(ds)
-        cm.check_readings(ds)
+        _check_evaluated(cm, ds)
     rows, predictions = [], {}
     for ds, label in zip(loaded, distinct_labels(loaded)):
+        _warn_faster_than_trained(cm, ds, label)
         y, p, ran_over = _measured_and_predicted(cm, ds, label, reference, past, gap)
         rows.append({"dataset": label, **score(y, p)})
         predictions[label] = (ds.time_s, y, p)
@@ -431,6 +505,39 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
             _write_evaluation(cm, result, tmp, plots)
         result.out_dir = out_dir
     return result
+
+
+def _warn_unstable(cm, model):
+    """Warn (``thermal_twin`` logger) of a model saved despite its stability or identification check."""
+    if "unstable" in cm.metadata:
+        where = "the model" if isinstance(model, CompensationModel) else str(model)
+        log.warning("%s: saved with --allow-unstable although its check refused it (%s): its scores show how far "
+                    "off it is, it is no model to compensate with", where, cm.metadata["unstable"])
+
+
+def _check_evaluated(cm, dataset):
+    """Refuse a record the model cannot be scored on: its channels, missing readings, fewer than 2 rows (a
+    change needs a start and a later row), or a negative speed of a model that takes it as measured."""
+    cm.check(dataset)
+    cm.check_readings(dataset)
+    if len(dataset) < 2:
+        raise TwinInputError(f"{dataset.metadata.get('source') or dataset_label(dataset)}: {len(dataset)} row; "
+                             "a model is scored on the change of a record since its first row, so it needs at "
+                             "least 2 rows")
+    for speed in cm.preprocessing.get("absolute_inputs", []):
+        _check_speed_sign(dataset, speed)
+
+
+def _warn_faster_than_trained(cm, dataset, label):
+    """Warn (``thermal_twin`` logger) where the record's spindle runs over :data:`SPEED_EXTRAPOLATION` times
+    the top running speed of the training records, as the model file keeps it (a file written before it kept it
+    is not checked)."""
+    for name, trained in cm.metadata.get("training_top_speed_rpm", {}).items():
+        top = _top_running_speed(dataset[name])
+        if top > SPEED_EXTRAPOLATION * trained:
+            log.warning("%s: %s runs up to %g rpm, over %g× the top speed of the training records (%g rpm): the "
+                        "model extrapolates (a speed logged in another unit, Hz in an rpm column, is 60× off)",
+                        label, name, top, SPEED_EXTRAPOLATION, trained)
 
 
 def _check_reference(reference, history, gap):

@@ -271,10 +271,12 @@ class Dataset:
         Returns
         -------
         Dataset
-            Rows with ``start_s ≤ t ≤ end_s``.
+            Rows with ``start_s ≤ t ≤ end_s``; a window that leaves out the first row leaves out the
+            conditions before it too (``before_start``).
         """
         keep = (self.time_s >= start_s) & (self.time_s <= end_s)
-        return Dataset(self.time_s[keep], self.values[keep], self.channels, self.metadata)
+        metadata = self.metadata if keep[:1].all() else {k: v for k, v in self.metadata.items() if k != "before_start"}
+        return Dataset(self.time_s[keep], self.values[keep], self.channels, metadata)
 
     # ---------------------------------------------------------------- files
     def write(self, path: str | Path) -> Path:

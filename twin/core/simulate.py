@@ -271,10 +271,47 @@ def initial_temperature(machine: Machine, scenario: Scenario, schedule: Scenario
         value = init.get("temperature_C")
         zone = room_zone(machine.zones)
         return float(schedule.conditions([0.0]).ambient_C[zone][0] if value is None else value)
+    return fea.ThermalSolver(machine.thermal).steady_state(_idle_conditions(machine, scenario, schedule).inputs[0])
+
+
+def _idle_conditions(machine, scenario, schedule):
+    """The conditions the machine stood in before t = 0 (:meth:`Scenario.idle_start`), as one row, inputs
+    without ``modify``."""
     cond = schedule.conditions([0.0])
     rpm, idle, ambient = scenario.idle_start(cond.ambient_C)
-    u = machine.input_matrix(rpm, idle, ambient, cond.gradient_K_per_m)[0]
-    return fea.ThermalSolver(machine.thermal).steady_state(u)
+    return Conditions(cond.times_s, rpm, idle, ambient, cond.gradient_K_per_m,
+                      machine.input_matrix(rpm, idle, ambient, cond.gradient_K_per_m))
+
+
+def before_start(machine: Machine, scenario: Scenario, schedule: ScenarioInputs) -> dict[str, float]:
+    """The operating channels as they stood before t = 0: the spindle stopped (or a steady start's speed), no
+    feed, and the heat those give.
+
+    A record's first row holds the conditions at t = 0, where a duty cycle
+    usually starts the spindle; the machine's state there is the one it
+    reached before (:func:`initial_temperature`). A model that takes a
+    record's first row as its rest state reads these instead
+    (:func:`twin.compensation.records.with_rest_start`).
+
+    Parameters
+    ----------
+    machine : Machine
+        The machine.
+    scenario : Scenario
+        The scenario (its ``[initial]`` table).
+    schedule : ScenarioInputs
+        Its inputs (``modify`` applies to the powers, as in the record).
+
+    Returns
+    -------
+    dict of str to float
+        Channel → value (rpm, mm/min, W) for the spindle, feed and power channels.
+    """
+    idle = _idle_conditions(machine, scenario, schedule)
+    if schedule.modify is not None:
+        idle.inputs = schedule.modify(idle)
+    infos, columns = machine_condition_channels(machine, idle)
+    return {c.name: float(v[0]) for c, v in zip(infos, columns) if c.kind in ("spindle_speed", "feed", "power")}
 
 
 def simulate(scenario: str | Path | Scenario, machine: Machine | None = None, mesh_size_m: float | None = None,
@@ -351,6 +388,7 @@ def simulate(scenario: str | Path | Scenario, machine: Machine | None = None, me
         columns_info.append(ChannelInfo(c.name, c.unit, c.kind, c.label, c.position))
         columns.append(sensors[:, j])
     metadata = _run_metadata(machine, scenario, seed, noise, balance, step_errors)
+    metadata["before_start"] = before_start(machine, scenario, schedule)
     dataset = Dataset(times, np.column_stack(columns), columns_info, metadata)
     return SimulationResult(dataset, machine, scenario, run.fields, time.perf_counter() - start,
                             balance["relative_error"])
