@@ -156,7 +156,7 @@ def _checked_fit(estimator, path):
     if check is not None:
         try:
             check()
-        except ValueError as exc:
+        except (TypeError, ValueError) as exc:   # a hyperparameter of the wrong type (null) fails as TypeError
             raise ValueError(f"{path}: {exc}") from None
     return estimator
 

@@ -196,7 +196,7 @@ def test_incompatible_model_files_are_refused(tmp_path):
     doc = json.loads(path.read_text())
     doc["estimator"]["version"] = 7
     (tmp_path / "inner.json").write_text(json.dumps(doc))
-    with pytest.raises(TwinInputError, match="field 'version' has value 7"):
+    with pytest.raises(TwinInputError, match="field 'estimator.version' = 7 was changed after the model was saved"):
         CompensationModel.load(tmp_path / "inner.json")
     (tmp_path / "junk.json").write_text("{not json")
     with pytest.raises(TwinInputError, match="not a JSON model file"):

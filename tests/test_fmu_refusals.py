@@ -132,6 +132,24 @@ def fixed_after_initialisation(path):
     return {"sets": sets, "step": step, "T_initial": T_initial, "Z": z, "terminate": terminate}
 
 
+def unreadable_state(path):
+    f, vr = instance(path)
+    f.doStep(0.0, 10.0)
+    refusals = []
+    for _ in range(2):
+        try:
+            state = f.deSerializeFMUstate(b"garbage")
+        except FMICallException as exc:
+            refusals.append(int(exc.status))
+            continue
+        refusals.append(status(lambda: f.setFMUstate(state)))
+    step = status(lambda: f.doStep(10.0, 10.0))
+    z = f.getReal([vr["Z"]])[0]
+    terminate = status(f.terminate)
+    f.freeInstance()
+    return {"refusals": refusals, "step": step, "Z": z, "terminate": terminate}
+
+
 out = globals()[sys.argv[1]](sys.argv[2])
 out["messages"] = MESSAGES
 print(json.dumps(out))
@@ -222,6 +240,15 @@ def test_setting_a_fixed_parameter_after_initialisation_is_refused_and_harmless(
         in out["messages"]
 
 
+@pytest.mark.parametrize("kind", KINDS)
+def test_bytes_that_are_no_state_are_refused_and_harmless(fmus, kind, tmp_path):
+    """Python FMU: PythonFMU reads state bytes on the class, outside _keeping_alive: two garbage deserialisations
+    then fmi2FreeInstance crashed the host (exit 139)."""
+    out = _in_own_process("unreadable_state", fmus[kind], tmp_path)
+    assert all(code >= 3 for code in out["refusals"]) and len(out["refusals"]) == 2, out
+    assert out["step"] == 0 and out["terminate"] == 0 and math.isfinite(out["Z"]), out
+
+
 # ----------------------------------------------------------------------------- through twin's own runner
 def test_simulate_turns_a_refused_input_into_an_error_naming_it(fmus, rom):
     """twin.fmu.export.simulate (used by twin fmu simulate) raised fmpy's bare exception, or (native) looped."""
@@ -233,24 +260,29 @@ def test_simulate_turns_a_refused_input_into_an_error_naming_it(fmus, rom):
 
 
 # ----------------------------------------------------------------------------- broken FMU files
-def _without(fmu, prefix, out):
-    """A copy of ``fmu`` without its members whose names start with ``prefix``."""
+def _changed(fmu, prefix, out, content=None):
+    """A copy of ``fmu`` whose members whose names start with ``prefix`` are left out, or hold ``content``."""
     with zipfile.ZipFile(fmu) as zin, zipfile.ZipFile(out, "w") as zout:
         for item in zin.infolist():
             if not item.filename.startswith(prefix):
                 zout.writestr(item, zin.read(item.filename))
+            elif content is not None:
+                zout.writestr(item, content)
     return out
 
 
-@pytest.mark.parametrize(("kind", "prefix", "missing"), [
-    ("native", "binaries/", ("binaries/linux64/thermal_twin_rom.so is missing: the shared library for this platform "
-                             "(linux64); its sources/ can rebuild it")),
-    ("python", "binaries/", "binaries/linux64/ThermalTwin.so is missing: the shared library for this platform"),
-    ("python", "resources/rom.npz", "resources/rom.npz is missing: the reduced model the slave runs"),
+@pytest.mark.parametrize(("kind", "prefix", "content", "missing"), [
+    ("native", "binaries/", None, ("binaries/linux64/thermal_twin_rom.so is missing: the shared library for this "
+                                   "platform (linux64); its sources/ can rebuild it")),
+    ("python", "binaries/", None, "binaries/linux64/ThermalTwin.so is missing: the shared library for this platform"),
+    ("python", "resources/rom.npz", None, "resources/rom.npz is missing: the reduced model the slave runs"),
+    ("python", "resources/interface.json", b"{}",          # validate raised KeyError: 'engine'
+     "resources/interface.json is unreadable: not a JSON object naming the slave's engine"),
 ])
-def test_an_fmu_without_its_binary_or_rom_data_is_reported_not_run(fmus, kind, prefix, missing, tmp_path, capsys):
+def test_an_fmu_without_its_binary_or_rom_data_is_reported_not_run(fmus, kind, prefix, content, missing, tmp_path,
+                                                                   capsys):
     """simulate ended in a traceback ("Failed to instantiate model") and validate said "no problems"."""
-    broken = str(_without(fmus[kind], prefix, tmp_path / "broken.fmu"))
+    broken = str(_changed(fmus[kind], prefix, tmp_path / "broken.fmu", content))
     assert main(["fmu", "simulate", broken, "heat_cool_9000", "--out", str(tmp_path / "x.csv")]) == 2
     err = one_error_line(capsys)
     assert f"{broken}: cannot run here: {missing}" in err, err

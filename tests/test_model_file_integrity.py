@@ -85,6 +85,10 @@ def _offset_plus_one(doc):
     (_set("metadata", "note", value="retuned"), "field 'metadata.note' = \"retuned\" was added"),
     (_set("metadata", "training_top_speed_rpm", "spindle", value=12000.0),
      "field 'metadata.training_top_speed_rpm' = {\"spindle\":12000.0} was changed"),
+    # values the estimator cannot even read: the digest names them before the estimator chokes on them
+    (_set("estimator", "params", "speed_reference", value=None),
+     "field 'estimator.params.speed_reference' = null was changed"),
+    (_set("estimator", "params", "process_noise", value=[1]), "field 'estimator.params.process_noise' = [1] was"),
 ])
 def test_a_field_changed_after_saving_is_refused_naming_it(saved, tmp_path, edit, message):
     path = _edited(saved, tmp_path, edit)
@@ -138,6 +142,8 @@ def _unsealed(edit):
      r"field 'params.colour' has value \"red\", but GreyBoxRegressor has no parameter 'colour'"),
     (_set("preprocessing", "zero_reference", value="yes"),
      r"field 'preprocessing.zero_reference' has value \"yes\", expected true or false"),
+    (_set("preprocessing", "rest_start", value=1), r"field 'preprocessing.rest_start' has value 1, expected true"),
+    (_set("estimator", "params", "speed_reference", value=None), r"\[estimator\]: float\(\) argument must be"),
 ])
 def test_a_value_no_fit_gives_is_refused_in_a_file_without_digests(saved, tmp_path, edit, message):
     path = _edited(saved, tmp_path, _unsealed(edit))

@@ -73,3 +73,24 @@ def test_a_static_model_sees_the_speed_change_at_the_start(records):
     assert cm.training[0]["reference"]["inputs"][0] == 0.0       # the speed at the reference: stopped
     features = cm.features(with_rest_start(test, cm.inputs + [cm.target]))
     assert features[1, 0] == 12000.0
+
+
+def test_a_model_file_written_before_rest_starts_reads_records_as_it_was_trained(records):
+    """Its speed reference was the first row's: evaluating it from the rest row would change its predictions."""
+    training, test = records
+    cm = train([training], "spindle,T05", "Z", "mlr")
+    assert cm.preprocessing["rest_start"] is True
+    new = evaluate(cm, [test]).rows[0]
+    del cm.preprocessing["rest_start"]                       # as in a file written before
+    old = evaluate(cm, [test]).rows[0]
+    assert (new["rows"], old["rows"]) == (len(test) + 1, len(test))
+
+
+def test_averaging_the_reference_over_a_rest_row_and_running_rows_is_refused(records):
+    from twin.errors import TwinInputError
+
+    with pytest.raises(TwinInputError, match=r"^train: the record's spindle changes at its first row .* "
+                                             r"--reference-samples 3 would average it with running rows; use "
+                                             r"--reference-samples 1$"):
+        train([records[0]], "spindle,T05", "Z", "mlr", reference_samples=3)
+    train([records[0]], "T05,T06", "Z", "mlr", reference_samples=3)     # a model on temperatures: no rest row

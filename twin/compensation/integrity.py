@@ -46,7 +46,7 @@ FIELD = "field_sha256"
 #: how deep an object field is split into entries with a digest each: the estimator's params and learned per entry
 _DEPTH = {"estimator": 2}
 #: the entries of ``preprocessing`` that are true or false: any other value (``"yes"``) would be read as true
-SWITCHES = ("zero_reference", "time_column")
+SWITCHES = ("zero_reference", "time_column", "rest_start")
 
 
 def canonical(value: object) -> str:

@@ -326,7 +326,7 @@ def repeats(first: Dataset, later: Dataset, names: Sequence[str]) -> bool:
         first.matrix(list(names))[at], later.matrix(list(names))[inside], equal_nan=True))
 
 
-def with_rest_start(dataset: Dataset, names: Sequence[str] | None = None) -> Dataset:
+def with_rest_start(dataset: Dataset, names: Sequence[str] | None = None, reference_samples: int = 1) -> Dataset:
     """The record with the state it started from as a first row, when the record says the machine stood in
     other operating conditions before its first row (a twin record whose spindle starts at t = 0).
 
@@ -349,17 +349,31 @@ def with_rest_start(dataset: Dataset, names: Sequence[str] | None = None) -> Dat
     names : sequence of str, optional
         The channels a model reads (default: every channel): a model that reads none of those that change
         at the start (a model on temperatures) gets the record as it is.
+    reference_samples : int, default 1
+        Rows the model's zero reference averages: more than one would average the rest row with running
+        rows, and is refused when a rest row is added.
 
     Returns
     -------
     Dataset
         ``dataset``, or a copy with the rest row first (``metadata["rest_row_s"]``: its time, s; no
         ``before_start`` any more, so a second call adds nothing).
+
+    Raises
+    ------
+    TwinInputError
+        A rest row is needed and ``reference_samples`` is above 1.
     """
     before = {name: value for name, value in dataset.metadata.get("before_start", {}).items() if name in dataset}
     read = before if names is None else [name for name in before if name in names]
     if len(dataset) < 2 or all(dataset[name][0] == before[name] for name in read):
         return dataset
+    if reference_samples > 1:
+        changed = next(name for name in read if dataset[name][0] != before[name])
+        raise TwinInputError(f"{dataset_label(dataset)}: the record's {changed} changes at its first row (the "
+                             f"twin run starts its duty cycle there), so its rest state is one row, and "
+                             f"--reference-samples {reference_samples} would average it with running rows; use "
+                             "--reference-samples 1")
     rest = dataset.values[0].copy()
     for name, value in before.items():
         rest[dataset.index(name)] = value

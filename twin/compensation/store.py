@@ -223,7 +223,9 @@ class CompensationModel:
         ``zero_reference``, ``reference_samples``, ``time_column`` (true when the estimator takes the
         time since the record's start as its first column: the grey-box model), ``absolute_inputs``
         (inputs taken as measured: the grey-box model's speed), ``observed`` (thermometers the model fuses
-        while it runs) and, once fitted, the raw ``training_reference``.
+        while it runs), ``rest_start`` (twin records are read from the rest state before their start,
+        :func:`~twin.compensation.records.with_rest_start`; absent in files written before) and, once
+        fitted, the raw ``training_reference``.
     training : list of dict
         Label, rows, source, scenario, kind, duration (h) and ``reference`` (raw inputs and target at its
         start) of each training record.
@@ -483,11 +485,12 @@ class CompensationModel:
         """
         path = Path(path)
         doc = _read_document(path)
+        # digests first: an edited field is named as such before the estimator reads (and may choke on) it
+        check_sealed(doc, path)
         try:
             estimator = model_from_document(doc["estimator"], f"{path} [estimator]")
         except ValueError as exc:
             raise TwinInputError(str(exc)) from None
-        check_sealed(doc, path)
         return cls(estimator, doc["model_name"], list(doc["inputs"]), doc["target"], list(doc["input_units"]),
                    doc["target_unit"], dict(doc.get("preprocessing") or {}), list(doc.get("training") or []),
                    doc.get("sampling_interval_s"), dict(doc.get("metadata") or {}))
@@ -544,9 +547,11 @@ def _channel_units(datasets, inputs, target):
 
 def _preprocessing(estimator, model, inputs, units, zero_reference, reference_samples, observe):
     """The model's ``preprocessing``, after checking its declared first input (a speed, taken as measured)."""
+    # rest_start: twin records were read from the rest state before their start (with_rest_start), and a
+    # record evaluated with this model is read so too
     prep = {"zero_reference": bool(zero_reference), "reference_samples": int(reference_samples),
             "convention": "inputs and target minus their value at the start of each dataset"
-            if zero_reference else "raw values"}
+            if zero_reference else "raw values", "rest_start": True}
     first = model_traits(estimator).first_input
     if first is not None:
         if units[0] != first[1]:

@@ -75,7 +75,8 @@ log = logging.getLogger("thermal_twin")
 # ----------------------------------------------------------------------------- datasets
 def load_dataset(spec: Dataset | Path | str, column_map: dict[str, str] | None = None,
                  nan_policy: Literal["error", "interpolate", "drop", "keep"] = "error", machine: Machine | None = None,
-                 noise: bool = True, label: str | None = None, channels: Sequence[str] | None = None) -> Dataset:
+                 noise: bool = True, label: str | None = None, channels: Sequence[str] | None = None,
+                 rest_start: bool = True, reference_samples: int = 1) -> Dataset:
     """A :class:`Dataset` from a path or a scenario name.
 
     ``spec`` may be a :class:`Dataset` (returned as is), a CSV path (read with
@@ -84,7 +85,8 @@ def load_dataset(spec: Dataset | Path | str, column_map: dict[str, str] | None =
     time in s), or the name of a scenario, which is
     simulated on ``machine`` (default: the scenario's) with its sensor noise.
     A twin record whose duty cycle changes ``channels`` at its start gets the
-    state it started from as a first row (:func:`~twin.compensation.records.with_rest_start`).
+    state it started from as a first row (:func:`~twin.compensation.records.with_rest_start`),
+    unless ``rest_start`` is false (a model file written before rest starts).
 
     Parameters
     ----------
@@ -102,6 +104,10 @@ def load_dataset(spec: Dataset | Path | str, column_map: dict[str, str] | None =
         Stored as ``metadata["label"]``, the name the dataset goes by in tables.
     channels : sequence of str, optional
         The channels a model reads: ``nan_policy`` is about them (default every channel of a measured CSV).
+    rest_start : bool, default True
+        Add a twin record's rest state as a first row (:func:`~twin.compensation.records.with_rest_start`).
+    reference_samples : int, default 1
+        Rows the model's zero reference averages (more than one is refused when a rest row is added).
 
     Returns
     -------
@@ -114,7 +120,7 @@ def load_dataset(spec: Dataset | Path | str, column_map: dict[str, str] | None =
         Neither a file nor a known scenario, or a bad CSV (file, field, value).
     """
     if isinstance(spec, Dataset):
-        return with_rest_start(spec, channels)
+        return with_rest_start(spec, channels, reference_samples) if rest_start else spec
     path = Path(str(spec))
     if path.exists():
         if sidecar_path(path).exists() and column_map is None:
@@ -135,7 +141,7 @@ def load_dataset(spec: Dataset | Path | str, column_map: dict[str, str] | None =
         ds = simulate(str(spec), machine, noise=noise).dataset
     if label:
         ds.metadata["label"] = label
-    return with_rest_start(ds, channels)
+    return with_rest_start(ds, channels, reference_samples) if rest_start else ds
 
 
 def _input_files(specs):
@@ -301,7 +307,8 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
         check_output_file(out, overwrite, inputs=_input_files(datasets))
     observe = split_names(observe)
     channels = [*split_names(inputs), *observe, target]
-    records = on_one_clock([load_dataset(d, column_map, nan_policy, machine, channels=channels) for d in datasets])
+    records = on_one_clock([load_dataset(d, column_map, nan_policy, machine, channels=channels,
+                                         reference_samples=reference_samples) for d in datasets])
     loaded = joined_when_contiguous(records, channels)
 
     def fit(model_name, model_params):
@@ -349,7 +356,7 @@ def _check_speed_input(datasets, inputs, model):
         _check_speed_sign(ds, speed)
     readings = np.concatenate([ds[speed] for ds in datasets])
     # one reading throughout (a speed of 0) is an input that never changes, which fit_compensation_model names
-    if np.ptp(readings) > 0 and not any(running(ds[speed]).any() for ds in datasets):
+    if np.nanmax(readings) > np.nanmin(readings) and not any(running(ds[speed]).any() for ds in datasets):
         top = float(np.max(np.abs(readings), initial=0.0, where=np.isfinite(readings)))
         raise TwinInputError(f"{', '.join(dataset_label(ds) for ds in datasets)}: the spindle never runs ({speed} at "
                              f"most {top:g} rpm; it runs above {STANDSTILL_RPM:g} rpm), so {model} cannot identify "
@@ -363,9 +370,10 @@ def _check_speed_sign(dataset, speed):
     negative = np.flatnonzero(values < 0)
     if negative.size:
         k = int(negative[0])
+        row = k + ("rest_row_s" not in dataset.metadata)     # an added rest row is no row of the file
         raise TwinInputError(f"{dataset.metadata.get('source') or dataset_label(dataset)}: column "
                              f"{dataset.info(speed).column!r} is {values[k]:g} rpm at t = {dataset.time_s[k]:g} s "
-                             f"(data row {k + 1}); a spindle speed is >= 0 rpm, its magnitude whichever way the "
+                             f"(data row {row}); a spindle speed is >= 0 rpm, its magnitude whichever way the "
                              "spindle turns")
 
 
@@ -485,7 +493,10 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
     cm = model if isinstance(model, CompensationModel) else CompensationModel.load(model)
     _warn_unstable(cm, model)
     channels = [*cm.inputs, cm.target]   # the observed thermometers are among the inputs
-    loaded = on_one_clock([load_dataset(d, column_map, nan_policy, machine, channels=channels)
+    # a model file written before rest starts keeps the first row as its reference, as it was trained
+    rest = {"rest_start": cm.preprocessing.get("rest_start", False),
+            "reference_samples": cm.preprocessing.get("reference_samples", 1)}
+    loaded = on_one_clock([load_dataset(d, column_map, nan_policy, machine, channels=channels, **rest)
                            for d in [*datasets, *([] if history is None else [history])]])
     past = None if history is None else loaded.pop()
     for ds in loaded + ([past] if past is not None else []):

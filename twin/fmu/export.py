@@ -597,6 +597,10 @@ def validate(path: Path | str) -> list[str]:
     return problems or missing_parts(path)
 
 
+#: the Python slave's variables and engine, in the FMU archive
+INTERFACE = "resources/interface.json"
+
+
 def missing_parts(path: Path | str) -> list[str]:
     """What a readable FMU needs to run on this platform and does not hold, one line each (empty when complete).
 
@@ -611,7 +615,7 @@ def missing_parts(path: Path | str) -> list[str]:
     Returns
     -------
     list of str
-        ``"<member> is missing: <what it is>"``.
+        ``"<member> is missing: <what it is>"``, or ``"<member> is unreadable: …"``.
     """
     from fmpy import (
         platform,
@@ -628,19 +632,31 @@ def missing_parts(path: Path | str) -> list[str]:
         needed = {f"binaries/{folder}/{kind.modelIdentifier}{sharedLibraryExtension}":
                   f"the shared library for this platform ({folder}){rebuild}"
                   for kind in (md.coSimulation, md.modelExchange) if kind is not None}
-        if md.coSimulation is not None and md.coSimulation.modelIdentifier == PYTHON_IDENTIFIER:
+        python = md.coSimulation is not None and md.coSimulation.modelIdentifier == PYTHON_IDENTIFIER
+        if python:
             needed.update(_python_resources(z, names))
-    return [f"{name} is missing: {what}" for name, what in needed.items() if name not in names]
+        unreadable = [f"{INTERFACE} is unreadable: not a JSON object naming the slave's engine"] \
+            if python and INTERFACE in names and _engine(z) is None else []
+    return [f"{name} is missing: {what}" for name, what in needed.items() if name not in names] + unreadable
 
 
 def _python_resources(z, names):
     """Member → what it is, for the resources the Python slave of the open FMU archive ``z`` reads."""
     needed = {"resources/slavemodule.txt": "PythonFMU's name of the slave module",
               "resources/thermal_twin_slave.py": "the Python slave",
-              "resources/interface.json": "the slave's variables and engine"}
-    if "resources/interface.json" in names and json.loads(z.read("resources/interface.json"))["engine"] == "rom":
+              INTERFACE: "the slave's variables and engine"}
+    if INTERFACE in names and _engine(z) == "rom":
         needed["resources/rom.npz"] = "the reduced model the slave runs"
     return needed
+
+
+def _engine(z):
+    """The engine the Python slave's interface names (``rom``, ``fe``), or None when it names none or does not read."""
+    try:
+        interface = json.loads(z.read(INTERFACE))
+    except ValueError:          # not JSON, or not UTF-8
+        return None
+    return interface.get("engine") if isinstance(interface, dict) else None
 
 
 def input_table(rom: ReducedModel, scenario: Scenario | Path | str, times: ArrayLike | None = None) -> np.ndarray:

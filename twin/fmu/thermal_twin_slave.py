@@ -77,7 +77,7 @@ def _keeping_alive(cls):
         def call(self, *args, **kwargs):
             try:
                 return method(self, *args, **kwargs)
-            except Exception:
+            except BaseException:       # Ctrl-C in a long FE step takes the same handler
                 for obj in (self, type(self), self.log_queue):
                     ctypes.pythonapi.Py_IncRef(ctypes.py_object(obj))
                 raise
@@ -330,12 +330,36 @@ class ThermalTwin(Fmi2Slave):
         return state
 
     def _set_fmu_state(self, state):
+        problem = self._state_problem(state)
+        if problem:
+            self._refuse(f"fmi2SetFMUstate: {problem}; the instance is left as it was")
         state = dict(state)
         self.engine.set_state(state.pop("__engine__"))
         self._phase = state.pop("__phase__")
         self._time = state.pop("__time__")
         self.values.update(state)
         self._cache = None
+
+    def _state_problem(self, state):
+        """Why ``state`` is not one :meth:`_get_fmu_state` of this FMU gave, or None (checked before any of it
+        is applied)."""
+        ours = self._get_fmu_state()
+        if not isinstance(state, dict) or set(state) != set(ours):
+            return "not a state of this FMU (unreadable bytes, or the state of another FMU)"
+        engine, mine = state["__engine__"], ours["__engine__"]
+        if not isinstance(engine, dict) or set(engine) != set(mine) or any(
+                np.shape(engine[k]) != np.shape(mine[k]) for k in mine):
+            return "its model state does not have this FMU's shape"
+        return None
+
+    @staticmethod
+    def _fmu_state_from_bytes(state: bytes):
+        # PythonFMU calls this on the class, where _keeping_alive cannot give back the references its exception
+        # handler drops: it must not raise, so bytes that are no state become one _set_fmu_state refuses
+        try:
+            return json.loads(bytes(state).decode("utf-8"))
+        except (UnicodeDecodeError, ValueError):
+            return None
 
     # -------------------------------------------------------------- FMI
     def setup_experiment(self, start_time: float, stop_time: "float | None" = None,
