@@ -16,6 +16,7 @@ from ..compensation.store import make_estimator
 from ..core.variants import zero_referenced
 from .candidates import Candidates
 from .records import Record
+from .selection import METHODS
 
 #: The sensor counts among which each axis's best set is reported: the thesis goal of 4–5 sensors.
 REPORT_K = (4, 5)
@@ -67,7 +68,7 @@ def score_set(train: list[Record], test: list[Record], cols: np.ndarray, axis: s
     rmse : float
         RMSE pooled over ``test``, µm.
     per_scenario : dict
-        Scenario → (max |residual|, max |drift change|), µm.
+        Scenario → ``max_residual``, ``uncompensated_max`` (max |drift change|), ``rmse`` (µm) and ``rows``.
     """
     X, y = stack(train, cols, axis)
     est = make_estimator(model).fit(X, y)
@@ -77,7 +78,8 @@ def score_set(train: list[Record], test: list[Record], cols: np.ndarray, axis: s
         yt = zero_referenced(r.drift[axis])
         e = est.predict(Xt) - yt
         res.append(e)
-        per[r.scenario] = (float(np.abs(e).max()), float(np.abs(yt).max()))
+        per[r.scenario] = {"max_residual": float(np.abs(e).max()), "uncompensated_max": float(np.abs(yt).max()),
+                           "rmse": float(np.sqrt(np.mean(e ** 2))), "rows": len(e)}
     e = np.concatenate(res)
     return float(np.abs(e).max()), float(np.sqrt(np.mean(e ** 2))), per
 
@@ -158,7 +160,9 @@ def best_k_pool(k_max: int) -> list[int]:
 def choose_best(table: list[dict], candidates: Candidates, axes: tuple, k_max: int,
                 methods: tuple | None = None) -> dict:
     """Axis → (method, K, candidate indices) of the smallest max |residual| in ``table`` (the validation
-    scores) among the K of :func:`best_k_pool` and, if given, among ``methods``.
+    scores) among the K of :func:`best_k_pool` and, if given, among ``methods``.  A tie goes to the smaller K,
+    then to the method first in :data:`~twin.placement.selection.METHODS` — never to the order methods were
+    given in.
 
     Parameters
     ----------
@@ -182,7 +186,7 @@ def choose_best(table: list[dict], candidates: Candidates, axes: tuple, k_max: i
     for axis in axes:
         rows = [r for r in table if r["axis"] == axis and r["K"] in best_k_pool(k_max)
                 and (methods is None or r["method"] in methods)]
-        b = min(rows, key=lambda r: r["max_residual"])
+        b = min(rows, key=lambda r: (r["max_residual"], r["K"], METHODS.index(r["method"])))
         best[axis] = (b["method"], b["K"], [candidates.names.index(n) for n in b["sensors"]])
     return best
 

@@ -113,9 +113,7 @@ def select_sets(records: list[Record], responses: list[Record], methods: list[st
         The sets per method, axis and K, and the candidates' scores.
     """
     t0 = time.perf_counter()
-    per = max(50, max_rows // len(records))
-    blocks = [(r, thin(len(r.time_s), per)) for r in records]
-    Xblocks = [zero_referenced(r.temperatures)[idx] for r, idx in blocks]
+    blocks, Xblocks = _training_blocks(records, max_rows)
     Xsel = np.vstack(Xblocks)
     out = Selection(rows=int(len(Xsel)))
     seed = SeedSelector(Xsel, random_state=0)
@@ -130,6 +128,13 @@ def select_sets(records: list[Record], responses: list[Record], methods: list[st
         if log:
             log(f"greedy-physics selection done ({time.perf_counter() - t0:.1f} s)")
     return out
+
+
+def _training_blocks(records, max_rows):
+    """``([(record, kept rows)], [zero-referenced temperatures of the kept rows, °C])`` of the training records."""
+    per = max(50, max_rows // len(records))
+    blocks = [(r, thin(len(r.time_s), per)) for r in records]
+    return blocks, [zero_referenced(r.temperatures)[idx] for r, idx in blocks]
 
 
 def _axis_sets(out, methods, axis, k_max, Xsel, yblocks, Xblocks, seed, pod):
@@ -151,15 +156,60 @@ def _axis_sets(out, methods, axis, k_max, Xsel, yblocks, Xblocks, seed, pod):
             out.scores[f"qr_weight_{axis}"] = picks[0][1]
 
 
-def _physics_sets(out, blocks, Xblocks, responses, axes, k_max):
-    """``greedy-physics``: one set for every axis, leave-one-block-out over the training records and the step
-    responses, each axis weighted by 1 / its training peak drift."""
+def _physics_order(blocks, Xblocks, responses, axes, k_max):
+    """``greedy-physics``'s ``(order, objective per step, each candidate alone)``: leave-one-block-out over the
+    training records and the step responses, each axis weighted by 1 / its training peak drift."""
+    axes = sorted(axes)        # the targets' order must not change the sums the greedy steps compare
     Ytr = [np.column_stack([zero_referenced(r.drift[a])[idx] for a in axes]) for r, idx in blocks]
     weights = 1.0 / np.maximum(np.max([np.abs(Y).max(axis=0) for Y in Ytr], axis=0), 1e-12)
-    order, _hist, alone = greedy_loso(
+    return greedy_loso(
         Xblocks + [zero_referenced(r.temperatures) for r in responses],
         Ytr + [np.column_stack([zero_referenced(r.drift[a]) for a in axes]) for r in responses], k_max,
         target_weights=weights)
+
+
+def _physics_sets(out, blocks, Xblocks, responses, axes, k_max):
+    """``greedy-physics``: one set for every axis (see :func:`_physics_order`), into ``out``."""
+    order, _hist, alone = _physics_order(blocks, Xblocks, responses, axes, k_max)
     for axis in axes:
         out.sets[("greedy-physics", axis)] = [order[:k] for k in range(1, k_max + 1)]
     out.scores["physics_alone"] = alone
+
+
+def select_one(records: list[Record], responses: list[Record], method: str, axis: str, axes: tuple, k: int,
+               max_rows: int = 2000) -> list[int]:
+    """The ``k`` sensors ``method`` chooses for ``axis`` on ``records``, as :func:`select_sets` would, for one K.
+
+    Used to choose again on the same scenarios with the sensor noise drawn anew: how much a chosen set owes to
+    one noise draw.
+
+    Parameters
+    ----------
+    records, responses : list of Record
+        Training records and step responses, as for :func:`select_sets` (°C, µm).
+    method : str
+        A name from :data:`METHODS`.
+    axis : str
+        The drift axis.
+    axes : tuple of str
+        Every drift axis of the study (``greedy-physics`` chooses one set for them all).
+    k : int
+        Sensors to choose.
+    max_rows : int
+        As for :func:`select_sets`.
+
+    Returns
+    -------
+    list of int
+        Candidate indices, in the order the method ranks them.
+    """
+    blocks, Xblocks = _training_blocks(records, max_rows)
+    if method == "greedy-physics":
+        return [int(i) for i in _physics_order(blocks, Xblocks, responses, axes, k)[0]]
+    yblocks = [zero_referenced(r.drift[axis])[idx] for r, idx in blocks]
+    if method == "greedy-loso":
+        return [int(i) for i in greedy_loso(Xblocks, yblocks, k)[0]]
+    Xsel, ysel = np.vstack(Xblocks), np.concatenate(yblocks)
+    if method == "qr-drift":
+        return [int(i) for i in qr_drift(Xsel, ysel, k)[0]]
+    return [int(i) for i in SeedSelector(Xsel, random_state=0).select(method, k, seed_scores(Xsel, ysel))]
