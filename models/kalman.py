@@ -6,10 +6,10 @@ The model, with inputs ``u`` held (or averaged) over each step of ``dt`` s::
     y[k]   = H x[k] + J u[k] + v[k],    v ~ N(0, R)
 
 :func:`discretize` turns a continuous model ``ẋ = A x + B u`` (with a
-continuous process-noise intensity) into ``F, G, Q``; :class:`KalmanFilter`
-fuses measurements that may be missing (NaN) at any step, and estimates any
-other linear output ``z = L x + M u`` (a drift nobody measures) with its
-variance.  Arrays only: the models that use it (a thermal ROM, a grey-box RC
+continuous process-noise intensity) into ``F, G, Q`` for any step, however
+stiff the model; :class:`KalmanFilter` fuses measurements that may be missing
+(NaN) at any step, and estimates any other linear output ``z = L x + M u`` (a
+drift nobody measures) with its variance.  Arrays only: the models that use it (a thermal ROM, a grey-box RC
 network) supply the matrices.
 """
 
@@ -21,10 +21,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import cho_factor, cho_solve, expm
 
+#: Largest ‖A‖₁·h of the Van Loan step: e^{‖A‖h} ≤ e, so its blocks e^{−Ah} and e^{Aᵀh} stay near 1 and their
+#: product keeps full precision (at ‖A‖·dt ≈ 700 e^{−A dt} overflows; long before, it cancels to noise).
+VAN_LOAN_SPAN = 1.0
+
 
 def discretize(A: ArrayLike, B: ArrayLike, dt: float, noise_intensity: ArrayLike | None = None
                ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64] | None]:
-    """Exact discretisation of ``ẋ = A x + B u + w`` for inputs constant over a step of ``dt`` s.
+    """Exact discretisation of ``ẋ = A x + B u + w`` for inputs constant over a step of ``dt`` s (any dt ≥ 0).
 
     Parameters
     ----------
@@ -36,24 +40,66 @@ def discretize(A: ArrayLike, B: ArrayLike, dt: float, noise_intensity: ArrayLike
 
     Returns
     -------
-    F, G, Q : the step matrices; ``Q = ∫₀^dt e^{As} Q_c e^{Aᵀs} ds`` (Van Loan), or
-        ``None`` when no intensity is given.
+    F, G, Q : the step matrices; ``Q = ∫₀^dt e^{As} Q_c e^{Aᵀs} ds`` (:func:`noise_covariance`), or ``None``
+        when no intensity is given.
+
+    Raises
+    ------
+    ValueError
+        If ``dt`` is negative or not finite.
     """
+    if not (np.isfinite(dt) and dt >= 0):
+        raise ValueError(f"discretize: the step must be a finite number of seconds ≥ 0, got {dt}")
     A = np.atleast_2d(np.asarray(A, float))
     B = np.asarray(B, float).reshape(A.shape[0], -1)
     n, m = B.shape
     block = np.zeros((n + m, n + m))
     block[:n, :n], block[:n, n:] = A, B
-    step = expm(block * dt)
+    step = expm(block * dt)      # e^{A dt} decays: scipy's scaling and squaring is stable for any dt
     F, G = step[:n, :n], step[:n, n:]
     if noise_intensity is None:
         return F, G, None
+    return F, G, noise_covariance(A, noise_intensity, dt)
+
+
+def noise_covariance(A: ArrayLike, noise_intensity: ArrayLike, dt: float) -> NDArray[np.float64]:
+    """``Q = ∫₀^dt e^{As} Q_c e^{Aᵀs} ds``: Van Loan over a short step h, then doubled up to ``dt``.
+
+    Van Loan's block exponential holds e^{−Ah}, which grows as fast as the stiffest mode decays: over a
+    long step it overflows (NaN) or cancels.  So it is taken over h = dt / 2ᵏ with ‖A‖₁·h ≤
+    :data:`VAN_LOAN_SPAN`, and ``Q(2h) = Q(h) + e^{Ah} Q(h) e^{Aᵀh}`` (exact) doubles it k times — a sum of
+    positive semi-definite terms, so nothing cancels, whatever dt.
+
+    Parameters
+    ----------
+    A : (n, n) array, 1/s
+        The continuous state matrix.
+    noise_intensity : (n, n) array
+        ``Q_c``, state unit² per s.
+    dt : float
+        Step, s (≥ 0).
+
+    Returns
+    -------
+    numpy.ndarray
+        (n, n) symmetric ``Q``, state unit².
+    """
+    A = np.atleast_2d(np.asarray(A, float))
     Qc = np.asarray(noise_intensity, float)
+    n = A.shape[0]
+    span = float(np.abs(A).sum(axis=0).max()) * dt
+    doublings = int(np.ceil(np.log2(span / VAN_LOAN_SPAN))) if span > VAN_LOAN_SPAN else 0
+    h = dt / 2.0 ** doublings
     van_loan = np.zeros((2 * n, 2 * n))
     van_loan[:n, :n], van_loan[:n, n:], van_loan[n:, n:] = -A, Qc, A.T
-    E = expm(van_loan * dt)
-    Q = E[n:, n:].T @ E[:n, n:]
-    return F, G, 0.5 * (Q + Q.T)
+    E = expm(van_loan * h)
+    F = E[n:, n:].T
+    Q = F @ E[:n, n:]
+    for _ in range(doublings):
+        Q = 0.5 * (Q + Q.T)
+        Q = Q + F @ Q @ F.T
+        F = F @ F
+    return 0.5 * (Q + Q.T)
 
 
 @dataclass

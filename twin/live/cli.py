@@ -23,8 +23,14 @@ if TYPE_CHECKING:
 #: (order 80, Z axis, k = 6; model-based, no record used).
 DEFAULT_THERMOMETERS = ("T18", "T26", "T23", "T22", "T16", "T09")
 DEFAULT_SPEED = 600.0
-#: Exit code of a session that fused no sample or ended without a connection to the server.
+#: Exit code of a session that fused no sample, ended without a connection to the server, or stopped on an
+#: estimate that is not finite.
 EXIT_NOT_OBSERVED = 1
+#: Exit code of a session ended by Ctrl-C: the shell's code for a process ended by SIGINT (128 + 2), as ``twin``'s.
+EXIT_INTERRUPTED = 130
+#: Which bands the calibration checked (docs/live.md, "Calibration protocol"), said in every summary.
+BANDS_NOTE = ("bands: the Z band's coverage is calibrated and checked on held-out FE records (docs/live.md); "
+              "the X and Y bands come from the same model but their coverage was never checked")
 #: The dataset channel kinds a replay option can name (a measured CSV's °C columns are all "temperature";
 #: a thermometer may be a camera spot).
 OPTION_KINDS = {"--spindle": ("spindle_speed",), "--room-air": ("air", "ambient", "temperature"),
@@ -151,12 +157,28 @@ async def replay_session(dataset: Dataset, thermometers: list[str], observer: Re
         client = LiveClient(server.endpoint, node_map, observer, log_path, late_after_s)
         until = float(dataset.time_s[-1])
         task = asyncio.create_task(client.run(until_time_s=until, max_wall_s=30.0 + until / speed * 5))
-        while not client._subscribed and not task.done():
-            await asyncio.sleep(0.01)
-        if task.done():
-            return task.result(), 0.0
-        wall = await server.replay(dataset.time_s, values, speed)
-        return await task, wall
+        try:
+            return await _replay_to(client, task, server, dataset.time_s, values, speed)
+        finally:
+            if not task.done():       # Ctrl-C: the server must outlive its client's disconnect
+                task.cancel()
+                await asyncio.gather(task, return_exceptions=True)
+
+
+async def _replay_to(client, task, server, times, values, speed):
+    """Replay once ``client`` has subscribed; ``(its stats, the replay's wall s)``."""
+    import asyncio
+
+    while not client._subscribed and not task.done():
+        await asyncio.sleep(0.01)
+    if task.done():
+        return task.result(), 0.0
+    replay = asyncio.create_task(server.replay(times, values, speed))
+    await asyncio.wait([replay, task], return_when=asyncio.FIRST_COMPLETED)
+    if not replay.done():         # the client stopped first (interrupted, failed): nobody is listening
+        replay.cancel()
+        return await task, 0.0
+    return await task, replay.result()
 
 
 def _run_replay(args):
@@ -227,10 +249,13 @@ def _print_summary(stats, thermometers, dataset):
     print(f"fused {stats.samples} samples in {stats.wall_s:.1f} s ({rate:.0f} samples/s) from "
           f"{', '.join(thermometers)} + spindle speed + room air; late {stats.late}, missing readings "
           f"{stats.missing}, reconnects {stats.reconnects}, failed connection attempts {stats.failed_attempts}")
+    if stats.rejected:
+        print(f"readings left out: {stats.rejected}")
     if stats.last is not None:
         e = stats.last
         print(f"at t = {e.time_s:g} s: " + ", ".join(f"{a} {e.drift_um[j]:.2f} ± {e.band_um[j]:.2f} µm"
                                                      for j, a in enumerate(AXES)) + " (95 %)")
+        print(BANDS_NOTE)
     if dataset is not None and "Z" in dataset and stats.history:
         t = np.array([h[0] for h in stats.history])
         z = np.array([h[1][2] for h in stats.history])
@@ -265,6 +290,49 @@ def _not_observed(stats, server):
     return None
 
 
+def _log_state(path):
+    """What a partial log at ``path`` is now (None: not there), to tell whether this session wrote it."""
+    from .client import partial_path
+
+    try:
+        return partial_path(path).stat().st_mtime_ns
+    except (OSError, TypeError):               # no such file, or no --log
+        return None
+
+
+def _partial_log(path, before):
+    """'; its partial log is kept as FILE.part' when this session left one (its state changed from ``before``)."""
+    from .client import partial_path
+
+    state = _log_state(path)
+    return f"; its partial log is kept as {partial_path(path)}" if state is not None and state != before else ""
+
+
+def _observe(args):
+    """Run the session; Ctrl-C, a failing observer and errors say what became of the log."""
+    from .client import ObserverFailure, SessionInterrupted
+
+    before = _log_state(args.log)
+    try:
+        return _run_replay(args) if args.replay else _run_endpoint(args)
+    except (KeyboardInterrupt, SessionInterrupted):
+        print(f"twin live: interrupted{_partial_log(args.log, before) or '; no log was written'}", file=sys.stderr)
+        raise _Ended(EXIT_INTERRUPTED) from None
+    except ObserverFailure as exc:
+        print(f"twin live: {exc}{_partial_log(args.log, before)}", file=sys.stderr)
+        raise _Ended(EXIT_NOT_OBSERVED) from None
+    except TwinInputError as exc:
+        raise TwinInputError(f"{exc}{_partial_log(args.log, before)}") from None
+
+
+class _Ended(Exception):
+    """The session ended early, already explained on stderr, with the exit code ``code``."""
+
+    def __init__(self, code):
+        super().__init__(code)
+        self.code = code
+
+
 def cmd_live(args: argparse.Namespace) -> int:
     """``twin live``: replay (``--replay``) or observe a machine (``--endpoint``); print the summary.
 
@@ -276,21 +344,31 @@ def cmd_live(args: argparse.Namespace) -> int:
     Returns
     -------
     int
-        0, or :data:`EXIT_NOT_OBSERVED` when no sample was fused or the session ended without a connection
-        (after the summary, with the reason on stderr).
+        0; :data:`EXIT_NOT_OBSERVED` when no sample was fused, the session ended without a connection or the
+        observer's estimate was not finite; :data:`EXIT_INTERRUPTED` after Ctrl-C (each with the reason on
+        stderr, naming the partial log the session left, if any).
     """
     if not 0.0 <= args.late_after < float("inf"):
         raise TwinInputError(f"--late-after must be a finite number of seconds ≥ 0, got {args.late_after:g}")
+    from pathlib import Path
+
     if args.log:
         from ..infra.outdir import check_output_file
-        check_output_file(args.log, args.overwrite, inputs=_input_files(args))
-    stats, thermometers, dataset = _run_replay(args) if args.replay else _run_endpoint(args)
+        from .client import partial_path
+
+        for path in (args.log, partial_path(args.log)):    # a partial log is a session's record too
+            check_output_file(path, args.overwrite, inputs=_input_files(args))
+    try:
+        stats, thermometers, dataset = _observe(args)
+    except _Ended as ended:
+        return ended.code
     _print_summary(stats, thermometers, dataset)
-    if args.log and stats.samples:              # the log of a session that fused nothing is removed
-        print(f"log written to {args.log}")
+    if stats.log is not None and stats.log == Path(args.log):
+        print(f"log written to {stats.log}")
     reason = _not_observed(stats, f"--endpoint {args.endpoint}" if args.endpoint else "the replay server")
     if reason:
-        print(f"twin live: {reason}", file=sys.stderr)
+        kept = f"; its partial log is kept as {stats.log}" if stats.log is not None else ""
+        print(f"twin live: {reason}{kept}", file=sys.stderr)
         return EXIT_NOT_OBSERVED
     return 0
 
@@ -304,8 +382,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         The ``twin`` subparsers.
     """
     p = sub.add_parser("live", help="run the drift observer on a machine's OPC UA sensors (or a replayed dataset)",
-                       epilog=f"Exit code: 0 done, {EXIT_NOT_OBSERVED} no sample fused or the session ended "
-                                  "without a connection to the server, 2 bad input.")
+                       epilog=f"Exit code: 0 done, {EXIT_NOT_OBSERVED} no sample fused, the session ended "
+                                  "without a connection to the server or the estimate was not finite, 2 bad "
+                                  f"input, {EXIT_INTERRUPTED} interrupted (Ctrl-C).")
     p.add_argument("--endpoint", help="OPC UA server, opc.tcp://HOST:PORT/…")
     p.add_argument("--node-map", help="TOML file: [inputs] spindle_speed, room_air; [thermometers]; [outputs]")
     p.add_argument("--replay", metavar="DATASET", help="serve this dataset (CSV) on a local OPC UA server and run "
@@ -325,7 +404,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--spindle", default="spindle", help="replay: the dataset channel of the spindle speed, rpm")
     p.add_argument("--machine", default="vmc_ram", help="machine name or TOML path (default vmc_ram)")
     p.add_argument("--order", type=int, default=DEFAULT_ORDER, help=f"ROM order (default {DEFAULT_ORDER})")
-    p.add_argument("--log", help="CSV log of the estimates (µm), written as FILE.part and renamed at the end")
+    p.add_argument("--log", help="CSV log of the estimates (µm), written as FILE.part and renamed to FILE when the "
+                                 "session ends as asked (an interrupted or failed one leaves FILE.part)")
     p.add_argument("--duration", type=float, help="stop after this many wall seconds (default: run until stopped)")
     p.add_argument("--late-after", type=float, default=1.0,
                    help="wall seconds to wait for a sample's missing readings before fusing it (default 1)")

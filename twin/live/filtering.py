@@ -106,8 +106,8 @@ class ModalKalmanFilter(KalmanFilter):
         self.x = F @ self.x + self.G @ u
         return self
 
-    def update(self, y: np.ndarray, u: np.ndarray) -> float:
-        """Fuse the readings ``y`` (NaN = missing) taken with the input ``u``.
+    def innovations(self, y: np.ndarray, u: np.ndarray) -> tuple:
+        """The innovation of the readings ``y`` and its covariance, as :meth:`update` uses them.
 
         Parameters
         ----------
@@ -118,6 +118,32 @@ class ModalKalmanFilter(KalmanFilter):
 
         Returns
         -------
+        tuple
+            ``(seen, ν, H P, S)``: the readings present (bool, (n_thermometers,)), their innovation (°C), H P with
+            H their rows, and the innovation covariance S (°C²).
+        """
+        seen = np.isfinite(y)
+        H = self.H[seen] if not seen.all() else self.H
+        innovation = y[seen] - H @ self.x - self.J[seen] @ u
+        HP = H @ self.P
+        S = HP @ H.T
+        S.flat[::len(S) + 1] += self._variances[seen]
+        return seen, innovation, HP, S
+
+    def update(self, y: np.ndarray, u: np.ndarray, prepared: tuple | None = None) -> float:
+        """Fuse the readings ``y`` (NaN = missing) taken with the input ``u``.
+
+        Parameters
+        ----------
+        y : ndarray, shape (n_thermometers,)
+            Readings, °C; NaN = missing.
+        u : ndarray, shape (n_inputs,)
+            The plant inputs at the reading.
+        prepared : tuple, optional
+            :meth:`innovations` of these readings in the present state, if already computed.
+
+        Returns
+        -------
         float
             The normalised innovation squared (χ² with as many degrees of freedom as readings), NaN if
             nothing was read.
@@ -125,11 +151,7 @@ class ModalKalmanFilter(KalmanFilter):
         seen = np.isfinite(y)
         if not seen.any():
             return np.nan
-        H = self.H[seen] if not seen.all() else self.H
-        innovation = y[seen] - H @ self.x - self.J[seen] @ u
-        HP = H @ self.P
-        S = HP @ H.T
-        S.flat[::len(S) + 1] += self._variances[seen]
+        _, innovation, HP, S = self.innovations(y, u) if prepared is None else prepared
         solved = np.linalg.solve(S, np.column_stack([HP, innovation]))
         gain_t, weighted = solved[:, :-1], solved[:, -1]        # Kᵀ = S⁻¹ H P, S⁻¹ ν
         nis = float(innovation @ weighted)

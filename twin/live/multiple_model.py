@@ -26,7 +26,15 @@ from numpy.typing import ArrayLike
 from ..errors import TwinInputError
 from ..rom.reduction import ReducedModel
 from .model import NoiseModel, concentrated_moment
-from .observer import NOISE, Z95, Adaptation, DriftObserver, Estimate, RecordRunner
+from .observer import (
+    NOISE,
+    Z95,
+    Adaptation,
+    DriftObserver,
+    Estimate,
+    RecordRunner,
+    gated,
+)
 
 
 class MultipleModelObserver(RecordRunner):
@@ -88,7 +96,7 @@ class MultipleModelObserver(RecordRunner):
         time_s : float
             Machine time of the sample, s; after the previous sample's.
         spindle_rpm, room_C : float
-            Spindle speed (rpm) and room air (°C); NaN keeps the previous input.
+            Spindle speed (rpm) and room air (°C); NaN keeps that input's last reading.
         temperatures_C : array_like
             (p,) thermometer readings, °C (NaN = missing).
 
@@ -98,9 +106,14 @@ class MultipleModelObserver(RecordRunner):
             The mixture's estimate; None until a room air reading has started the observer.
         """
         before = self.time_s
-        estimates = [member.step(time_s, spindle_rpm, room_C, temperatures_C) for member in self.members]
-        if estimates[0] is None:
+        y = np.asarray(temperatures_C, float).reshape(len(self.thermometers))
+        steps = [member.advance(time_s, spindle_rpm, room_C) for member in self.members]
+        if not self.members[0].started:
             return None
+        # one gate for every hypothesis (the likelihoods compare the same readings): a reading is rejected only
+        # if even the hypothesis that predicts it best finds it impossible
+        rejected = gated(np.min([member.innovation_scores(y) for member in self.members], axis=0))
+        estimates = [member.fuse(y, dt, rejected) for member, dt in zip(self.members, steps)]
         if estimates[0].used:
             self._weigh(0.0 if before is None else float(time_s) - before)
         return self._mixture(estimates)
@@ -120,7 +133,7 @@ class MultipleModelObserver(RecordRunner):
         mean = w @ means
         band = Z95 * np.sqrt(w @ (variances + (means - mean) ** 2))
         return Estimate(estimates[0].time_s, mean, band, w @ np.array([e.temperatures_C for e in estimates]),
-                        estimates[0].used, float(w @ [e.inflation for e in estimates]))
+                        estimates[0].used, float(w @ [e.inflation for e in estimates]), estimates[0].rejected)
 
     def expected_readings(self, time_s: float, spindle_rpm: float, room_C: float) -> np.ndarray:
         """The weighted readings the hypotheses predict for the next sample (°C), without changing the observer.
