@@ -97,7 +97,11 @@ class SampleAssembler:
         """
         t = round(time_s + self.offset, 6)
         if t > self.done_until:
-            self._behind.clear()     # a newer value: what came behind were stragglers of fused samples
+            # this node's clock did not jump: what it sent behind was late for fused samples.  Only its own: a
+            # batch holds each node's values in turn, so another node's straggler may come after a jumped value
+            for values in self._behind.values():
+                values.pop(key, None)
+            self._behind = {stamp: values for stamp, values in self._behind.items() if values}
             self._file(key, t, value, status, now)
             return
         self.late += 1
