@@ -67,3 +67,132 @@ def test_sigint_exits_with_one_line_and_code_130(phase, seen, tmp_path):
     assert list(tmp_path.iterdir()) == []            # no result folder, not even a partial one
     if phase == "simulating":
         assert "step/s" in stderr                    # the bar counts time steps
+
+
+# A Ctrl-C whose KeyboardInterrupt a library swallows (a bare ``except:`` in an import): the run once went on to
+# simulate all 9600 steps of etve_160h and exit 0. The signal is real; only the swallowing is staged.
+
+def swallow_a_ctrl_c():
+    """Send this process a real SIGINT, inside a bare ``except`` as a careless library would."""
+    try:
+        signal.raise_signal(signal.SIGINT)
+    except BaseException:  # noqa: BLE001, S110 - the point of the test
+        pass
+
+
+def test_a_swallowed_ctrl_c_still_stops_the_run_before_its_first_step(tmp_path, monkeypatch, capsys):
+    from twin.cli import main
+    from twin.run import workflows
+
+    real = workflows.run_scenario
+    steps = []
+
+    def run_scenario(*args, progress, **kwargs):
+        swallow_a_ctrl_c()
+
+        def counted(done, total):
+            steps.append(done)
+            progress(done, total)
+
+        return real(*args, progress=counted, **kwargs)
+
+    monkeypatch.setattr(workflows, "run_scenario", run_scenario)
+    assert main(["run", "etve_160h", "--out", str(tmp_path / "run")]) == 130
+    assert steps == [1]                               # stopped at the first progress step, not after 9600
+    assert capsys.readouterr().err.strip().splitlines()[-1] == MESSAGE
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("then", ["returns", "fails"])
+def test_a_swallowed_ctrl_c_in_a_command_without_progress_writes_nothing(then, tmp_path, monkeypatch, capsys):
+    """No progress step to raise it again: the result is not written, and the error it led to is not shown."""
+    import twin.run.cli as run_cli
+    from twin.cli import main
+    from twin.core.files import write_text_atomic
+    from twin.errors import TwinInputError
+
+    out = tmp_path / "x.txt"
+
+    def command(args):
+        swallow_a_ctrl_c()
+        if then == "fails":
+            raise TwinInputError("a mesh that the interrupted import left half-built")
+        write_text_atomic(out, "a result")
+        return 0
+
+    monkeypatch.setattr(run_cli, "cmd_mesh", command)
+    assert main(["mesh"]) == 130
+    assert capsys.readouterr().err.strip().splitlines() == ["twin mesh: interrupted; no result was written"]
+    assert list(tmp_path.iterdir()) == []             # neither the file nor its .partial
+
+
+def test_a_recorded_ctrl_c_is_forgotten_by_the_next_command(tmp_path, capsys):
+    from twin.cli import main
+    from twin.core.interrupt import request_interrupt
+
+    request_interrupt()                               # as an earlier command in this process left it
+    assert main(["run", "no_such_scenario"]) == 2     # the new command runs, and fails for its own reason
+    assert "unknown scenario" in capsys.readouterr().err
+
+
+@pytest.fixture
+def recorded_ctrl_c():
+    """A Ctrl-C recorded while its KeyboardInterrupt went nowhere; forgotten after the test."""
+    from twin.core.interrupt import clear_interrupt, request_interrupt
+
+    request_interrupt()
+    yield
+    clear_interrupt()
+
+
+def test_a_recorded_ctrl_c_stops_progress_and_every_kind_of_result_file(recorded_ctrl_c, tmp_path):
+    from twin.core.files import write_text_atomic
+    from twin.infra.outdir import atomic_directory
+    from twin.infra.progress import progress_bar
+
+    with pytest.raises(KeyboardInterrupt):
+        progress_bar("simulating", unit="step")(1, 10)
+    with pytest.raises(KeyboardInterrupt):
+        write_text_atomic(tmp_path / "model.json", "{}")
+    with pytest.raises(KeyboardInterrupt), atomic_directory(tmp_path / "run") as staging:
+        (staging / "summary.md").write_text("done")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_recorded_ctrl_c_leaves_no_fmu(recorded_ctrl_c, rom, tmp_path):
+    from twin.fmu.export import export_fmu
+
+    with pytest.raises(KeyboardInterrupt):
+        export_fmu(rom, tmp_path / "twin.fmu", kind="python")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_recorded_ctrl_c_ends_a_live_session_within_seconds(rom, tmp_path):
+    import asyncio
+
+    from twin.core.interrupt import clear_interrupt, request_interrupt
+    from twin.live.cli import DEFAULT_THERMOMETERS, free_port
+    from twin.live.client import LiveClient, SessionInterrupted
+    from twin.live.observer import DriftObserver
+    from twin.live.replay import ReplayServer, default_node_map
+
+    thermometers = list(DEFAULT_THERMOMETERS)
+
+    async def session():
+        async with ReplayServer(["spindle", "T15", *thermometers], port=free_port()) as server:
+            client = LiveClient(server.endpoint, default_node_map(thermometers, "T15", index=server.index),
+                                DriftObserver(rom, thermometers), tmp_path / "log.csv")
+            task = asyncio.create_task(client.run(max_wall_s=60))
+            while not client._subscribed and not task.done():
+                await asyncio.sleep(0.01)
+            request_interrupt()                       # its KeyboardInterrupt went nowhere
+            started = asyncio.get_running_loop().time()
+            with pytest.raises(SessionInterrupted):
+                await task
+            return asyncio.get_running_loop().time() - started
+
+    try:
+        assert asyncio.run(session()) < 10            # not the 60 s the session was given
+    finally:
+        clear_interrupt()
+    assert not (tmp_path / "log.csv").exists()          # the log is not taken for a finished session

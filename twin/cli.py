@@ -18,6 +18,7 @@ import signal
 import sys
 
 from .compensation import cli as compensation_cli
+from .core.interrupt import clear_interrupt, interrupt_requested, raise_if_interrupted, request_interrupt
 from .errors import user_errors
 from .fmu import cli as fmu_cli
 from .gap import cli as gap_cli
@@ -57,8 +58,12 @@ def _exit_now(signum, frame):
 
 
 def _interrupt_once(signum, frame):
-    """The first Ctrl-C of a command unwinds it (partial results are removed); a second one leaves at once."""
+    """The first Ctrl-C of a command unwinds it (partial results are removed); a second one leaves at once.
+
+    The request is also recorded, so that a KeyboardInterrupt a library swallowed is raised again at the
+    next progress step or before any result is written (:mod:`twin.core.interrupt`)."""
     _on_sigint(_exit_now)
+    request_interrupt()
     raise KeyboardInterrupt
 
 
@@ -75,6 +80,11 @@ def _command_name(args):
     """``run``, or ``fmu validate`` for a command with subcommands."""
     sub = getattr(args, f"{args.command}_command", None)
     return args.command if sub is None else f"{args.command} {sub}"
+
+
+def _interrupted(args):
+    print(f"twin {_command_name(args)}: interrupted; no result was written", file=sys.stderr)
+    return INTERRUPTED
 
 
 def _file_error(exc):
@@ -122,24 +132,27 @@ def main(argv: list[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
         _notices_to_stderr()
+        clear_interrupt()
         _on_sigint(_interrupt_once)
         try:
             try:
                 code = args.func(args)
+                raise_if_interrupted()
             finally:                       # the command has unwound: nothing left to clean up
                 _on_sigint(_exit_now)
                 close_bars()
         except user_errors() as exc:
             message = str(exc)
         except KeyboardInterrupt:
-            print(f"twin {_command_name(args)}: interrupted; no result was written", file=sys.stderr)
-            return INTERRUPTED
+            return _interrupted(args)
         except OSError as exc:
             message = _file_error(exc)
-            if message is None:
+            if message is None and not interrupt_requested():
                 raise
         else:
             return code or 0
+        if interrupt_requested():          # the error followed a Ctrl-C that a library swallowed
+            return _interrupted(args)
         print(f"twin {_command_name(args)}: error: {message}", file=sys.stderr)
         return 2
     finally:

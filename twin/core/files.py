@@ -4,6 +4,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from .interrupt import raise_if_interrupted
+
 
 def write_text_atomic(path: str | Path, text: str) -> Path:
     """Write ``text`` (UTF-8) to a hidden ``.<name>.partial`` beside ``path``, then rename it into place.
@@ -30,6 +32,11 @@ def write_text_atomic(path: str | Path, text: str) -> Path:
         file.write(text)
         file.flush()
         os.fsync(file.fileno())
+    try:
+        raise_if_interrupted()           # no result after a Ctrl-C, even one a library swallowed
+    except KeyboardInterrupt:
+        tmp.unlink(missing_ok=True)
+        raise
     os.replace(tmp, path)
     sync_folder(path.parent)
     return path

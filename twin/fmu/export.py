@@ -41,6 +41,7 @@ from xml.etree.ElementTree import Element, SubElement, fromstring, tostring
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..core.interrupt import raise_if_interrupted
 from ..core.machine_definition import room_zone
 from ..core.scenario import Scenario, load_scenario
 from ..infra.cli_common import check_distinct
@@ -206,6 +207,7 @@ def export_fmu(rom: ReducedModel, out: Path | str, kind: Literal["python", "nati
         if problems:
             raise FMUError(f"{out}: not written: the exported FMU has {len(problems)} problem(s): "
                            + " | ".join(problems))
+        raise_if_interrupted()           # no FMU after a Ctrl-C, even one a library swallowed
     except BaseException:                 # an interrupted or refused export leaves no file that looks valid
         partial.unlink(missing_ok=True)
         raise

@@ -35,6 +35,7 @@ from datetime import datetime, timezone
 from pathlib import Path, PurePosixPath
 
 from ..core.files import sync_file, sync_folder, write_text_atomic
+from ..core.interrupt import raise_if_interrupted
 from ..errors import TwinInputError
 
 MARKER = ".thermal-twin-output.json"
@@ -221,6 +222,7 @@ def _project_version():
 
 
 def _commit(staging, out, command):
+    raise_if_interrupted()               # no result after a Ctrl-C, even one a library swallowed
     files = _staged_files(staging)
     owned = _owned_files(out) or set()
     blocked = [rel for rel in files if _blocked(out, rel, owned)]

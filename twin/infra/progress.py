@@ -4,11 +4,13 @@ from __future__ import annotations
 import weakref
 from collections.abc import Callable
 
+from ..core.interrupt import raise_if_interrupted
+
 _open_bars = weakref.WeakSet()
 
 
 def progress_bar(description: str, unit: str) -> Callable[[int, int], None]:
-    """A ``progress(done, total)`` callback drawing a tqdm bar.
+    """A ``progress(done, total)`` callback drawing a tqdm bar; it raises KeyboardInterrupt after a Ctrl-C.
 
     The unit is required: the rate shown (e.g. ``scenario/s``) is only right if it names what is counted.
 
@@ -29,6 +31,7 @@ def progress_bar(description: str, unit: str) -> Callable[[int, int], None]:
     bar = {"tqdm": None}
 
     def update(done, total):
+        raise_if_interrupted()          # a Ctrl-C whose KeyboardInterrupt a library swallowed stops the work here
         if bar["tqdm"] is None:
             # delay > 0: the constructor draws nothing, so the bar is known to close_bars before its first
             # line reaches stderr (a Ctrl-C between the two left the line open, and the message joined it)

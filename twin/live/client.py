@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..core.interrupt import raise_if_interrupted
 from ..errors import TwinInputError
 from .nodemap import AXES, NodeMap
 from .observer import INNOVATION_GATE
@@ -451,6 +452,7 @@ class LiveClient:
             return max_wall_s - (time.monotonic() - start)
 
         def stop():
+            raise_if_interrupted()       # a Ctrl-C whose KeyboardInterrupt asyncua or asyncio swallowed
             return self.samples.done_until >= until_time_s or left() <= 0
 
         delay, sessions, ended = self.backoff_s, 0, False
