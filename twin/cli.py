@@ -18,7 +18,15 @@ import signal
 import sys
 
 from .compensation import cli as compensation_cli
-from .core.interrupt import clear_interrupt, interrupt_requested, raise_if_interrupted, request_interrupt
+from .core.interrupt import (
+    cancel_delivery,
+    clear_interrupt,
+    deliver_again_soon,
+    interrupt_requested,
+    raise_if_interrupted,
+    request_interrupt,
+    safe_to_raise,
+)
 from .errors import user_errors
 from .fmu import cli as fmu_cli
 from .gap import cli as gap_cli
@@ -60,10 +68,14 @@ def _exit_now(signum, frame):
 def _interrupt_once(signum, frame):
     """The first Ctrl-C of a command unwinds it (partial results are removed); a second one leaves at once.
 
-    The request is also recorded, so that a KeyboardInterrupt a library swallowed is raised again at the
-    next progress step or before any result is written (:mod:`twin.core.interrupt`)."""
-    _on_sigint(_exit_now)
+    The request is recorded first, so that a KeyboardInterrupt a library swallows is raised again at the
+    next progress step or before any result is written; during an import or a finaliser it is not raised
+    but delivered again a moment later (:mod:`twin.core.interrupt`)."""
     request_interrupt()
+    if not safe_to_raise(frame):
+        deliver_again_soon()
+        return
+    _on_sigint(_exit_now)
     raise KeyboardInterrupt
 
 
@@ -140,6 +152,7 @@ def main(argv: list[str] | None = None) -> int:
                 raise_if_interrupted()
             finally:                       # the command has unwound: nothing left to clean up
                 _on_sigint(_exit_now)
+                cancel_delivery()
                 close_bars()
         except user_errors() as exc:
             message = str(exc)
