@@ -292,22 +292,31 @@ def test_output_nodes_are_checked_at_the_start_and_a_float_one_gets_floats(rom, 
 
 
 # ----------------------------------------------------------------------------- D6, D7: clocks and stale nodes
-def test_a_source_clock_that_jumps_back_is_said_once_and_re_anchored(rom, caplog):
+def _twenty_samples(rom, sample_of, *, late_after_s):
+    """The stats of a client while the server publishes 20 samples: ``sample_of(k)`` gives sample k's source
+    timestamp (s), its values and the channels they are for."""
     async def main():
         async with ReplayServer(CHANNELS, port=free_port()) as server:
-            # every sample waits for all its readings (a loaded machine must not fuse one early and count the
-            # rest late): what is late here is late for the clock alone
-            client = _client(server, rom, late_after_s=30.0)
+            client = _client(server, rom, late_after_s=late_after_s)
             task = asyncio.create_task(client.run(until_time_s=190.0, max_wall_s=60))
             await _until_subscribed(client, task)
             for k in range(20):
-                stamp = 10.0 * k - (3600.0 if k >= 10 else 0.0)          # the controller's clock set back 1 h
-                await server.publish(stamp, _sample(10.0 * k, rpm=9000.0))
+                await server.publish(*sample_of(k))
                 await asyncio.sleep(0.01)
             return await task
 
+    return asyncio.run(main())
+
+
+def test_a_source_clock_that_jumps_back_is_said_once_and_re_anchored(rom, caplog):
+    def sample_of(k):
+        stamp = 10.0 * k - (3600.0 if k >= 10 else 0.0)                  # the controller's clock set back 1 h
+        return stamp, _sample(10.0 * k, rpm=9000.0), CHANNELS
+
     caplog.set_level(logging.INFO, logger="thermal_twin")
-    stats = asyncio.run(main())
+    # every sample waits for all its readings (a loaded machine must not fuse one early and count the rest
+    # late): what is late here is late for the clock alone
+    stats = _twenty_samples(rom, sample_of, late_after_s=30.0)
     assert [h[0] for h in stats.history][-20:] == [10.0 * k for k in range(20)]
     assert stats.late == 0
     jumps = _warnings(caplog, "the timestamps jumped back 3590 s")
@@ -315,20 +324,13 @@ def test_a_source_clock_that_jumps_back_is_said_once_and_re_anchored(rom, caplog
 
 
 def test_a_thermometer_that_stops_updating_is_named_once(rom, caplog):
-    async def main():
-        async with ReplayServer(CHANNELS, port=free_port()) as server:
-            client = _client(server, rom, late_after_s=0.1)
-            task = asyncio.create_task(client.run(until_time_s=190.0, max_wall_s=60))
-            await _until_subscribed(client, task)
-            for k in range(20):
-                names = CHANNELS if k <= 5 else [c for c in CHANNELS if c != THERMOMETERS[0]]
-                values = dict(zip(CHANNELS, _sample(10.0 * k)))
-                await server.publish(10.0 * k, [values[n] for n in names], names)
-                await asyncio.sleep(0.01)
-            return await task
+    def sample_of(k):
+        names = CHANNELS if k <= 5 else [c for c in CHANNELS if c != THERMOMETERS[0]]
+        values = dict(zip(CHANNELS, _sample(10.0 * k)))
+        return 10.0 * k, [values[n] for n in names], names
 
     caplog.set_level(logging.INFO, logger="thermal_twin")
-    stats = asyncio.run(main())
+    stats = _twenty_samples(rom, sample_of, late_after_s=0.1)
     assert stats.samples >= 20
     stale = _warnings(caplog, "has not updated since")
     assert len(stale) == 1 and f"[thermometers] {THERMOMETERS[0]} = " in stale[0] and "since t = 50 s" in stale[0]
