@@ -126,8 +126,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         The subparsers of the ``twin`` command.
     """
     t = sub.add_parser("train", help="train a compensation model on datasets and save it (JSON, no pickle)")
-    t.add_argument("datasets", nargs="+", help=_datasets_help() + "; records in time order that continue one "
-                   "another are one record, the others separate records (each from rest for --model greybox)")
+    t.add_argument("datasets", nargs="+", help=_datasets_help() + "; in any order (fitted by first time stamp, "
+                   "then content); records whose clocks continue one another are one record, the others separate "
+                   "records (each from rest for --model greybox)")
     t.add_argument("--inputs", required=True, action="append", help="input channels, comma-separated")
     t.add_argument("--target", required=True, help="target channel, e.g. Z")
     t.add_argument("--observe", action="append", help="thermometers the model fuses while it runs (its Kalman "

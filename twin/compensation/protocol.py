@@ -16,6 +16,7 @@
 from __future__ import annotations
 
 import logging
+from bisect import bisect_right
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Literal
 
@@ -23,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from models.registry import model_traits
-from models.selection_cv import Selection, select_by_blocked_cv
+from models.selection_cv import SCHEMES, Selection, blocked_folds, record_blocks, select_by_blocked_cv
 
 from ..core.dataset import Dataset
 from ..errors import TwinInputError
@@ -32,6 +33,7 @@ from .records import (
     check_complete,
     continued_record,
     dataset_label,
+    distinct_labels,
     evenly_sampled,
     note_long_steps,
     repeats,
@@ -122,8 +124,8 @@ def auto_select(datasets: Iterable[Dataset], inputs: list[str], target: str,
     pool, left_out = _candidate_pool(datasets, inputs, candidates, zero_reference)
     record_starts = np.cumsum([len(ds) for ds in datasets])[:-1].tolist()
     try:
-        selection = select_by_blocked_cv(pool, np.vstack(X), np.concatenate(y),
-                                         np.concatenate([ds[speed_name] for ds in datasets]),
+        speed = np.concatenate([ds[speed_name] for ds in datasets])
+        selection = select_by_blocked_cv(pool, np.vstack(X), np.concatenate(y), speed,
                                          unit=datasets[0].info(target).unit, record_starts=record_starts)
     except ValueError as exc:     # the record's (one speed regime only); a candidate's failed fit is caught inside
         which = "this record" if len(datasets) == 1 else f"these {len(datasets)} records"
@@ -132,11 +134,21 @@ def auto_select(datasets: Iterable[Dataset], inputs: list[str], target: str,
     if record_starts:
         selection.reason += (f" The {len(datasets)} records each start at rest and have blocks of their own; "
                              "none spans two.")
+        selection.folds = _fold_names_with_records(datasets, speed, record_starts)
     if left_out:
         selection.reason += " Left out: " + "; ".join(f"{', '.join(labels)} ({why})"
                                                       for why, labels in left_out.items()) + "."
     model, params = candidates[selection.chosen]
     return model, dict(params), selection
+
+
+def _fold_names_with_records(datasets, speed, record_starts):
+    """The fold names of :func:`~models.selection_cv.select_by_blocked_cv` on several records, each followed by
+    the record that holds its test block ("rolling-origin block 3 (day 2)"): the blocks are numbered across the
+    records in their canonical order, which a reader cannot see."""
+    folds = blocked_folds(record_blocks(speed, record_starts), SCHEMES, record_starts)
+    labels = distinct_labels(datasets)
+    return [f"{fold.name} ({labels[bisect_right(record_starts, fold.test[0])]})" for fold in folds]
 
 
 def _candidate_pool(datasets, inputs, candidates, zero_reference):

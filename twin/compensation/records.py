@@ -13,7 +13,6 @@ t = 0 gets as an added first row (:func:`with_rest_start`).
 from __future__ import annotations
 
 import logging
-from bisect import bisect_left
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -24,6 +23,7 @@ from models.speed import running
 
 from ..core.dataset import Dataset
 from ..errors import TwinInputError
+from .record_order import in_canonical_order
 
 log = logging.getLogger("thermal_twin")
 
@@ -238,68 +238,88 @@ def linear_bridge(before: ArrayLike, after: ArrayLike, n_rows: int) -> NDArray[n
 
 
 def joined_when_contiguous(datasets: Sequence[Dataset], names: Sequence[str]) -> list[Dataset]:
-    """Records that continue one another (each starts one sampling interval after the one before it ends, with
-    the same channels and units) joined into one, in the channels ``names``; the others as they are.
+    """Records that continue one another (each starts one sampling interval after another ends, with the same
+    channels and units) joined into one, in the channels ``names``; the others as they are; all in the canonical
+    order of :mod:`twin.compensation.record_order`, whatever order they were given in.
 
     A record cut into files (a day per file) is one history: the second file starts warm, so neither a
-    time-series model nor a zero reference at its own start fits it alone.
+    time-series model nor a zero reference at its own start fits it alone. The files are found to continue
+    one another by their clocks, not by the order they were given in; where two records start one interval
+    after a third ends, the first of them in the canonical order continues it.
 
     Parameters
     ----------
     datasets : sequence of Dataset
-        Records in the order given.
+        Records in any order.
     names : sequence of str
         The model's channels (inputs and target).
 
     Returns
     -------
     list of Dataset
-        As many as there are runs of contiguous records.
+        As many as there are runs of contiguous records, in the canonical order of their first records.
 
     Raises
     ------
     TwinInputError
-        A record continues one that is not given right before it (files out of time order): each would be
-        taken to start afresh, the later one warm.
+        A record that starts with rows of another again (the same file twice, or files that overlap).
     """
-    joined: list[Dataset] = []
-    for ds in datasets:
-        if joined and _continues(joined[-1], ds, names):
-            log.info("%s continues %s: trained on as one record", dataset_label(ds), dataset_label(joined[-1]))
-            joined[-1] = continued_record(joined[-1], ds, names)
+    ordered = in_canonical_order(datasets, names)
+    _check_no_repeats(ordered, names)
+    runs: list[list[Dataset]] = []
+    tails: list[tuple[float, float]] = []   # per run, its last record's end and sampling interval, s
+    for ds in ordered:   # by start time: a record comes after every record it may continue
+        k = next((k for k, (end, dt) in enumerate(tails) if abs(ds.time_s[0] - end - dt) <= CONTINUES_WITHIN * dt
+                  and _continues(runs[k][-1], ds, names)), None)
+        if k is None:
+            runs.append([ds])
+            tails.append((np.nan, np.nan))
+            k = len(runs) - 1
         else:
-            joined.append(ds)
-    _check_time_order(joined, names)
+            log.info("%s continues %s: trained on as one record", dataset_label(ds), dataset_label(runs[k][-1]))
+            runs[k].append(ds)
+        # a record of one row has no interval (NaN), so nothing continues it
+        tails[k] = (float(ds.time_s[-1]), sampling_interval(ds, strict=False) if len(ds) > 1 else np.nan)
+    joined = []
+    for run in runs:
+        record = run[0]
+        for later in run[1:]:
+            record = continued_record(record, later, names)
+        joined.append(record)
     return joined
 
 
-def _check_time_order(records, names):
-    """Refuse a record that continues another one that it does not follow (found by start time, so that a
-    year of daily files costs a sort, not every pair)."""
-    starts = sorted((float(ds.time_s[0]), k) for k, ds in enumerate(records))
-    for first in records:
-        if len(first) < 2:
-            continue
-        dt = sampling_interval(first, strict=False)
-        expected = float(first.time_s[-1]) + dt
-        at = bisect_left(starts, (expected - CONTINUES_WITHIN * dt, -1))
-        while at < len(starts) and starts[at][0] <= expected + CONTINUES_WITHIN * dt:
-            later = records[starts[at][1]]
-            if later is not first and _continues(first, later, names):
-                raise TwinInputError(f"{dataset_label(later)} continues {dataset_label(first)} (it starts one "
-                                     "sampling interval after it ends) but is not given right after it: give "
-                                     "the records in time order")
-            at += 1
+def _check_no_repeats(ordered, names):
+    """Refuse a record (in canonical order, so by start time) that starts inside an earlier one with the same
+    times and readings (:func:`repeats`)."""
+    for k, later in enumerate(ordered):
+        for first in ordered[:k]:
+            if (len(first) and len(later) and first.time_s[0] <= later.time_s[0] <= first.time_s[-1]
+                    and _same_channels(first, later, names) and _first_row_is_a_row_of(first, later, names)
+                    and repeats(first, later, names)):
+                raise TwinInputError(f"{dataset_label(later)} starts with a row of {dataset_label(first)} again "
+                                     f"(t = {later.time_s[0]:g} s, the same readings): the same file twice, or "
+                                     "files that overlap; give each row once")
+
+
+def _first_row_is_a_row_of(first, later, names):
+    """Whether ``later``'s first row is a row of ``first`` (same time, same readings of ``names``): the cheap
+    test before :func:`repeats` compares every row, as records whose clocks each start at 0 all share times."""
+    at = int(np.searchsorted(first.time_s, later.time_s[0]))
+    return bool(at < len(first) and first.time_s[at] == later.time_s[0] and all(
+        first[n][at] == later[n][0] or (np.isnan(first[n][at]) and np.isnan(later[n][0])) for n in names))
+
+
+def _same_channels(first, later, names):
+    """Whether both records hold ``names`` in the same units."""
+    return all(n in first and n in later and first.info(n).unit == later.info(n).unit for n in names)
 
 
 def _continues(first, later, names):
-    if len(first) < 2 or not all(n in first and n in later and first.info(n).unit == later.info(n).unit
-                                 for n in names):
+    """Whether ``later`` starts one sampling interval of ``first`` after ``first`` ends (to within
+    :data:`CONTINUES_WITHIN` of it), with the same channels in the same units."""
+    if len(first) < 2 or not _same_channels(first, later, names):
         return False
-    if repeats(first, later, names):
-        raise TwinInputError(f"{dataset_label(later)} starts with a row of {dataset_label(first)} again (t = "
-                             f"{later.time_s[0]:g} s, the same readings): the same file twice, or files that "
-                             "overlap; give each row once")
     dt = sampling_interval(first, strict=False)
     return abs(later.time_s[0] - first.time_s[-1] - dt) <= CONTINUES_WITHIN * dt
 

@@ -605,7 +605,7 @@ def _time_series_interval(cm, datasets, params):
     if len(datasets) > 1 and not takes_time:
         raise TwinInputError(f"model {cm.model_name!r} is a grey time-series model and trains on one contiguous "
                              f"record; got {len(datasets)} datasets that do not continue one another (each "
-                             "must start one sampling interval after the one before it ends, in time order; or "
+                             "must start one sampling interval after another ends, by its clock; or "
                              "use a model that trains on several records, each from rest: greybox, or a static "
                              "model: mlr, pcr, ann, anfis)")
     timed = takes_time and "sampling_interval" not in (params or {})

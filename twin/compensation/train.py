@@ -49,6 +49,7 @@ from .protocol import (
     identification_problem,
     stability_problem,
 )
+from .record_order import in_canonical_order
 from .records import (
     dataset_label,
     distinct,
@@ -264,8 +265,10 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
     Parameters
     ----------
     datasets : sequence of Dataset, Path or str
-        Training records (see :func:`load_dataset`). Records that continue one another (each starts
-        one sampling interval after the one before it ends) are one record
+        Training records (see :func:`load_dataset`), in any order: they are fitted in the canonical
+        order of :mod:`twin.compensation.record_order` (by first time stamp, then by content; never by
+        file name or path), so a permutation, a renamed or a moved file gives the same model. Records
+        that continue one another (one starts one sampling interval after another ends) are one record
         (:func:`~twin.compensation.records.joined_when_contiguous`).
     inputs : str or list of str
         Input channels (comma-separated names allowed, as ``--inputs`` gives them).
@@ -307,8 +310,11 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
         check_output_file(out, overwrite, inputs=_input_files(datasets))
     observe = split_names(observe)
     channels = [*split_names(inputs), *observe, target]
-    records = on_one_clock([load_dataset(d, column_map, nan_policy, machine, channels=channels,
-                                         reference_samples=reference_samples) for d in datasets])
+    # the canonical order (first time stamp, then content), never the order given: the fit depends on the order
+    # of the rows it stacks, the model must not depend on that of the files (twin.compensation.record_order)
+    records = in_canonical_order(on_one_clock([load_dataset(d, column_map, nan_policy, machine, channels=channels,
+                                                            reference_samples=reference_samples) for d in datasets]),
+                                 channels)
     loaded = joined_when_contiguous(records, channels)
 
     def fit(model_name, model_params):
@@ -447,6 +453,10 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
     with ``allow_unstable`` (and why its check refused it), and a record
     whose spindle runs over :data:`SPEED_EXTRAPOLATION` times the training
     records' top running speed (the model extrapolates).
+
+    Each record is scored on its own (with ``reference="own"``), so its row does not depend on the other
+    records or their order; the rows are in the order given, which is the time order of a
+    ``reference="train"`` chain.
 
     ``reference="train"``: each dataset continues the training record (it may
     start warm), so it is referenced to the training start, and time-series

@@ -10,7 +10,9 @@ holding the CSV's SHA-256, so an interrupted write never leaves a dataset
 that looks complete.
 
 Measured data enters through :meth:`Dataset.from_measured_csv`, which checks
-the time column, reports gaps and handles NaNs by an explicit policy.
+the time column (in s: a header that names hours or minutes is refused, and a
+record that looks timed in hours gets a hint), reports gaps and handles NaNs
+by an explicit policy.
 """
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ import csv
 import hashlib
 import io
 import json
+import logging
 import re
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
@@ -43,6 +46,33 @@ UNITS = {
 KIND_OF_UNIT = {"degC": "temperature", "um": "displacement", "ue": "strain", "rpm": "spindle_speed",
                 "mm_min": "feed", "W": "power", "K_m": "ambient_gradient", "J": "energy", "s": "time"}
 NAN_POLICIES = ("error", "interpolate", "drop", "keep")
+
+log = logging.getLogger("thermal_twin")
+
+#: Words for a time unit other than s in a time column's header, and the unit they name.
+OTHER_TIME_UNITS = {"h": "h", "hr": "h", "hrs": "h", "hour": "h", "hours": "h", "min": "min", "mins": "min",
+                    "minute": "min", "minutes": "min", "ms": "ms", "msec": "ms", "d": "d", "day": "d", "days": "d"}
+#: Seconds in each unit of :data:`OTHER_TIME_UNITS`, for the message that says how to convert.
+SECONDS_PER = {"h": 3600.0, "min": 60.0, "ms": 1e-3, "d": 86400.0}
+_UNIT_WORD = {"h": "hours", "min": "minutes", "ms": "milliseconds", "d": "days"}
+#: A header that names the time in another unit: ``time_h``, ``t [min]``, ``Time (hours)``, ``elapsed_min``,
+#: ``hours``. A bare ``t``/``time`` names no unit and is taken as s when mapped to ``time_s``; a capital ``T``
+#: alone (``T_min``) is a temperature.
+_TIME_IN_OTHER_UNIT = re.compile(r"(?:(?P<word>time|t|elapsed|elapsed_time|runtime|duration)\s*[_\-/ ]?\s*[\[(]?\s*"
+                                 r"(?P<unit>[a-z]+)\s*[\])]?|(?P<bare>hours|hrs|minutes|mins))", re.IGNORECASE)
+#: A measured record is taken for one timed in hours (a hint, never an error) when it spans under
+#: FAST_RECORD_SPAN_S "s" in median steps under FAST_RECORD_STEP_S "s" *and* a temperature it reads changes
+#: faster than FAST_HEATING_K_PER_S on average over it (or a displacement faster than FAST_DRIFT_UM_PER_S).
+#: A thermal test lasts minutes to days, its slowest time constants are 10 min to hours, and a machine's
+#: structure warms at most about 1 K/min at a spindle's run-up (FL_THERMAL: 7 K over its first hour; the
+#: default twin at 9000 rpm: 35 µm in 2 h): 8 h logged in hours span 8 "s" with a change of K per "s". A
+#: legitimately fast capture (a 10 Hz logger for a minute) moves its temperatures by tenths of a kelvin, far
+#: slower than the thresholds, and gets no hint. Minutes (an 8 h test spans 480 "s" in steps of 1) are not
+#: told apart from a fast capture by their values: only the header check catches them.
+FAST_RECORD_SPAN_S = 200.0
+FAST_RECORD_STEP_S = 0.5
+FAST_HEATING_K_PER_S = 0.05      # 3 K/min
+FAST_DRIFT_UM_PER_S = 0.5        # 1.8 mm/h
 
 
 def project_version() -> str:
@@ -416,7 +446,8 @@ class Dataset:
             time_s, values = _apply_nan_policy(path, time_s, values, channels, nan_policy, report, about)
         report.update(_sampling_report(time_s))
         dataset = cls(time_s, values, channels, {"source": str(path), "kind": "measured", "import": report})
-        return _checked_sensors(dataset, [channels[k].name for k in about])
+        read = [channels[k].name for k in about]
+        return _noted_hours(_checked_sensors(dataset, read), read, time_column)
 
     def __repr__(self):
         span = f"{self.time_s[0]:g}–{self.time_s[-1]:g} s" if len(self) else "empty"
@@ -432,9 +463,55 @@ def _checked_sensors(dataset, names):
     return dataset
 
 
+def time_unit_in_name(column: str) -> str | None:
+    """The time unit other than s that a column's header names (``"h"``, ``"min"``, ``"ms"``, ``"d"``), or None.
+
+    Parameters
+    ----------
+    column : str
+        A CSV header, e.g. ``time_h``, ``t [min]``, ``Time (hours)``, ``hours``.
+
+    Returns
+    -------
+    str or None
+        A key of :data:`SECONDS_PER`; None for a header in s (``time_s``, ``t [s]``) or one that names no unit.
+    """
+    match = _TIME_IN_OTHER_UNIT.fullmatch(column.strip())
+    if match is None or match["word"] == "T":   # a capital T is a temperature's letter (T_min, T_h)
+        return None
+    return OTHER_TIME_UNITS.get((match["unit"] or match["bare"]).lower())
+
+
+def _refuse_other_time_unit(path, column, mapped):
+    """Refuse a time column whose header names another unit than s: the twin counts time in s and converts
+    nothing on import (as a column map renames and does not convert a channel)."""
+    unit = time_unit_in_name(column)
+    if unit is None:
+        return
+    factor = SECONDS_PER[unit]
+    as_time = "is the time column (mapped to time_s)" if mapped else "looks like the time column"
+    raise TwinInputError(f"{path}: column {column!r} {as_time}, and its header says {_UNIT_WORD[unit]} ({unit}); "
+                         f"the twin reads time in s and does not convert it: write the column in s (× {factor:g}) "
+                         "as time_s")
+
+
+def _noted_hours(dataset, names, column):
+    """The dataset, once a hint that its time is in hours (:func:`hours_hint`) is logged and kept in its import
+    report as ``time_unit_hint``: a hint, not an error, since a fast capture can look alike."""
+    hint = hours_hint(dataset, names, column)
+    if hint is not None:
+        log.warning("%s", hint)
+        dataset.metadata["import"]["time_unit_hint"] = hint
+    return dataset
+
+
 def _time_column(path, header, data, time_column, origin):
-    """``(index, time in s)`` of a measured CSV's time column, present, complete and strictly increasing."""
+    """``(index, time in s)`` of a measured CSV's time column, present, complete and strictly increasing; a
+    header that names another unit (:func:`time_unit_in_name`) is refused."""
+    _refuse_other_time_unit(path, time_column, mapped=time_column != "time_s")
     if time_column not in header:
+        for column in header:
+            _refuse_other_time_unit(path, column, mapped=False)
         raise TwinInputError(f"{path}: no time column {time_column!r}; columns: {header}")
     t_index = header.index(time_column)
     time_s = data[:, t_index]
@@ -490,6 +567,47 @@ def _apply_nan_policy(path, time_s, values, channels, nan_policy, report, about)
             if bad.any():
                 values[bad, k] = np.interp(time_s[bad], time_s[~bad], values[~bad, k])
     return time_s, values
+
+
+def hours_hint(dataset: Dataset, names: Sequence[str], column: str = "time_s") -> str | None:
+    """A one-line hint that a measured record's time is in hours, not s, or None (thresholds and why:
+    :data:`FAST_RECORD_SPAN_S`).
+
+    Parameters
+    ----------
+    dataset : Dataset
+        A measured record (its ``metadata["source"]`` names the file).
+    names : sequence of str
+        The channels a command reads: their temperatures (°C) and displacements (µm) are the evidence; a
+        spare column's noise is none.
+    column : str, default "time_s"
+        The time column's header, for the message.
+
+    Returns
+    -------
+    str or None
+        Naming the file, the column, its span and median step (s) and the fastest change per s.
+    """
+    if len(dataset) < 2:
+        return None
+    span_s = float(dataset.time_s[-1] - dataset.time_s[0])
+    step_s = float(np.median(np.diff(dataset.time_s)))
+    if span_s >= FAST_RECORD_SPAN_S or step_s >= FAST_RECORD_STEP_S:
+        return None
+    limits = {"degC": (FAST_HEATING_K_PER_S, "K"), "um": (FAST_DRIFT_UM_PER_S, "µm")}
+    for name in names:
+        unit = dataset.info(name).unit
+        values = dataset[name][np.isfinite(dataset[name])]
+        if unit not in limits or len(values) < 2:
+            continue
+        limit, shown = limits[unit]
+        rate = float(np.ptp(values)) / span_s
+        if rate > limit:
+            return (f"{dataset.metadata.get('source', 'the data')}: column {column!r} spans {span_s:g} s in steps "
+                    f"of {step_s:g} s while {name} changes by {np.ptp(values):.3g} {shown} ({rate:.3g} {shown}/s, "
+                    f"over {limit:g}), too fast for a thermal record: is the time in hours (× 3600 to s) or "
+                    "minutes (× 60)? The twin reads it in s")
+    return None
 
 
 def _sampling_report(time_s):
