@@ -6,7 +6,8 @@ Prints:
    *seen (earlier held-out)* and the *seen* sets of :mod:`twin.live.protocol` — full-FE records with effects
    outside the nominal twin — the share
    of samples whose true Z lies inside the observer's 95 % band over the thermometer noise draws of the set,
-   the mean band half-width and the Z error; pooled per set.
+   the mean band half-width and the Z error; pooled per set.  Then the same for the X and the Y drift (the same
+   runs; their bands with the shipped :data:`~twin.live.multiple_model.BAND_INFLATION`).
 2. The issue's goals on ``heat_cool_9000`` (nominal and with the enclosure convection × 0.6) and ``etve_160h``
    (× 0.6): Z RMS / max error (µm) of the observer (ROM r = 80, the 6 default thermometers of ``twin live``,
    spindle speed, the room air T15 — all read through the DS18S20 model, seed 7), of the open-loop ROM (the
@@ -20,10 +21,13 @@ Prints:
     python bench/bench_live.py --skip-etve     # without etve_160h (its FE run takes minutes)
     python bench/bench_live.py --opcua-only    # the OPC UA throughput only
     python bench/bench_live.py --calibrate     # the training grid of the noise model and the setting it picks
+    python bench/bench_live.py --calibrate-xy  # the X and Y bands on the training records and the factors picked
     python bench/bench_live.py --visibility    # per part: how much Z a watt moves and how much the thermometers see
 
 ``--calibrate`` runs the observer with each setting of :data:`GRID` on the *training* records only (never the
-held-out or seen ones) and applies :func:`choose_setting`.
+held-out or seen ones) and applies :func:`choose_setting`.  ``--calibrate-xy`` runs the shipped observer without
+band inflation on the training records only, scores each axis, and applies :func:`choose_inflation` to the X
+and Y bands over :data:`INFLATION_GRID` (:data:`ADDITIVE_GRID_UM` printed beside, for comparison).
 """
 from __future__ import annotations
 
@@ -35,6 +39,8 @@ import numpy as np
 
 from twin.live import protocol
 from twin.live.cli import DEFAULT_THERMOMETERS
+from twin.live.model import AXES
+from twin.live.observer import Z95
 
 ROOM_AIR = protocol.ROOM_AIR
 GOAL_CASES = protocol.SEEN
@@ -48,13 +54,20 @@ MLR_TRAIN = ("iso230_3_spindle_spectrum", "thesis_test_4", "six_part_cycle", "cu
 GRID = ((0.0,), (10.0,), (20.0,), (40.0,), (80.0,), (0.0, 20.0), (0.0, 40.0), (0.0, 80.0), (0.0, 160.0))
 #: The rule: the least interval score of the 95 % band (:attr:`~twin.live.protocol.RecordScore.interval_score_um`),
 #: averaged over the training records (each record weighs the same).
+#: Factors on an axis's band half-width (the filter's ±1.96 σ) that the X/Y calibration compares, per axis, by the
+#: same rule (:func:`choose_inflation`); 1 leaves the band as the filter gives it.
+INFLATION_GRID = (1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 12.0, 16.0)
+#: The other correction printed beside, not chosen from: an additive drift-model error of σ µm (the band
+#: 1.96 √(σ_filter² + σ²)), a floor that does not vanish on a machine at rest.
+ADDITIVE_GRID_UM = (0.1, 0.2, 0.3, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0)
 
 
-def observer_factory(rom, names, setting=None):
-    """A function making a fresh observer: the shipped one, or that of the hypotheses ``setting`` (σ_P, W)."""
+def observer_factory(rom, names, setting=None, band_inflation=None):
+    """A function making a fresh observer: the shipped one, or that of the hypotheses ``setting`` (σ_P, W) and
+    the band factors ``band_inflation`` (X, Y, Z; default the shipped ones)."""
     from twin.live.multiple_model import live_observer
 
-    return lambda: live_observer(rom, names, hypotheses_W=setting)
+    return lambda: live_observer(rom, names, hypotheses_W=setting, band_inflation=band_inflation)
 
 
 def rms(e):
@@ -99,15 +112,56 @@ def calibrate(rom, names):
     return best
 
 
+def inflated_scores(runs, axis, factor=1.0, additive_um=0.0):
+    """The :class:`~twin.live.protocol.RecordScore` s of ``axis`` in ``runs`` with its band half-width × ``factor``,
+    or widened by an additive drift-model error of σ = ``additive_um`` µm."""
+    j = AXES.index(axis)
+    return [protocol.axis_score(r, axis, np.hypot(factor * r.band_um[:, j], Z95 * additive_um)) for r in runs]
+
+
+def choose_inflation(runs, axis):
+    """The factor of :data:`INFLATION_GRID` with the least mean interval score of ``axis`` over ``runs``
+    (:class:`~twin.live.protocol.RecordRun` s of the training records, run without band inflation)."""
+    return min(INFLATION_GRID, key=lambda k: interval_score(inflated_scores(runs, axis, k)))
+
+
+def calibrate_xy(rom, names):
+    """Score every axis of the shipped observer, band uninflated, on the training records; print each axis's
+    table, the grids of :data:`INFLATION_GRID` and :data:`ADDITIVE_GRID_UM`, and the factors chosen."""
+    cases, seeds = protocol.sets()["training"]
+    print(f"training: {len(cases)} records × seeds {', '.join(map(str, seeds))}; the shipped observer, no band "
+          f"inflation\n")
+    make = observer_factory(rom, names, band_inflation=(1.0, 1.0, 1.0))
+    runs = [protocol.run_record(c, make, names, seeds) for c in cases]
+    for axis in AXES:
+        print(f"{axis}, as the filter gives it:\n")
+        coverage_table([protocol.axis_score(r, axis) for r in runs], axis)
+    chosen = {}
+    for axis in AXES:
+        print(f"{axis}, corrected (band × factor, or + an additive σ):\n")
+        print("| correction | mean interval score (µm) | pooled coverage | worst record | mean band (µm) |")
+        print("|---|---:|---:|---:|---:|")
+        rows = [(f"band × {k:g}", inflated_scores(runs, axis, k)) for k in INFLATION_GRID]
+        rows += [(f"+ σ {a:g} µm", inflated_scores(runs, axis, additive_um=a)) for a in ADDITIVE_GRID_UM]
+        for label, scores in rows:
+            cover, worst, band = pooled(scores)
+            print(f"| {label} | {interval_score(scores):.2f} | {100 * cover:.1f} % | {100 * worst:.1f} % | "
+                  f"{band:.2f} |")
+        chosen[axis] = choose_inflation(runs, axis)
+        note = " (for reference: Z's band is calibrated by the hypotheses and carries no factor)" if axis == "Z" else ""
+        print(f"\n{axis}: the rule picks band × {chosen[axis]:g}{note}\n", flush=True)
+    return chosen
+
+
 def hypotheses(setting):
     """``0 / 40 W``: the σ_P of a setting."""
     return " / ".join(f"{v:g}" for v in setting) + " W"
 
 
-def coverage_table(scores):
-    """Print the per-record coverage table and the pooled row."""
-    print("| record | effect kind | true Z RMS (µm) | observer Z RMS / max (µm) | in 95 % band | mean band (µm) | "
-          "interval score (µm) |")
+def coverage_table(scores, axis="Z"):
+    """Print the per-record coverage table of ``axis`` and the pooled row."""
+    print(f"| record | effect kind | true {axis} RMS (µm) | observer {axis} RMS / max (µm) | in 95 % band | "
+          "mean band (µm) | interval score (µm) |")
     print("|---|---|---:|---:|---:|---:|---:|")
     for s in scores:
         print(f"| {s.case.label} | {s.case.kind} | {s.truth_rms_um:.1f} | {s.rms_um:.2f} / {s.max_um:.2f} | "
@@ -209,6 +263,8 @@ def main(argv=None):
     parser.add_argument("--speed", type=float, default=20000.0, help="replay speed for the OPC UA throughput")
     parser.add_argument("--opcua-only", action="store_true", help="only the OPC UA throughput (no FE run)")
     parser.add_argument("--calibrate", action="store_true", help="only the training grid and the chosen setting")
+    parser.add_argument("--calibrate-xy", action="store_true",
+                        help="only the X and Y bands on the training records and the band factors chosen")
     parser.add_argument("--visibility", action="store_true", help="only the per-part Z and thermometer response per W")
     args = parser.parse_args(argv)
 
@@ -216,6 +272,9 @@ def main(argv=None):
     rom = cached_rom(build_machine("vmc_ram"), 80)
     if args.calibrate:
         calibrate(rom, names)
+        return
+    if args.calibrate_xy:
+        calibrate_xy(rom, names)
         return
     if args.visibility:
         visibility(rom, names)
@@ -225,7 +284,9 @@ def main(argv=None):
             cases, seeds = protocol.sets()[name]
             cases = [c for c in cases if not (args.skip_etve and c.scenario == "etve_160h")]
             print(f"{name} records, seeds {seeds[0]}–{seeds[-1]}:\n")
-            coverage_table([protocol.score(c, observer_factory(rom, names), names, seeds) for c in cases])
+            runs = [protocol.run_record(c, observer_factory(rom, names), names, seeds) for c in cases]
+            for axis in ("Z", "X", "Y"):
+                coverage_table([protocol.axis_score(r, axis) for r in runs], axis)
         goal_table(rom, names, [c for c in GOAL_CASES if not (args.skip_etve and c.scenario == "etve_160h")])
     opcua_throughput(rom, names, args.speed)
 

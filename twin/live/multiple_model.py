@@ -33,6 +33,7 @@ from .observer import (
     DriftObserver,
     Estimate,
     RecordRunner,
+    axis_factors,
     gated,
 )
 
@@ -56,11 +57,15 @@ class MultipleModelObserver(RecordRunner):
         Thermometer name → sensor model (:class:`~twin.live.observer.DriftObserver`).
     concentrated : numpy.ndarray, optional
         (r, r) second moment of a 1 W source at an unknown cell (default: that of ``rom``, cached).
+    band_inflation : array_like, optional
+        (3,) factor on the mixture's X, Y, Z band half-width (default 1: its ±1.96 σ); the hypotheses' own
+        bands, which the mixture's variance is made of, are not inflated.
     """
 
     def __init__(self, rom: ReducedModel, thermometers: list[str], concentrated_W: tuple[float, ...],
                  noise: NoiseModel | None = None, adaptation: Adaptation | None = None, sensors: dict | None = None,
-                 concentrated: np.ndarray | None = None) -> None:
+                 concentrated: np.ndarray | None = None, band_inflation: ArrayLike | None = None) -> None:
+        self.band_inflation = axis_factors(band_inflation)
         sizes = tuple(float(s) for s in concentrated_W)
         if len(sizes) < 2 or len(set(sizes)) != len(sizes) or min(sizes) < 0:
             raise TwinInputError(f"concentrated_W needs two or more distinct sizes ≥ 0 W, got {concentrated_W!r}")
@@ -131,7 +136,7 @@ class MultipleModelObserver(RecordRunner):
         means = np.array([e.drift_um for e in estimates])
         variances = np.array([e.band_um for e in estimates]) ** 2 / Z95 ** 2
         mean = w @ means
-        band = Z95 * np.sqrt(w @ (variances + (means - mean) ** 2))
+        band = Z95 * np.sqrt(w @ (variances + (means - mean) ** 2)) * self.band_inflation
         return Estimate(estimates[0].time_s, mean, band, w @ np.array([e.temperatures_C for e in estimates]),
                         estimates[0].used, float(w @ [e.inflation for e in estimates]), estimates[0].rejected)
 
@@ -168,8 +173,15 @@ class MultipleModelObserver(RecordRunner):
 HYPOTHESES_W = (0.0, 40.0)
 
 
+#: Factors on the 95 % band's half-width of the X, Y and Z drift that ``twin live`` publishes, 1: X and Y chosen on
+#: the training records by the interval score (``python bench/bench_live.py --calibrate-xy``; docs/live.md,
+#: "Calibration protocol"); Z is 1, its band calibrated by the choice of :data:`HYPOTHESES_W`.
+BAND_INFLATION = (5.0, 1.25, 1.0)
+
+
 def live_observer(rom: ReducedModel, thermometers: list[str], sensors: dict | None = None,
-                  hypotheses_W: tuple[float, ...] | None = None) -> DriftObserver | MultipleModelObserver:
+                  hypotheses_W: tuple[float, ...] | None = None,
+                  band_inflation: ArrayLike | None = None) -> DriftObserver | MultipleModelObserver:
     """The observer ``twin live`` runs: the shipped noise model with the unread-source hypotheses.
 
     Parameters
@@ -178,6 +190,9 @@ def live_observer(rom: ReducedModel, thermometers: list[str], sensors: dict | No
         As :class:`MultipleModelObserver`.
     hypotheses_W : tuple of float, optional
         σ_P of each hypothesis, W (default :data:`HYPOTHESES_W`); one gives a single filter.
+    band_inflation : array_like, optional
+        (3,) factors on the X, Y, Z band's half-width, 1 (default :data:`BAND_INFLATION`; ``(1, 1, 1)``: the
+        filter's own ±1.96 σ).
 
     Returns
     -------
@@ -185,6 +200,8 @@ def live_observer(rom: ReducedModel, thermometers: list[str], sensors: dict | No
         A new observer, not started.
     """
     sizes = HYPOTHESES_W if hypotheses_W is None else tuple(hypotheses_W)
+    inflation = BAND_INFLATION if band_inflation is None else band_inflation
     if len(sizes) == 1:
-        return DriftObserver(rom, thermometers, dataclasses.replace(NOISE, concentrated_W=sizes[0]), sensors=sensors)
-    return MultipleModelObserver(rom, thermometers, sizes, sensors=sensors)
+        return DriftObserver(rom, thermometers, dataclasses.replace(NOISE, concentrated_W=sizes[0]), sensors=sensors,
+                             band_inflation=inflation)
+    return MultipleModelObserver(rom, thermometers, sizes, sensors=sensors, band_inflation=inflation)

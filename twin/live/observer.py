@@ -67,6 +67,25 @@ def gated(scores: ArrayLike) -> np.ndarray:
     return out if 2 * out.sum() < np.isfinite(scores).sum() else np.zeros(len(scores), bool)
 
 
+def axis_factors(band_inflation: ArrayLike | None) -> np.ndarray:
+    """The (3,) X, Y, Z band inflation factors (1 each when None), checked finite and ≥ 1.
+
+    Parameters
+    ----------
+    band_inflation : array_like or None
+        (3,) factors on the 95 % band's half-width, 1.
+
+    Returns
+    -------
+    numpy.ndarray
+        (3,) factors, 1.
+    """
+    factors = np.ones(3) if band_inflation is None else np.asarray(band_inflation, float).reshape(-1)
+    if factors.shape != (3,) or not np.all(np.isfinite(factors)) or np.any(factors < 1.0):
+        raise TwinInputError(f"band_inflation needs three finite factors ≥ 1 (X, Y, Z), got {band_inflation!r}")
+    return factors
+
+
 @dataclass(frozen=True)
 class Adaptation:
     """The NIS-driven widening of the process noise (see the module docstring).
@@ -166,11 +185,15 @@ class DriftObserver(RecordRunner):
     concentrated : numpy.ndarray, optional
         (r, r) second moment of a 1 W source at an unknown cell of the machine
         (:func:`~twin.live.model.concentrated_moment`); default: that of ``rom``, built once and cached.
+    band_inflation : array_like, optional
+        (3,) factor on the X, Y, Z band's half-width (1: the posterior's ±1.96 σ, the default); ``twin live``
+        runs :data:`~twin.live.multiple_model.BAND_INFLATION`.
     """
 
     def __init__(self, rom: ReducedModel, thermometers: list[str], noise: NoiseModel | None = None,
                  adaptation: Adaptation | None = None, sensors: dict | None = None,
-                 concentrated: np.ndarray | None = None) -> None:
+                 concentrated: np.ndarray | None = None, band_inflation: ArrayLike | None = None) -> None:
+        self.band_inflation = axis_factors(band_inflation)
         self.model = ObserverModel(rom, thermometers, NOISE if noise is None else noise, sensors, concentrated)
         self.adaptation = ADAPTATION if adaptation is None else adaptation
         self.rom, self.thermometers = rom, self.model.thermometers
@@ -396,7 +419,8 @@ class DriftObserver(RecordRunner):
     def _estimate(self, used, rejected):
         kf, u, model, L = self._kf, self._u, self.model, self._L
         sd = np.sqrt(np.maximum(((L @ kf.P) * L).sum(axis=1), 0.0))
-        return Estimate(self.time_s, L @ kf.x + model.M @ u, Z95 * sd, self._Lf @ kf.x + model.Mf @ u, used,
+        return Estimate(self.time_s, L @ kf.x + model.M @ u, Z95 * sd * self.band_inflation,
+                        self._Lf @ kf.x + model.Mf @ u, used,
                         self.inflation, rejected)
 
     @property

@@ -19,6 +19,10 @@ The protocol (docs/live.md, "Calibration protocol"), fixed before any judgement:
   convection × 0.6), reported beside, but not called held out: earlier versions of the observer were judged on
   them.
 
+Each record is scored per drift axis (:func:`run_record`, :func:`axis_score`): Z's band is calibrated by the choice
+of the observer's hypotheses, X's and Y's by a factor on their band chosen on the same training records
+(:data:`~twin.live.multiple_model.BAND_INFLATION`).
+
 Truths are the full FE of :func:`twin.core.simulate.simulate` on a changed definition copy
 (:func:`twin.gap.truth.physics_truth`, cached by content hash, no noise); the thermometers then get the DS18S20
 model (:mod:`twin.core.noise`: offset ±0.5 °C per sensor, 0.0625 °C steps) with each seed, and so does the
@@ -38,6 +42,7 @@ from ..core.machine_definition import HeatSource
 from ..core.noise import apply_noise
 from ..gap.benchmark import random_sources
 from ..gap.truth import PhysicsChange, physics_truth
+from .model import AXES
 
 if TYPE_CHECKING:
     from .observer import RecordRunner
@@ -242,21 +247,49 @@ def readings(record: Dataset, names: list[str], seed: int) -> tuple[np.ndarray, 
 
 
 @dataclass
+class RecordRun:
+    """The observer's estimates on one truth record over several thermometer noise draws, every axis.
+
+    Attributes
+    ----------
+    case : Case
+        The record.
+    error_um : numpy.ndarray
+        (k, 3) estimate minus the true X, Y, Z drift, µm, the draws' samples one after the other.
+    band_um : numpy.ndarray
+        (k, 3) half-width of the 95 % X, Y, Z band at each of those samples, µm.
+    truth_um : numpy.ndarray
+        (k, 3) the true X, Y, Z drift at each of those samples, µm.
+    wall_s : float
+        Wall time of the observer runs, s.
+    simulated_s : float
+        Machine time the runs covered (record length × draws), s.
+    """
+
+    case: Case
+    error_um: np.ndarray
+    band_um: np.ndarray
+    truth_um: np.ndarray
+    wall_s: float
+    simulated_s: float
+
+
+@dataclass
 class RecordScore:
-    """The observer's Z estimate on one truth record, over several thermometer noise draws.
+    """The observer's estimate of one drift axis (Z unless told) on one truth record, over several noise draws.
 
     Attributes
     ----------
     case : Case
         The record.
     coverage : float
-        Share of the samples (all draws) whose true Z lies inside the 95 % band, 1.
+        Share of the samples (all draws) whose true drift lies inside the 95 % band, 1.
     band_um : float
-        Mean half-width of the 95 % Z band, µm.
+        Mean half-width of the 95 % band, µm.
     rms_um, max_um : float
-        RMS (over the draws' samples) and largest |error| of the Z estimate, µm.
+        RMS (over the draws' samples) and largest |error| of the estimate, µm.
     truth_rms_um : float
-        RMS of the true Z drift, µm.
+        RMS of the true drift, µm.
     interval_score_um : float
         Mean interval score of the 95 % band (Gneiting & Raftery 2007): its width, plus 2/0.05 × the distance
         by which the truth falls outside it, µm.  A proper score: lower is better, and its expectation is least
@@ -267,6 +300,8 @@ class RecordScore:
         Machine time the runs covered (record length × draws), s.
     samples : int
         Samples scored (record samples × draws).
+    axis : str
+        The drift axis scored: ``X``, ``Y`` or ``Z``.
     """
 
     case: Case
@@ -279,11 +314,12 @@ class RecordScore:
     wall_s: float
     simulated_s: float
     samples: int
+    axis: str = "Z"
 
 
-def score(case: Case, observer_factory: Callable[[], RecordRunner], thermometers: list[str],
-          seeds: tuple) -> RecordScore:
-    """Run a fresh observer (``observer_factory()``) on the truth of ``case`` once per noise seed; pool the scores.
+def run_record(case: Case, observer_factory: Callable[[], RecordRunner], thermometers: list[str],
+               seeds: tuple) -> RecordRun:
+    """Run a fresh observer (``observer_factory()``) on the truth of ``case`` once per noise seed; keep every axis.
 
     Parameters
     ----------
@@ -299,13 +335,13 @@ def score(case: Case, observer_factory: Callable[[], RecordRunner], thermometers
 
     Returns
     -------
-    score : RecordScore
-        Band coverage, mean band (µm), Z error (µm) and wall time pooled over the seeds.
+    RecordRun
+        The X, Y, Z errors, bands and truths (µm) of every draw, and the wall time.
     """
     import time
 
     record = truth(case)
-    z = record["Z"]
+    true = record.matrix(list(AXES))
     errors, bands, wall = [], [], 0.0
     for seed in seeds:
         T, air = readings(record, thermometers, seed)
@@ -313,10 +349,50 @@ def score(case: Case, observer_factory: Callable[[], RecordRunner], thermometers
         start = time.perf_counter()
         drift, band = observer.run(record.time_s, record["spindle"], air, T)
         wall += time.perf_counter() - start
-        errors.append(drift[:, 2] - z)
-        bands.append(band[:, 2])
-    e, b = np.abs(np.concatenate(errors)), np.concatenate(bands)
+        errors.append(drift - true)
+        bands.append(band)
+    return RecordRun(case, np.concatenate(errors), np.concatenate(bands), np.tile(true, (len(seeds), 1)), wall,
+                     float(record.time_s[-1] - record.time_s[0]) * len(seeds))
+
+
+def axis_score(run: RecordRun, axis: str = "Z", band_um: np.ndarray | None = None) -> RecordScore:
+    """Score one drift axis of ``run``: band coverage, mean band, error and interval score.
+
+    Parameters
+    ----------
+    run : RecordRun
+        The observer's estimates on a record.
+    axis : str
+        ``X``, ``Y`` or ``Z``.
+    band_um : numpy.ndarray, optional
+        (k,) half-widths of the 95 % band to score instead of the run's (a corrected band), µm.
+
+    Returns
+    -------
+    RecordScore
+        Of ``axis``.
+    """
+    j = AXES.index(axis)
+    e, z = np.abs(run.error_um[:, j]), run.truth_um[:, j]
+    b = run.band_um[:, j] if band_um is None else np.asarray(band_um, float)
     interval_score = 2.0 * b + (2.0 / 0.05) * np.maximum(e - b, 0.0)
-    return RecordScore(case, float(np.mean(e <= b)), float(np.mean(b)), float(np.sqrt(np.mean(e ** 2))),
-                       float(e.max()), float(np.sqrt(np.mean(z ** 2))), float(np.mean(interval_score)), wall,
-                       float(record.time_s[-1] - record.time_s[0]) * len(seeds), len(e))
+    return RecordScore(run.case, float(np.mean(e <= b)), float(np.mean(b)), float(np.sqrt(np.mean(e ** 2))),
+                       float(e.max()), float(np.sqrt(np.mean(z ** 2))), float(np.mean(interval_score)), run.wall_s,
+                       run.simulated_s, len(e), axis)
+
+
+def score(case: Case, observer_factory: Callable[[], RecordRunner], thermometers: list[str],
+          seeds: tuple) -> RecordScore:
+    """The Z score of :func:`run_record` (the calibration's axis): band coverage, mean band, Z error, wall time.
+
+    Parameters
+    ----------
+    case, observer_factory, thermometers, seeds
+        As :func:`run_record`.
+
+    Returns
+    -------
+    score : RecordScore
+        Band coverage, mean band (µm), Z error (µm) and wall time pooled over the seeds.
+    """
+    return axis_score(run_record(case, observer_factory, thermometers, seeds), "Z")
