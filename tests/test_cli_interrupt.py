@@ -126,6 +126,7 @@ def test_a_swallowed_ctrl_c_in_a_command_without_progress_writes_nothing(then, t
     assert main(["mesh"]) == 130
     assert capsys.readouterr().err.strip().splitlines() == ["twin mesh: interrupted; no result was written"]
     assert list(tmp_path.iterdir()) == []             # neither the file nor its .partial
+    write_text_atomic(out, "written after the command")   # the Ctrl-C ended with its command, not for good
 
 
 def test_a_recorded_ctrl_c_is_forgotten_by_the_next_command(tmp_path, capsys):

@@ -169,6 +169,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"twin {_command_name(args)}: error: {message}", file=sys.stderr)
         return 2
     finally:
+        clear_interrupt()                  # the command is over: a later one in this process starts afresh
         COMMAND.reset(recorded)
         if previous is not None:
             _on_sigint(previous)
