@@ -256,7 +256,7 @@ def test_the_reconnect_backoff_never_outlasts_the_duration(tmp_path, rom):
 
 
 # ----------------------------------------------------------------------------- D5: output nodes
-@pytest.mark.parametrize("kind", ["read-only", "string", "float"])
+@pytest.mark.parametrize("kind", ["read-only", "string", "float", "input"])
 def test_output_nodes_are_checked_at_the_start_and_a_float_one_gets_floats(rom, tmp_path, kind):
     from asyncua import ua
 
@@ -265,13 +265,14 @@ def test_output_nodes_are_checked_at_the_start_and_a_float_one_gets_floats(rom, 
             node_map = default_node_map(THERMOMETERS, "T15", index=server.index)
             node_map.source = str(tmp_path / "machine.toml")
             machine = await server.server.nodes.objects.add_object(server.index, "Cnc")
-            variant = {"string": ua.VariantType.String, "float": ua.VariantType.Float}.get(kind)
-            if variant is None:
-                node_map.outputs["Z"] = f"ns={server.index};s=T15"          # a sensor node
+            variant = {"string": ua.VariantType.String, "float": ua.VariantType.Float}.get(kind, ua.VariantType.Double)
+            if kind == "input":
+                node_map.outputs["Z"] = f"ns={server.index};s=T15"          # the room air's node
             else:
                 value = "0" if kind == "string" else 0.0
                 var = await machine.add_variable(ua.NodeId("Z_out", server.index), "Z_out", value, variant)
-                await var.set_writable()
+                if kind != "read-only":
+                    await var.set_writable()
                 node_map.outputs["Z"] = f"ns={server.index};s=Z_out"
             client = LiveClient(server.endpoint, node_map, DriftObserver(rom, THERMOMETERS))
             task = asyncio.create_task(client.run(until_time_s=20.0, max_wall_s=15))
@@ -285,7 +286,8 @@ def test_output_nodes_are_checked_at_the_start_and_a_float_one_gets_floats(rom, 
         stats, written = asyncio.run(main())
         assert written == pytest.approx(stats.last.drift_um[2], rel=1e-6)
         return
-    expected = {"read-only": r"machine.toml: \[outputs\] Z = 'ns=2;s=T15': not writable on opc.tcp://127.0.0.1",
+    expected = {"read-only": r"machine.toml: \[outputs\] Z = 'ns=2;s=Z_out': not writable on opc.tcp://127.0.0.1",
+                "input": r"machine.toml: \[outputs\] Z = 'ns=2;s=T15': the node of \[inputs\] room_air too",
                 "string": r"machine.toml: \[outputs\] Z = 'ns=2;s=Z_out': data type String on opc.tcp://127.0.0.1"}
     with pytest.raises(TwinInputError, match=expected[kind]):
         asyncio.run(main())

@@ -351,14 +351,22 @@ def cmd_live(args: argparse.Namespace) -> int:
     """
     if not 0.0 <= args.late_after < float("inf"):
         raise TwinInputError(f"--late-after must be a finite number of seconds ≥ 0, got {args.late_after:g}")
+    if args.duration is not None and not 0.0 < args.duration < float("inf"):
+        # 0 and NaN would run for ever (``or inf``), a negative one end at once as if the server were gone
+        raise TwinInputError(f"--duration must be a finite number of seconds > 0, got {args.duration:g}")
     from pathlib import Path
 
     if args.log:
         from ..infra.outdir import check_output_file
         from .client import partial_path
 
-        for path in (args.log, partial_path(args.log)):    # a partial log is a session's record too
+        logs = (args.log, partial_path(args.log))        # a partial log is a session's record too
+        for path in logs:
             check_output_file(path, args.overwrite, inputs=_input_files(args))
+        for path in logs:
+            # --overwrite replaces both now: an older session's complete log left beside this one's partial log
+            # would be taken for this session's result
+            Path(path).unlink(missing_ok=True)
     try:
         stats, thermometers, dataset = _observe(args)
     except _Ended as ended:

@@ -208,7 +208,7 @@ class LiveClient:
     Raises
     ------
     TwinInputError
-        If the node map lacks a node for one of the observer's thermometers.
+        If the node map lacks a node for one of the observer's thermometers, or two keys share a node.
     """
 
     def __init__(self, endpoint: str, node_map: NodeMap, observer: RecordRunner, log_path: str | Path | None = None,
@@ -218,6 +218,7 @@ class LiveClient:
         missing = [t for t in observer.thermometers if t not in node_map.thermometers]
         if missing:
             raise TwinInputError(f"{node_map.source}: [thermometers] has no node for {missing[0]}")
+        node_map.check_distinct()
         self.keys = [k for k, _ in node_map.sensors()]
         self.log_path, self.late_after_s = log_path, late_after_s
         self.backoff_s, self.max_backoff_s, self.timeout_s, self.publish_ms = \

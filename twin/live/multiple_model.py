@@ -32,9 +32,9 @@ from .observer import (
     Adaptation,
     DriftObserver,
     Estimate,
+    InnovationGate,
     RecordRunner,
     axis_factors,
-    gated,
 )
 
 
@@ -79,6 +79,7 @@ class MultipleModelObserver(RecordRunner):
         first = self.members[0]
         self.rom, self.thermometers, self.field_names = rom, first.thermometers, first.field_names
         self.weights = np.full(len(sizes), 1.0 / len(sizes))
+        self._gate = InnovationGate(len(self.thermometers))
 
     @property
     def time_s(self) -> float | None:
@@ -91,6 +92,7 @@ class MultipleModelObserver(RecordRunner):
         for member in self.members:
             member.start(time_s, room_C)
         self.weights = np.full(len(self.members), 1.0 / len(self.members))
+        self._gate = InnovationGate(len(self.thermometers))
         return self
 
     def step(self, time_s: float, spindle_rpm: float, room_C: float, temperatures_C: ArrayLike) -> Estimate | None:
@@ -117,7 +119,7 @@ class MultipleModelObserver(RecordRunner):
             return None
         # one gate for every hypothesis (the likelihoods compare the same readings): a reading is rejected only
         # if even the hypothesis that predicts it best finds it impossible
-        rejected = gated(np.min([member.innovation_scores(y) for member in self.members], axis=0))
+        rejected = self._gate(np.min([member.innovation_scores(y) for member in self.members], axis=0))
         estimates = [member.fuse(y, dt, rejected) for member, dt in zip(self.members, steps)]
         if estimates[0].used:
             self._weigh(0.0 if before is None else float(time_s) - before)

@@ -14,8 +14,8 @@ A TOML file::
     Z_band = "ns=2;s=Z_band95_um"
     Z_compensation = "ns=2;s=Z_compensation_um"
 
-Node ids use the OPC UA string form (``ns=<index>;s=<name>`` or ``ns=<index>;i=<number>``).  Every error
-names the file, the key and the value.
+Node ids use the OPC UA string form (``ns=<index>;s=<name>`` or ``ns=<index>;i=<number>``); each key has a node
+of its own (an output on a sensor's node is refused).  Every error names the file, the key and the value.
 """
 from __future__ import annotations
 
@@ -84,6 +84,26 @@ class NodeMap:
                 return f"{self.source}: [{section}] {key} = {table[key]!r}"
         return f"{self.source}: {key}"
 
+    def check_distinct(self) -> None:
+        """Refuse a node that two keys share: an output on a sensor node would write µm into it and read them back
+        as °C, two sensors on one node would be one reading taken for two, two outputs would overwrite each other.
+
+        Raises
+        ------
+        TwinInputError
+            Naming the file, the key, its node and the key that has it already.
+        """
+        from asyncua import ua
+
+        owner = {}          # node → "[section] key" (node ids compared parsed: "ns=2;s=A" is "ns=2; s=A")
+        for section in ("inputs", "thermometers", "outputs"):
+            for key, text in getattr(self, section).items():
+                node = ua.NodeId.from_string(text)
+                if node in owner:
+                    raise TwinInputError(f"{self.source}: [{section}] {key} = {text!r}: the node of {owner[node]} "
+                                         "too; every input, thermometer and output needs a node of its own")
+                owner[node] = f"[{section}] {key}"
+
     def to_toml(self) -> str:
         """The map as the TOML text :func:`load_node_map` reads.
 
@@ -128,7 +148,7 @@ def load_node_map(path: str | Path) -> NodeMap:
     ------
     TwinInputError
         Naming the file, section, key and value: invalid TOML, an unknown section or key, a missing input, no
-        thermometer, a node id that does not parse.
+        thermometer, a node id that does not parse, a node two keys share (:meth:`NodeMap.check_distinct`).
     """
     path = Path(path)
     try:
@@ -155,4 +175,6 @@ def load_node_map(path: str | Path) -> NodeMap:
     bad = [k for k in tables["outputs"] if k not in OUTPUT_KEYS]
     if bad:
         raise TwinInputError(f"{path}: [outputs] {bad[0]}: unknown output; outputs: {', '.join(OUTPUT_KEYS)}")
-    return NodeMap(tables["inputs"], tables["thermometers"], tables["outputs"], str(path))
+    node_map = NodeMap(tables["inputs"], tables["thermometers"], tables["outputs"], str(path))
+    node_map.check_distinct()
+    return node_map

@@ -9,8 +9,9 @@ previous one (the sample's inputs held over it) and a measurement update with th
 readings are skipped).  The estimated drift is Gaussian: its 95 % band is ±1.96 σ of the posterior.
 
 **Innovation gate.**  Before the update, a reading whose normalised innovation ν²/S exceeds
-:data:`INNOVATION_GATE`² is left out (:func:`gated`): a sensor fault, not information — unless half the readings
-or more disagree at once, which says the model is off.
+:data:`INNOVATION_GATE`² is left out (:func:`gated`): a sensor fault, not information — unless half the thermometers
+or more (two of two) disagree at once, which says the model is off.  A thermometer a sample lacks is judged by its
+latest score (:class:`InnovationGate`), so a server that stamps each node apart is gated as one that does not.
 
 Each input is held on its own: a sample that has the spindle speed but no room air (or the reverse) updates
 the one it has.
@@ -43,16 +44,22 @@ Z95 = 1.959963984540054
 INNOVATION_GATE = 20.0
 
 
-def gated(scores: ArrayLike) -> np.ndarray:
-    """The readings the innovation gate rejects: ν²/S above :data:`INNOVATION_GATE`², when fewer than half fail.
+def gated(scores: ArrayLike, recent: ArrayLike | None = None) -> np.ndarray:
+    """The readings the innovation gate rejects: ν²/S above :data:`INNOVATION_GATE`², when they are a sensor's fault.
 
-    When half the readings or more fail together, it is the model that is off (a warm start, a long gap, heat it
-    does not know), not the sensors: all are kept, so the filter follows them.
+    They are when fewer than half of the thermometers judged fail, or only one of two or more: when more fail
+    together, it is the model that is off (a warm start, a long gap, heat it does not know), not the sensors, and
+    all are kept, so the filter follows them.  The thermometers judged are this sample's readings and, with
+    ``recent``, the latest score of each thermometer this sample lacks (a server that stamps each node apart
+    sends one reading a sample: judged alone, it could never be told from the model being off).  A single
+    thermometer is never rejected: nothing tells its fault from the model's.
 
     Parameters
     ----------
     scores : array_like
         (p,) normalised innovations squared ν²/S of the readings, 1 (NaN: missing).
+    recent : array_like, optional
+        (p,) each thermometer's latest ν²/S over the last few samples, 1 (NaN: none); default: ``scores``.
 
     Returns
     -------
@@ -60,11 +67,47 @@ def gated(scores: ArrayLike) -> np.ndarray:
         (p,) bool, True for a rejected reading.
     """
     scores = np.asarray(scores, float)
+    judged = scores if recent is None else np.where(np.isfinite(scores), scores, np.asarray(recent, float))
     with np.errstate(invalid="ignore"):          # NaN (missing) compares False: never rejected
         out = scores > INNOVATION_GATE ** 2
-    if not out.any():
-        return out
-    return out if 2 * out.sum() < np.isfinite(scores).sum() else np.zeros(len(scores), bool)
+        failing = int(np.sum(judged > INNOVATION_GATE ** 2))
+    n = int(np.isfinite(judged).sum())
+    if not out.any() or not (2 * failing < n or failing == 1 < n):
+        return np.zeros(len(scores), bool)
+    return out
+
+
+class InnovationGate:
+    """:func:`gated` with each thermometer's latest score kept for ``2 (p + 2)`` samples (p thermometers): a server
+    that stamps each node apart sends one reading a sample, one round of the nodes in p + 2 samples.
+
+    Parameters
+    ----------
+    n_readings : int
+        p, the thermometers.
+    """
+
+    def __init__(self, n_readings: int) -> None:
+        self.scores, self.age = np.full(n_readings, np.nan), np.full(n_readings, np.inf)
+
+    def __call__(self, scores: ArrayLike) -> np.ndarray:
+        """The readings :func:`gated` rejects, judged with the recent scores; this sample's are kept for the next.
+
+        Parameters
+        ----------
+        scores : array_like
+            (p,) ν²/S of this sample's readings, 1 (NaN: missing).
+
+        Returns
+        -------
+        numpy.ndarray
+            (p,) bool, True for a rejected reading.
+        """
+        scores = np.asarray(scores, float)
+        seen = np.isfinite(scores)
+        self.age += 1
+        self.scores[seen], self.age[seen] = scores[seen], 0
+        return gated(scores, np.where(self.age <= 2 * (len(scores) + 2), self.scores, np.nan))
 
 
 def axis_factors(band_inflation: ArrayLike | None) -> np.ndarray:
@@ -200,7 +243,8 @@ class DriftObserver(RecordRunner):
         self.field_names = self.model.field_names
         self._power, self._kf = {}, None
         self._room = np.r_[self.model.plant_inputs(0.0, 1.0)[0] - self.model.plant_inputs(0.0, 0.0)[0], 0.0]
-        self.time_s = None
+        self.time_s, self._rpm = None, 0.0
+        self._gate = InnovationGate(len(self.thermometers))
 
     # ------------------------------------------------------------------ filtering
     def start(self, time_s: float, room_C: float) -> DriftObserver:
@@ -226,6 +270,7 @@ class DriftObserver(RecordRunner):
         self.time_s, self._u = float(time_s), np.r_[model.plant_inputs(0.0, room_C)[0], 1.0]
         self._rpm, self._air, self._prepared = 0.0, float(room_C), None
         self._nis, self.inflation = 1.0, 1.0
+        self._gate = InnovationGate(len(self.thermometers))
         return self
 
     def step(self, time_s: float, spindle_rpm: float, room_C: float, temperatures_C: ArrayLike) -> Estimate | None:
@@ -260,7 +305,7 @@ class DriftObserver(RecordRunner):
         dt = self.advance(time_s, spindle_rpm, room_C)
         if not self.started:
             return None
-        return self.fuse(y, dt, gated(self.innovation_scores(y)))
+        return self.fuse(y, dt, self._gate(self.innovation_scores(y)))
 
     @property
     def started(self) -> bool:
@@ -288,10 +333,13 @@ class DriftObserver(RecordRunner):
             If the sample is not later than the previous one.
         """
         if not self.started:
+            # a speed read before the first room air is held for the start (a speed reported only on change may
+            # not come again for hours)
+            rpm = self._rpm = float(spindle_rpm) if np.isfinite(spindle_rpm) else self._rpm
             if not np.isfinite(room_C):
                 return None                    # no room air yet: nothing to start from
             self.start(time_s, room_C)
-            self._rpm = float(spindle_rpm) if np.isfinite(spindle_rpm) else self._rpm
+            self._rpm = rpm
             dt = None
         elif time_s <= self.time_s:
             raise TwinInputError(f"observer: sample time {time_s} s is not after the previous {self.time_s} s")

@@ -1,6 +1,6 @@
 """What ``twin live`` refuses to fuse, per node: readings whose OPC UA status is not Good, readings outside the
 plausible range of their kind (:data:`twin.core.plausible.PLAUSIBLE`: a DS18x20 reads −127 °C when it is
-disconnected), readings the observer's innovation gate rejects (:func:`twin.live.observer.gated`), and nodes
+disconnected; a spindle speed beyond :data:`MAX_SPINDLE_RPM`), readings the observer's innovation gate rejects (:func:`twin.live.observer.gated`), and nodes
 that stop updating.
 
 Each is counted per node (the summary lists them) and named once on stderr when it starts: a session of
@@ -24,6 +24,13 @@ log = logging.getLogger("thermal_twin")
 
 #: A node is stale when its last update is older than this many sample intervals (the nodes' median spacing).
 STALE_INTERVALS = 5
+#: The fastest plausible spindle speed, rpm: beyond the fastest machine-tool spindles (about 60 000 rpm), so a
+#: faster reading is a unit or scaling error (1e9 rpm would drive the model to millimetres of drift).  A negative
+#: speed is the spindle turning in reverse (M04), whose heat the model takes by its magnitude.
+MAX_SPINDLE_RPM = 100_000.0
+#: Plausible range and unit per reading kind.
+RANGES = {"air": (*PLAUSIBLE["air"], "°C"), "temperature": (*PLAUSIBLE["temperature"], "°C"),
+          "spindle": (-MAX_SPINDLE_RPM, MAX_SPINDLE_RPM, "rpm")}
 #: What each reason is called in the summary.
 REASONS = {"status": "status not Good", "type": "not a number", "range": "outside the plausible range",
            "gate": "innovation gate"}
@@ -42,7 +49,7 @@ class ReadingChecks:
 
     def __init__(self, node_map: NodeMap, thermometers: list[str]) -> None:
         self.map = node_map
-        self.kinds = {"room_air": "air", **dict.fromkeys(thermometers, "temperature")}
+        self.kinds = {"spindle_speed": "spindle", "room_air": "air", **dict.fromkeys(thermometers, "temperature")}
         self.watched = ["room_air", *thermometers]
         #: key → reason (:data:`REASONS`) → readings rejected
         self.rejected: dict[str, dict[str, int]] = {}
@@ -79,10 +86,11 @@ class ReadingChecks:
             return np.nan
         kind = self.kinds.get(key)
         if kind is not None and np.isfinite(value):
-            lo, hi = PLAUSIBLE[kind]
+            lo, hi, unit = RANGES[kind]
             if not lo <= value <= hi:
-                self.reject(key, "range", time_s, f"{value:g} °C, outside the plausible {lo:g} … {hi:g} °C "
-                                                  f"of {'an air' if kind == 'air' else 'a'} {kind} sensor")
+                what = {"air": "an air sensor", "temperature": "a temperature sensor", "spindle": "a spindle"}[kind]
+                self.reject(key, "range", time_s, f"{value:g} {unit}, outside the plausible {lo:g} … {hi:g} {unit} "
+                                                  f"of {what}")
                 return np.nan
         return value
 
