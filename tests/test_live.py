@@ -380,7 +380,8 @@ def test_nan_missing_and_late_samples(rom):
             nan[3] = np.nan                                            # a NaN reading
             await server.publish(10.0, nan)
             await server.publish(20.0, _sample(20.0)[:-1], CHANNELS[:-1])   # one node never reports
-            await asyncio.sleep(1.0)
+            while client.samples.done_until < 20.0 and not task.done():     # fused late_after_s after, under any load
+                await asyncio.sleep(0.01)
             await server.publish(15.0, _sample(15.0))                  # late: 20 s was fused already
             await server.publish(30.0, _sample(30.0))
             await server.publish(40.0, _sample(40.0))
