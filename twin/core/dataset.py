@@ -73,6 +73,12 @@ FAST_RECORD_SPAN_S = 200.0
 FAST_RECORD_STEP_S = 0.5
 FAST_HEATING_K_PER_S = 0.05      # 3 K/min
 FAST_DRIFT_UM_PER_S = 0.5        # 1.8 mm/h
+#: A measured record is taken for one timed in ms (a hint, never an error) when its median step exceeds
+#: SLOW_RECORD_STEP_S and it spans over SLOW_RECORD_SPAN_S: a thermal logger samples every second to every few
+#: minutes, a slow one hourly, and a test lasts hours to weeks; 8 h sampled every 60 s, logged in ms, spans 333
+#: "days" in steps of 16.7 "h".
+SLOW_RECORD_STEP_S = 3600.0
+SLOW_RECORD_SPAN_S = 30 * 86400.0
 
 
 def project_version() -> str:
@@ -397,7 +403,7 @@ class Dataset:
         column_map : dict of str to str or None, optional
             ``csv column → "<name>_<unit>"`` (e.g. ``{"t1": "T01_degC"}``), or to None to leave the column
             out (a spare or broken channel); unmapped columns must already be named ``<name>_<unit>`` with a
-            unit from :data:`UNITS`.
+            unit from :data:`UNITS`.  A column mapped to ``time_s`` is the time column (s).
         time_column : str
             Name of the time column: s, or ISO 8601 date-times (``2026-11-23 14:05:00``, with or without a
             UTC offset), which become s since the first stamp, kept as ``metadata["import"]["time_origin"]``
@@ -427,8 +433,8 @@ class Dataset:
         path = Path(path)
         if nan_policy not in NAN_POLICIES:
             raise TwinInputError(f"nan_policy must be one of {NAN_POLICIES}, got {nan_policy!r}")
+        column_map, time_column = _time_from_map(path, column_map, time_column)
         header, data, origin = _parse_csv(path, _read_utf8(path), time_column)
-        column_map = dict(column_map or {})
         unknown_map = sorted(set(column_map) - set(header))
         if unknown_map:
             raise TwinInputError(f"{path}: column map names column(s) {unknown_map} that the file lacks; "
@@ -495,10 +501,51 @@ def _refuse_other_time_unit(path, column, mapped):
                          "as time_s")
 
 
+def _time_from_map(path, column_map, time_column):
+    """``(column map without its time entry, time column)``: a map entry ``{"Time": "time_s"}`` names the time
+    column (in s; a header that names another unit is refused by :func:`_refuse_other_time_unit`)."""
+    column_map = dict(column_map or {})
+    mapped = [k for k, v in column_map.items() if v == "time_s"]
+    if len(mapped) > 1 or (mapped and time_column not in ("time_s", mapped[0])):
+        raise TwinInputError(f"{path}: the column map maps {mapped} to time_s, and the time column is "
+                             f"{time_column!r}: map one column to time_s")
+    for k in mapped:
+        del column_map[k]
+    return column_map, mapped[0] if mapped else time_column
+
+
+def ms_hint(dataset: Dataset, column: str = "time_s") -> str | None:
+    """A one-line hint that a measured record's time is in ms, not s, or None (thresholds and why:
+    :data:`SLOW_RECORD_STEP_S`).
+
+    Parameters
+    ----------
+    dataset : Dataset
+        A measured record (its ``metadata["source"]`` names the file).
+    column : str, default "time_s"
+        The time column's header, for the message.
+
+    Returns
+    -------
+    str or None
+        Naming the file, the column, its span (days) and median step (h).
+    """
+    if len(dataset) < 2:
+        return None
+    span_s = float(dataset.time_s[-1] - dataset.time_s[0])
+    step_s = float(np.median(np.diff(dataset.time_s)))
+    if step_s <= SLOW_RECORD_STEP_S or span_s <= SLOW_RECORD_SPAN_S:
+        return None
+    return (f"{dataset.metadata.get('source', 'the data')}: column {column!r} spans {span_s / 86400:.4g} days in "
+            f"steps of {step_s / 3600:.3g} h, too slow and too long for a thermal record: is the time in ms "
+            f"(÷ 1000 to s: {span_s / 3600e3:.3g} h in steps of {step_s / 1e3:g} s)? The twin reads it in s")
+
+
 def _noted_hours(dataset, names, column):
-    """The dataset, once a hint that its time is in hours (:func:`hours_hint`) is logged and kept in its import
-    report as ``time_unit_hint``: a hint, not an error, since a fast capture can look alike."""
-    hint = hours_hint(dataset, names, column)
+    """The dataset, once a hint that its time is in hours (:func:`hours_hint`) or ms (:func:`ms_hint`) is logged
+    and kept in its import report as ``time_unit_hint``: a hint, not an error, since a real record can look
+    alike."""
+    hint = hours_hint(dataset, names, column) or ms_hint(dataset, column)
     if hint is not None:
         log.warning("%s", hint)
         dataset.metadata["import"]["time_unit_hint"] = hint

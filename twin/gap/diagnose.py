@@ -50,6 +50,11 @@ DEFAULT_STEP_S = 60.0
 #: Shortest record the diagnosis accepts, s: a fit part and a held-out part that each see the machine's
 #: slow response (hours) need a few hours in all.
 MIN_RECORD_S = 2 * 3600.0
+#: Longest twin grid a diagnosis builds (steps): the trajectories it keeps take about steps × states × 8 bytes
+#: each, some 18 kB a step in all on the default machine (a record logged in ms, 480 000 steps of 60 s,
+#: grew to 8.7 GB), so this cap is about 1.8 GB, 69 days at the default 60 s step.  Refused before allocating.
+MAX_GRID_STEPS = 100_000
+BYTES_PER_GRID_STEP = 18e3
 
 
 @dataclass
@@ -394,9 +399,26 @@ def _read_inputs(measured, machine, scenario, column_map, holdout_fraction, init
     if step_s > held_out_s / 10.0:
         raise TwinInputError(f"step_s (--step) {step_s:g} s is longer than a tenth of the held-out "
                              f"{held_out_s:g} s of the record: the twin would take too few steps there")
+    _check_grid_size(record, step_s)
     if initial is None:
         initial = "uniform" if sc is not None and sc.initial["kind"] == "uniform" else "steady"
     return machine, sc, record, rows, initial
+
+
+def _check_grid_size(record, step_s):
+    """Stop before allocating a twin grid of more than :data:`MAX_GRID_STEPS` steps of ``step_s`` s over the
+    record's span, naming the span, the step, the memory it would take and the record's time-unit hint."""
+    span_s = float(record.time_s[-1] - record.time_s[0])
+    steps = span_s / step_s
+    if steps <= MAX_GRID_STEPS:
+        return
+    hint = (record.metadata.get("import", {}).get("time_unit_hint", "").split(": ", 1)[-1]
+            or "is the time in ms (÷ 1000)?")
+    raise TwinInputError(
+        f"{record.report.get('source', 'the record')}: the record spans {span_s:g} s ({span_s / 86400:.4g} days); "
+        f"at a step of {step_s:g} s the twin's grid would take {steps:.4g} steps (about "
+        f"{steps * BYTES_PER_GRID_STEP / 1e9:.3g} GB), over the {MAX_GRID_STEPS} allowed; {hint.rstrip('.')}. "
+        "Otherwise split the record or give a longer --step")
 
 
 def _explain(d, drive, discovery, timings):

@@ -23,7 +23,7 @@ import numpy as np
 from ..core.dataset import ChannelInfo, Dataset, sidecar_path
 from ..core.machine import Machine
 from ..core.machine_definition import MachineDefinition
-from ..core.plausible import check_plausible
+from ..core.plausible import check_air_against_surfaces, check_plausible
 from ..errors import TwinInputError
 
 SENSOR_KINDS = ("temperature", "air", "displacement", "strain")
@@ -35,11 +35,18 @@ SPEED_LIMIT_FACTOR = 1.05
 #: A logged feed above this factor × the machine's top feed is a unit error: a log holds rapid traverses too,
 #: which are faster than the feeds a scenario asks for (typically 2–3 ×).
 FEED_LIMIT_FACTOR = 3.0
-#: A spindle column that peaks between these fractions of the machine's top speed reads like one in Hz or rev/s
-#: (60× too small: 1000 … 12000 rpm read 17 … 200), and is warned about: below the first it is at standstill (a
-#: tachometer reads a few rpm there), above the second it runs.  A record that truly peaks there is possible
-#: (a slow warm-up), so it is not refused.
-SPINDLE_PEAK_IN_HZ = (0.001, 0.02)
+#: A running spindle column that peaks (99th percentile of |n|) at or below this fraction of the machine's top
+#: speed reads like one in Hz or rev/s (60× too small: 1000 … 12000 rpm read 17 … 200) or in krpm (1000× too
+#: small: 12000 rpm reads 12, 0.1 %), and is warned about.  Running: it holds its speed (:func:`_holds_speed`),
+#: which a tachometer's noise at standstill (a few rpm, either sign) does not.  A record that truly peaks there
+#: is possible (a slow warm-up), so it is warned about, not refused, as the Hz warning always was; the warning
+#: names both factors and goes into the report's notes.
+SPINDLE_PEAK_TOO_LOW = 0.02
+#: A feed column whose peak (99th percentile of |f| over the axes' rows) is at or below this fraction of the
+#: machine's top feed reads like one in m/min (1000× too small: 30000 mm/min reads 30, 0.1 %, and a log's
+#: rapid traverses at most 3× that); a thermal test's real feeds reach far above 1 % of the top feed (300 mm/min
+#: on a 30 m/min machine).  Warned about, like the spindle, since a slow finishing record is possible.
+FEED_PEAK_TOO_LOW = 0.01
 CONDITION_UNITS = {"spindle": "rpm", "feed_x": "mm_min", "feed_y": "mm_min", "feed_z": "mm_min",
                    "ambient_gradient": "K_m"}
 
@@ -109,7 +116,7 @@ def _nan_runs(t, v):
 def check_operating_range(dataset: Dataset, channel: ChannelInfo, values: np.ndarray,
                           definition: MachineDefinition) -> str | None:
     """Stop with a clear error when a spindle speed or feed lies beyond what the machine can do (a unit error);
-    warn when a spindle column peaks where one in Hz or rev/s would (60× too small).
+    warn when a running spindle peaks where one in Hz or krpm would, or a feed where one in m/min would.
 
     A spindle speed is taken by its magnitude (reverse rotation is logged negative; the heat does not care).
     A logged feed may include rapid traverses, faster than the largest feed a scenario asks for: it is
@@ -130,8 +137,9 @@ def check_operating_range(dataset: Dataset, channel: ChannelInfo, values: np.nda
     Returns
     -------
     str or None
-        A warning for the report when the spindle's typical peak (99th percentile of |n|) lies in the band
-        of :data:`SPINDLE_PEAK_IN_HZ`; else None.
+        A warning for the report when the column runs (peak > 0) but its typical peak (99th percentile of |v|)
+        is at or below :data:`SPINDLE_PEAK_TOO_LOW` (spindle: Hz or krpm?) or :data:`FEED_PEAK_TOO_LOW` (feed:
+        m/min?) × the machine's top; else None.
 
     Raises
     ------
@@ -149,17 +157,31 @@ def check_operating_range(dataset: Dataset, channel: ChannelInfo, values: np.nda
         raise TwinInputError(f"{source}: column {channel.column!r} has value {values[k]:g} at "
                              f"t = {dataset.time_s[k]:g} s, beyond the ±{limit:g} {what} of machine "
                              f"{definition.name!r}: is the column in another unit?")
-    if not spindle:
+    finite = np.abs(values[np.isfinite(values)])
+    peak = float(np.percentile(finite, 99.0))
+    top = definition.max_spindle_rpm if spindle else definition.max_feed_mm_min
+    if not 0.0 < peak <= (SPINDLE_PEAK_TOO_LOW if spindle else FEED_PEAK_TOO_LOW) * top:
         return None
-    peak = float(np.percentile(np.abs(values[np.isfinite(values)]), 99.0))
-    standstill, running = (f * definition.max_spindle_rpm for f in SPINDLE_PEAK_IN_HZ)
-    if not standstill < peak < running:
+    if spindle and not _holds_speed(finite, peak):
         return None
-    return (f"column {channel.column!r} peaks at about {peak:.4g} rpm (99th percentile), "
-            f"{100 * peak / definition.max_spindle_rpm:.2g} % of the {definition.max_spindle_rpm:g} rpm top speed "
-            f"of machine {definition.name!r}: if it is in Hz (rev/s), the speed is {60 * peak:.0f} rpm and every "
-            "spindle heat below is wrong (a spindle in Hz made the search beyond the library 'discover' a "
-            "7.7 kW source); convert it to rpm")
+    culprit = "a spindle in Hz or krpm" if spindle else "feeds in m/min"
+    unit, top_name, guess = (
+        ("rpm", "top speed", f"in Hz (rev/s), the speed is {60 * peak:.0f} rpm (× 60); if in krpm, "
+         f"{1000 * peak:.0f} rpm (× 1000)") if spindle
+        else ("mm/min", "top feed", f"in m/min, the feed is {1000 * peak:.0f} mm/min (× 1000)"))
+    return (f"column {channel.column!r} peaks at about {peak:.4g} {unit} (99th percentile), "
+            f"{100 * peak / top:.2g} % of the {top:g} {unit} {top_name} of machine {definition.name!r}: if it is "
+            f"{guess}, and every heat it drives below is wrong ({culprit} made the search beyond the library "
+            f"'discover' 10^4–10^5 W sources); convert it to {unit}")
+
+
+def _holds_speed(magnitudes, peak):
+    """Whether a spindle column runs: of the consecutive row pairs at or above half its peak (at least 3), at
+    least half change by at most 1 % of the peak (a held speed, not a tachometer's noise at rest)."""
+    on = magnitudes >= 0.5 * peak
+    pairs = on[1:] & on[:-1]
+    steady = pairs & (np.abs(np.diff(magnitudes)) <= 0.01 * peak)
+    return pairs.sum() >= 3 and steady.sum() >= 0.5 * pairs.sum()
 
 
 def check_scale(record: Record, predicted: np.ndarray, columns: Mapping[str, str]) -> None:
@@ -182,7 +204,8 @@ def check_scale(record: Record, predicted: np.ndarray, columns: Mapping[str, str
     Raises
     ------
     TwinInputError
-        When a sensor's measured range is more than :data:`SCALE_FACTOR` times larger or smaller than predicted.
+        When a sensor's measured range is more than :data:`SCALE_FACTOR` times larger or smaller than predicted,
+        or it is constant (a dead channel) where the twin predicts a clear signal.
     """
     floor = {"temperature": 0.5, "air": 0.5, "displacement": 2.0, "strain": 5.0}
     for j, (name, kind) in enumerate(zip(record.names, record.kinds)):
@@ -192,10 +215,16 @@ def check_scale(record: Record, predicted: np.ndarray, columns: Mapping[str, str
         if expected < floor[kind]:
             continue
         seen = float(np.ptp(v[ok]))
+        source, column = record.report.get("source", "the data"), columns.get(name, name)
+        if seen == 0.0:
+            raise TwinInputError(
+                f"{source}: column {column!r} ({name}) is constant at {v[ok][0]:g} {GROUP_UNITS[kind]} over the "
+                f"record where the nominal twin predicts a range of {expected:.4g} {GROUP_UNITS[kind]}: a dead "
+                f"channel? map it to null with --column-map '{{\"{column}\": null}}'")
         ratio = seen / expected
         if ratio < 1.0 / SCALE_FACTOR or ratio > SCALE_FACTOR:
             raise TwinInputError(
-                f"{record.report.get('source', 'the data')}: column {columns.get(name, name)!r} ({name}) spans "
+                f"{source}: column {column!r} ({name}) spans "
                 f"{seen:.4g} {GROUP_UNITS[kind]} but the nominal twin predicts {expected:.4g} {GROUP_UNITS[kind]} "
                 f"there ({ratio:.3g} ×): a unit error (mm under _um, µm under _um × 1000?); fix the column's unit")
 
@@ -217,6 +246,8 @@ class _Channels:
         self.feeds, self.air, self.ignored, self.empty = {}, [], [], []
         self.empty_columns, self.warnings = {}, []    # condition → its empty column; notes for the report
         self.spindle = self.gradient = None
+        self.air_columns = []                          # (CSV column, values °C with NaNs) of the air inputs
+        self.unit_suspects = []                        # condition columns warned about as in another unit
 
     def valid_names(self):
         return (f"sensors {sorted(self.sensors)}; conditions {sorted(CONDITION_UNITS)} and "
@@ -231,6 +262,7 @@ class _Channels:
         elif ch.name.startswith("ambient_") and ch.name[len("ambient_"):] in self.zones and ch.unit == "degC":
             if np.isfinite(v).any():
                 check_plausible(self.dataset, ch, "air", v)
+                self.air_columns.append((ch.column, v))
                 self.air.append((ch.name, ch.name[len("ambient_"):], 0.0, _fill(self.t, v)))
         elif ch.name.startswith("P_") and ch.unit == "W" or ch.name in self.cameras:
             self.ignored.append(ch.name)
@@ -251,6 +283,7 @@ class _Channels:
         check_plausible(self.dataset, ch, c.kind, v)
         if c.kind == "air":
             sensor = self.d.sensor(ch.name)
+            self.air_columns.append((ch.column, v))
             self.air.append((ch.name, sensor.zone, sensor.position[2] - self.d.ambient_reference_height_m,
                              _fill(self.t, v)))
         self.names.append(ch.name)
@@ -268,6 +301,7 @@ class _Channels:
             warning = check_operating_range(self.dataset, ch, v, self.d)
             if warning:
                 self.warnings.append(warning)
+                self.unit_suspects.append(ch.column)
         filled = _fill(self.t, v)
         if ch.name == "spindle":
             lowest = np.nanmin(v)
@@ -312,6 +346,8 @@ def match_record(dataset: Dataset, machine: Machine) -> Record:
     if not m.names:
         raise TwinInputError(f"the data has no sensor channel of machine {machine.name!r}; valid names: "
                              f"{m.valid_names()}")
+    check_air_against_surfaces(dataset.metadata.get("source", "the data"), m.air_columns,
+                               [v for v, kind in zip(m.cols, m.kinds) if kind == "temperature"])
     values = np.column_stack(m.cols)
     report = _import_report(dataset, m, t, values)
     return Record(t, m.names, m.kinds, values, m.spindle, m.feeds, m.gradient, m.air, report,
@@ -337,6 +373,7 @@ def _import_report(dataset, m, t, values):
         "channels_empty": m.empty,
         "empty_columns": m.empty_columns,
         "warnings": m.warnings,
+        "unit_suspects": m.unit_suspects,
         "channels_ignored": m.ignored,
         "nan_counts": {n: int((~np.isfinite(values[:, j])).sum()) for j, n in enumerate(names)
                        if not np.isfinite(values[:, j]).all()},
