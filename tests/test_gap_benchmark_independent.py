@@ -131,3 +131,13 @@ def test_wrong_unit_records_and_a_loose_thermometer_are_written_apart_from_the_d
     np.testing.assert_array_equal(room.values[:, 1:], data.values[:, 1:])
     with pytest.raises(TwinInputError, match="'Z' is not a thermometer"):
         apply_sensor_errors(data, [("thermometer_in_air", "Z", 0.4)], sc)
+
+
+def test_the_confusion_table_prints_log10_evidence_not_an_overflowing_ratio():
+    from twin.gap.benchmark import _confusion_table
+
+    row = {"truth": "belt_drive", "top": "belt_drive", "correct": True, "partially": True,
+           "ranking": [("belt_drive", 141.2)], "runner_up": "fixture_drift", "evidence_ratio": 2.04e31,
+           "log10_evidence_ratio": 31.3, "drift_gap": 9.3}
+    table = _confusion_table([row])
+    assert "log10 evidence ratio" in table and "| 31.3 |" in table and "e+31" not in table

@@ -200,7 +200,8 @@ def summarise(case: Case, d: Diagnosis) -> dict[str, object]:
     -------
     dict
         ``case``, ``kind``, ``truth``, ``top``, ``correct``, ``partially``, ``significant``, ``verdict``,
-        ``ranking`` ((name, ΔBIC) of the top 6), ``runner_up``, ``evidence_ratio``, ``gap_over_noise`` and
+        ``ranking`` ((name, ΔBIC) of the top 6), ``runner_up``, ``evidence_ratio`` and ``log10_evidence_ratio``
+        (over the runner-up), ``gap_over_noise`` and
         ``gap_over_tolerance`` per group, ``shrink_top`` (held-out drift RMS and max, µm, temperature RMS, K,
         before and after, and reductions as fractions), ``drift_gap`` (held-out drift RMS / σ_g); with the
         true model among the fits ``truth_fit`` (fitted against true parameters) and ``shrink_truth``; for a
@@ -215,7 +216,9 @@ def summarise(case: Case, d: Diagnosis) -> dict[str, object]:
            "significant": d.significant, "verdict": d.verdict,
            "ranking": [(r.name, round(r.delta_bic, 1)) for r in d.ranking[:6]],
            "runner_up": d.runner_up.name if d.runner_up is not None else None,
-           "evidence_ratio": d.evidence_ratio, "gap_over_noise": d.gap_over_noise,
+           "evidence_ratio": d.evidence_ratio,
+           "log10_evidence_ratio": d.decision.evidence().get("log10_ratio_vs_runner_up"),
+           "gap_over_noise": d.gap_over_noise,
            "gap_over_tolerance": d.gap_over_tolerance}
     truth_result = _truth_result(true_names, d)
     if truth_result is not None:
@@ -413,8 +416,9 @@ def _goal_lines(metrics):
 def _confusion_table(results):
     rows = [(r["truth"], r["top"], "✓" if r["correct"] else ("½" if r["partially"] else "✗"),
              _fmt(r["ranking"][0][1] if r["ranking"] else None, ".0f"), r["runner_up"] or "–",
-             _fmt(r["evidence_ratio"], ".3g"), _fmt(r["drift_gap"], ".1f")) for r in results]
-    return markdown_table(rows, ["true", "top-ranked", "✓", "ΔBIC top", "runner-up", "evidence ratio",
+             _fmt(r.get("log10_evidence_ratio"), ".1f"), _fmt(r["drift_gap"], ".1f")) for r in results]
+    # log10, as every evidence the twin prints: the ratio itself reads 2.04e+31 or overflows to inf
+    return markdown_table(rows, ["true", "top-ranked", "✓", "ΔBIC top", "runner-up", "log10 evidence ratio",
                                  "drift gap / tolerance"])
 
 

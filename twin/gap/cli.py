@@ -132,7 +132,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--measured", required=True,
                    help="measured CSV (<name>_<unit> columns, or with --column-map) or a twin dataset CSV")
     d.add_argument("--machine", default="vmc_ram", help="machine name or TOML path (default vmc_ram)")
-    d.add_argument("--scenario", help="scenario for missing inputs (spindle, feeds, ambient) and the initial state")
+    d.add_argument("--scenario", help="scenario for missing inputs: the spindle speed and feeds when the data has "
+                                      "none, the room zone's ambient when no air sensor is in the room zone; "
+                                      "other zones without an air sensor follow the room air, not the scenario")
     d.add_argument("--column-map", help='JSON file or inline JSON mapping CSV columns, e.g. {"t1": "T01_degC", "spare": null} (null leaves a column out)')
     d.add_argument("--holdout", type=float, default=0.3, help="held-out last fraction of the record (default 0.3)")
     d.add_argument("--effects", help="comma list of candidate effects (default: the whole library)")

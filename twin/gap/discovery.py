@@ -123,11 +123,14 @@ from .structure import Structure
 GRID_M = 0.2
 #: Sub-grid step of the position refinement of a source atom, m (± one grid half-step).
 REFINE_M = 0.05
-#: Time signals a candidate source may follow: name → (label, unit of the fitted power).
+#: Time signals a candidate source may follow: name → (label, unit of the fitted power).  The spindle's
+#: reference speed is the machine's (:func:`spindle_reference_rpm`); :func:`driver_unit` names it.
 DRIVERS = {"spindle": ("∝ spindle speed", "W at the reference speed"),
            "spindle_on": ("while the spindle runs", "W"),
            "feed": ("∝ the largest axis feed", "W at 10 m/min")}
 FEED_REFERENCE_MM_MIN = 10000.0
+#: Spindle reference speed of a machine without a spindle-driven source, rpm.
+DEFAULT_SPINDLE_REFERENCE_RPM = 9000.0
 MIN_DELTA_BIC = 10.0
 MIN_MATERIAL = 1.0
 MAX_WORSENING = 0.1
@@ -168,6 +171,12 @@ class Discovery:
     held_out: dict = field(default_factory=dict)
     position_radius_m: float | None = None  # farthest plausible position of a source from position_m, m
 
+    @property
+    def resolved(self) -> bool:
+        """True when the 90 % interval excludes 0 (a change of either sign is within it otherwise: not found)."""
+        lo, hi = self.interval
+        return bool(np.isfinite(lo) and np.isfinite(hi) and (lo > 0 or hi < 0))
+
     def sentence(self) -> str:
         """One line in words: a source's power, driver, position and part; else the label and the value.
 
@@ -199,8 +208,17 @@ class DiscoveryResult:
     held_out_sse_ratio: float = 1.0   # weighted held-out SSE after all accepted atoms / before (the base's)
     n_atoms: int = 0                  # atoms accepted (fitted coefficients; an extended source counts its cells)
 
+    def resolved(self) -> list[Discovery]:
+        """The accepted atoms whose 90 % interval excludes 0 (:attr:`Discovery.resolved`): what was found."""
+        return [d for d in self.items if d.resolved]
+
+    def unresolved(self) -> list[Discovery]:
+        """The accepted atoms whose 90 % interval includes 0: fitted, but neither sign is established."""
+        return [d for d in self.items if not d.resolved]
+
     def summary(self) -> list[str]:
-        """One line per discovery (:meth:`Discovery.sentence`), or one line saying none was accepted.
+        """One line per resolved discovery (:meth:`Discovery.sentence`), then one per unresolved atom marked
+        "not resolved (its 90 % interval includes 0)", or one line saying none was accepted.
 
         Returns
         -------
@@ -209,7 +227,8 @@ class DiscoveryResult:
         """
         if not self.items:
             return ["no atom of the dictionary is accepted on held-out data"]
-        return [d.sentence() for d in self.items]
+        return [d.sentence() for d in self.resolved()] + [
+            f"not resolved (its 90 % interval includes 0): {d.sentence()}" for d in self.unresolved()]
 
     def as_dict(self) -> dict[str, object]:
         """JSON-able form (for ``diagnosis.json``), with the :meth:`summary` lines.
@@ -218,11 +237,13 @@ class DiscoveryResult:
         -------
         dict
             ``base``, ``candidates``, ``seconds`` (s), ``held_out``, ``held_out_sse_ratio``, ``n_atoms``,
-            ``items`` (each :class:`Discovery` as a dict), ``rejected`` and ``summary``.
+            ``items`` (each :class:`Discovery` as a dict, with ``resolved``: whether its 90 % interval excludes 0),
+            ``rejected`` and ``summary``.
         """
         return {"base": self.base, "candidates": self.candidates, "seconds": self.seconds,
                 "held_out": self.held_out, "held_out_sse_ratio": self.held_out_sse_ratio, "n_atoms": self.n_atoms,
-                "items": [asdict(d) for d in self.items], "rejected": self.rejected, "summary": self.summary()}
+                "items": [{**asdict(d), "resolved": d.resolved} for d in self.items], "rejected": self.rejected,
+                "summary": self.summary()}
 
 
 # ============================================================================= the response model
@@ -340,8 +361,7 @@ def driver_signals(drive: Drive, machine: Machine) -> dict[str, np.ndarray]:
         ``spindle``: |speed| / reference; ``spindle_on``: 1 while the spindle turns; ``feed``: the largest
         |axis feed| / :data:`FEED_REFERENCE_MM_MIN`; each shape (N,).
     """
-    refs = [src.reference for src in machine.definition.sources if src.driver == "spindle"]
-    ref = max(refs) if refs else 9000.0
+    ref = spindle_reference_rpm(machine)
 
     def signals(rpm, feeds):
         rpm = np.abs(np.asarray(rpm, float))
@@ -350,6 +370,43 @@ def driver_signals(drive: Drive, machine: Machine) -> dict[str, np.ndarray]:
 
     S = drive.step_mean(signals) if hasattr(drive, "step_mean") else signals(drive.spindle_rpm, drive.feed_mm_min)
     return dict(zip(DRIVERS, np.asarray(S).T))
+
+
+def spindle_reference_rpm(machine: Machine) -> float:
+    """The spindle reference speed of the spindle driver signal (:func:`driver_signals`).
+
+    Parameters
+    ----------
+    machine : Machine
+        Its spindle-driven sources give their reference speeds, rpm.
+
+    Returns
+    -------
+    float
+        The largest of them, rpm (:data:`DEFAULT_SPINDLE_REFERENCE_RPM` without one).
+    """
+    refs = [src.reference for src in machine.definition.sources if src.driver == "spindle"]
+    return float(max(refs)) if refs else DEFAULT_SPINDLE_REFERENCE_RPM
+
+
+def driver_unit(driver: str, machine: Machine) -> str:
+    """Unit of the fitted power of a source following ``driver``, its reference named.
+
+    Parameters
+    ----------
+    driver : str
+        A :data:`DRIVERS` key.
+    machine : Machine
+        Gives the spindle reference speed (:func:`spindle_reference_rpm`).
+
+    Returns
+    -------
+    str
+        E.g. "W at 9000 rpm" (spindle), "W" (while the spindle runs), "W at 10 m/min" (feed).
+    """
+    if driver == "spindle":
+        return f"W at {spindle_reference_rpm(machine):g} rpm"
+    return DRIVERS[driver][1]
 
 
 def _cell(part, part_tets, centroids, volumes, centre, grid_m, min_tets=3):
@@ -575,11 +632,11 @@ class Dictionary:
         -------
         list of _Atom
             One per cell: its projected fit and held-out vectors; its value is a power in the unit
-            ``DRIVERS[driver][1]`` (W, at the driver's reference).
+            :func:`driver_unit` (W, at the driver's reference).
         """
         Z = self._driver_states(driver)
         bm = self.rom.modal(source_loads(self.structure.machine, cells))
-        unit, atoms = DRIVERS[driver][1], []
+        unit, atoms = driver_unit(driver, self.structure.machine), []
         for j, (part, _, centroid) in enumerate(cells):
             f, h = self.project(self._outputs(Z * bm[:, j]))
             atoms.append(_Atom("source", f"source@{part}({', '.join(f'{c:.2f}' for c in centroid)}):{driver}",
@@ -1039,5 +1096,5 @@ def render_discoveries(result: DiscoveryResult, machine: Machine, path: str | Pa
     if not src:
         return None
     return render_machine(machine, path, points=np.array([d.position_m for d in src]),
-                          point_labels=[f"{d.value:.0f} W" for d in src],
+                          point_labels=[f"{d.value:.0f} W" + ("" if d.resolved else " (not resolved)") for d in src],
                           title="discovered heat sources (beyond the library)")

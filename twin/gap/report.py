@@ -26,7 +26,7 @@ from .attribution import RESOLVED
 from .diagnose import Diagnosis
 from .discovery import render_discoveries
 from .fit import GROUP_UNIT
-from .verdict import parameters, role
+from .verdict import parameters, role, strict_json
 from .verdict import to_json as verdict_json
 
 #: Largest constant offset of a thermometer in calibration, K (a type K thermocouple's class 2 tolerance is
@@ -82,7 +82,8 @@ def write_report(d: Diagnosis, out_dir: str | Path, render: bool = True, overwri
             except Exception as exc:  # pragma: no cover - off-screen rendering depends on the host
                 d.notes.append(f"render skipped: {exc}")
         (tmp / "report.md").write_text(format_report(d, figures))
-        (tmp / "diagnosis.json").write_text(json.dumps(to_json(d), indent=1, default=json_default))
+        (tmp / "diagnosis.json").write_text(json.dumps(strict_json(to_json(d)), indent=1, default=json_default,
+                                                       allow_nan=False))
     return out_dir
 
 
@@ -99,7 +100,8 @@ def to_json(d: Diagnosis) -> dict[str, object]:
     dict
         The content of ``diagnosis.json``: verdict, named model and ranking (fits, ΔBIC, held-out figures),
         noise and scales (channel units), nominal residual, shrinkage, where, attribution, import report, notes,
-        timings (s); numpy values are converted by :func:`twin.core.dataset.json_default`.
+        timings (s); numpy values are converted by :func:`twin.core.dataset.json_default`.  The file itself is
+        strict JSON: :func:`write_report` writes null for a non-finite number (:func:`twin.gap.verdict.strict_json`).
     """
     def res(r):
         return {"name": r.name, "params": r.params(), "delta_bic": r.delta_bic, "bic": r.bic,
@@ -507,8 +509,8 @@ def _region_lines(est):
 
 def _parts_section(d, figures):
     L = []
-    if d.discovery is not None and d.discovery.items:
-        L += ["Where, from the discovery: " + "; ".join(d.discovery.summary()), ""]
+    if d.discovery is not None and d.discovery.resolved():
+        L += ["Where, from the discovery: " + "; ".join(x.sentence() for x in d.discovery.resolved()), ""]
     est = d.attribution.get("regions")
     if est is not None and est["shares"]:
         L += _region_lines(est)

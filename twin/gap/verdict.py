@@ -529,10 +529,17 @@ def _remainder(d):
     return "; ".join(parts)
 
 
+def _change(e):
+    """A group's held-out change in words: "-70 %", or "no change" / "—" where the nominal RMS is 0 (no ratio)."""
+    if np.isfinite(e["reduction"]):
+        return f"{-100 * e['reduction']:+.0f} %"
+    return "no change" if e["fitted_rms"] == e["nominal_rms"] else "—"
+
+
 def _held_out_line(d, model):
     out = []
     for g, e in reductions(model, d.nominal).items():
-        out.append(f"{g} {e['nominal_rms']:.3g} → {e['fitted_rms']:.3g} {UNIT[g]} ({-100 * e['reduction']:+.0f} %)")
+        out.append(f"{g} {e['nominal_rms']:.3g} → {e['fitted_rms']:.3g} {UNIT[g]} ({_change(e)})")
     return "held-out RMS " + ", ".join(out)
 
 
@@ -544,8 +551,9 @@ def _no_gap_text(d):
             f"sensor (at most {worst_sensor:.1f} × σ_j)")
 
 
-def _rejection_reasons(v):
-    """Why the best candidate was not named: its ΔBIC, materiality or the groups it worsens."""
+def _rejection_reasons(v, resolved=True):
+    """Why the best candidate was not named: its ΔBIC, materiality or the groups it worsens (``resolved``: whether
+    a displacing discovery has an atom whose 90 % interval excludes 0)."""
     why = []
     if v.best.delta_bic <= MIN_DELTA_BIC:
         why.append(f"ΔBIC {v.best.delta_bic:.1f} ≤ {MIN_DELTA_BIC:g}")
@@ -555,21 +563,24 @@ def _rejection_reasons(v):
         why.append(f"materiality {v.material:.2f} < {MIN_MATERIAL:g}")
     if v.worsened:
         why.append(f"worsens {', '.join(v.worsened)}")
-    if v.displaced:
+    if v.displaced and resolved:
         why.append(f"displaced by {v.displaced['by']}: they fit the held-out record better without it "
                    f"(ΔBIC {v.displaced['delta_bic']:.1f})")
+    elif v.displaced:
+        why.append("displaced: atoms fitted beyond the library on the nominal twin's residual fit the held-out record "
+                   f"better without it (ΔBIC {v.displaced['delta_bic']:.1f}), though none of them is resolved")
     return "; ".join(why) or "its pair rule"
 
 
-def _not_explained_text(v):
-    """The verdict when no library model is admissible."""
+def _not_explained_text(v, resolved=True):
+    """The verdict when no library model is admissible (``resolved`` as for :func:`_rejection_reasons`)."""
     text = (f"gap not explained by the library: nominal held-out residual up to "
             f"{worst(v.nominal_gap.values()):.1f} × σ_g "
-            f"({', '.join(f'{g} {r:.1f}' for g, r in v.nominal_gap.items())})")
+            f"({', '.join(f'{g} {r:.1f}' if np.isfinite(r) else f'{g} —' for g, r in v.nominal_gap.items())})")
     if v.nominal_flagged:
         text += "; sensors " + ", ".join(f"{n} {r:.1f} × σ" for n, r in v.nominal_flagged[:4])
     if v.best is not None:
-        text += f"; best candidate {v.best.name} rejected ({_rejection_reasons(v)})"
+        text += f"; best candidate {v.best.name} rejected ({_rejection_reasons(v, resolved)})"
     return text
 
 
@@ -590,6 +601,44 @@ def _explained_text(d):
     return text
 
 
+def air_assumptions(d: Diagnosis, lagged: bool = True) -> list[str]:
+    """What the twin assumed for the convection zones without an air sensor, in words.
+
+    A scenario (``--scenario``) supplies the ambient of the room zone only; every other zone without an air
+    sensor is taken as the room air (through its lag, if it has one) — e.g. a front zone whose door opens in the
+    scenario does not get those openings.
+
+    Parameters
+    ----------
+    d : Diagnosis
+        Its record's air sensors (their zones) and its model's measured drive (zones, room zone, lags in s, and
+        the scenario's room ambient, °C, when the room has no air sensor).
+    lagged : bool, default True
+        Include the zones the machine models as the room air through a lag (the enclosure): that is its model of
+        them, not an assumption about missing data; the verdict sentence leaves them out.
+
+    Returns
+    -------
+    list of str
+        One phrase per zone without an air sensor (empty without a measured drive).
+    """
+    drive = getattr(d.model, "drive", None)
+    if not hasattr(drive, "zones") or not hasattr(drive, "room_zone"):
+        return []
+    sensed = {zone for _, zone, *_ in d.record.air}
+    room, out = drive.room_zone, []
+    if room not in sensed:
+        source = ("the scenario's ambient" if getattr(drive, "fallback_room", None) is not None
+                  else "the mean of all air sensors")
+        out.append(f"room zone {room!r} (no air sensor) taken as {source}")
+    for z in drive.zones:
+        lag = drive.lags_s.get(z)
+        if z != room and z not in sensed and (lagged or not lag):
+            out.append(f"zone {z!r} (no air sensor) taken as the room air"
+                       + (f" through a {lag / 3600:g} h lag" if lag else ""))
+    return out
+
+
 def sentence(d: Diagnosis) -> str:
     """The one-paragraph verdict of a :class:`~twin.gap.diagnose.Diagnosis`.
 
@@ -606,10 +655,18 @@ def sentence(d: Diagnosis) -> str:
     outcome = d.decision.outcome
     if outcome == "no_significant_gap":
         return _no_gap_text(d)
-    text = _not_explained_text(d.decision) if outcome == "not_explained" else _explained_text(d)
-    if d.discovery is not None and getattr(d.discovery, "items", None):
-        text += "; discovered beyond the library: " + "; ".join(d.discovery.summary())
-    return text
+    found = d.discovery is not None and bool(getattr(d.discovery, "items", None))
+    resolved = [x.sentence() for x in d.discovery.resolved()] if found else []
+    text = (_not_explained_text(d.decision, bool(resolved)) if outcome == "not_explained"
+            else _explained_text(d))
+    if resolved:
+        text += "; discovered beyond the library: " + "; ".join(resolved)
+    if found and len(resolved) < len(d.discovery.items):
+        unresolved = d.discovery.unresolved()
+        text += ("; " + ("" if resolved else "nothing beyond the library was resolved: ")
+                 + "not resolved (90 % interval includes 0): " + "; ".join(x.sentence() for x in unresolved))
+    assumed = air_assumptions(d, lagged=False)
+    return text + ("; assumed: " + ", ".join(assumed) if assumed else "")
 
 
 def to_json(d: Diagnosis) -> dict[str, object]:
@@ -623,20 +680,54 @@ def to_json(d: Diagnosis) -> dict[str, object]:
     Returns
     -------
     dict
-        JSON-able: ``outcome``, ``explanation``, ``model``, ``parameters``, ``discoveries``, ``held_out`` (per
-        group: RMS in ``unit``, σ_g ``scale`` and ``timing_floor``), ``flagged_sensors`` and ``evidence``.
+        Strict-JSON-able (:func:`strict_json`: null for a figure that does not exist, e.g. the reduction of a group
+        whose nominal RMS is 0): ``outcome``, ``explanation``, ``model``, ``parameters``, ``discoveries`` (the
+        atoms whose 90 % interval excludes 0), ``not_resolved`` (the accepted atoms whose interval includes 0),
+        ``assumptions`` (:func:`air_assumptions`), ``held_out`` (per group: RMS in ``unit``, σ_g ``scale`` and
+        ``timing_floor``), ``flagged_sensors`` and ``evidence``.
     """
     v = d.decision
     model = v.winner
     held = reductions(model, d.nominal)
+    found = d.discovery.as_dict()["items"] if d.discovery is not None else []
     for g, e in held.items():
         e["unit"] = UNIT[g]
         e["scale"] = d.scales.group[g]
         e["timing_floor"] = d.scales.timing_group[g]
-    return {"outcome": v.outcome, "explanation": d.verdict, "model": model.name if model is not None else None,
-            "parameters": parameters(model),
-            "discoveries": d.discovery.as_dict()["items"] if d.discovery is not None else [],
-            "held_out": held, "flagged_sensors": flagged_table(d),
-            "evidence": {**v.evidence(), "worsened_groups": v.worsened, "displaced": v.displaced,
-                         "materiality": v.material, "nominal_gap_over_scale": v.nominal_gap,
-                         "remaining_gap_over_scale": v.remaining_gap}}
+    return strict_json({
+        "outcome": v.outcome, "explanation": d.verdict, "model": model.name if model is not None else None,
+        "parameters": parameters(model), "discoveries": [x for x in found if x["resolved"]],
+        "not_resolved": [x for x in found if not x["resolved"]], "assumptions": air_assumptions(d),
+        "held_out": held, "flagged_sensors": flagged_table(d),
+        "evidence": {**v.evidence(), "worsened_groups": v.worsened, "displaced": v.displaced,
+                     "materiality": v.material, "nominal_gap_over_scale": v.nominal_gap,
+                     "remaining_gap_over_scale": v.remaining_gap}})
+
+
+def strict_json(value: object) -> object:
+    """``value`` with every non-finite number (NaN, ±inf) replaced by None, recursively, for strict JSON.
+
+    ``json.dumps`` writes NaN and Infinity by default, which strict parsers reject; numpy arrays and scalars
+    become lists and Python numbers on the way.
+
+    Parameters
+    ----------
+    value : object
+        Dicts, lists, tuples, numbers, numpy arrays and scalars, or anything else (returned as it is).
+
+    Returns
+    -------
+    object
+        The same structure, ``null`` (None) where a number was not finite.
+    """
+    if isinstance(value, dict):
+        return {k: strict_json(x) for k, x in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [strict_json(x) for x in value]
+    if isinstance(value, np.ndarray):
+        return strict_json(value.tolist())
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
