@@ -165,3 +165,13 @@ def test_a_spindle_driven_source_names_its_reference_speed():
     assert driver_unit("spindle", machine) == "W at 9000 rpm"
     assert driver_unit("feed", machine) == "W at 10 m/min"
     assert driver_unit("spindle", SimpleNamespace(definition=SimpleNamespace(sources=[]))) == "W at 9000 rpm"
+
+
+def test_a_column_suspected_of_another_unit_leads_the_verdict():
+    """A spindle logged in krpm was only a note in the report, while the verdict named a 1e5 W source."""
+    d = _diagnosis(_not_explained(), _found(_source(9.87e4, 1.38e5, value=1.23e5)))
+    d.record.report = {"unit_suspects": ["spindle_rpm"]}
+    text = verdict.sentence(d)
+    assert text.startswith("UNIT SUSPECTED: 'spindle_rpm' may be in another unit") and "1.23e+05 W" in text
+    d.record.report = {"unit_suspects": []}
+    assert "UNIT SUSPECTED" not in verdict.sentence(d)

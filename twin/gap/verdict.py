@@ -666,7 +666,13 @@ def sentence(d: Diagnosis) -> str:
         text += ("; " + ("" if resolved else "nothing beyond the library was resolved: ")
                  + "not resolved (90 % interval includes 0): " + "; ".join(x.sentence() for x in unresolved))
     assumed = air_assumptions(d, lagged=False)
-    return text + ("; assumed: " + ", ".join(assumed) if assumed else "")
+    text += "; assumed: " + ", ".join(assumed) if assumed else ""
+    # first, not in the notes alone: a spindle in krpm made the discovery report a 1e5 W source with an interval
+    suspects = (getattr(d.record, "report", None) or {}).get("unit_suspects") or []
+    if suspects:
+        text = (f"UNIT SUSPECTED: {', '.join(repr(c) for c in suspects)} may be in another unit than its header "
+                "says (see the notes); every figure below takes the header's unit: " + text)
+    return text
 
 
 def to_json(d: Diagnosis) -> dict[str, object]:
