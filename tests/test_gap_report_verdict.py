@@ -175,3 +175,13 @@ def test_a_column_suspected_of_another_unit_leads_the_verdict():
     assert text.startswith("UNIT SUSPECTED: 'spindle_rpm' may be in another unit") and "1.23e+05 W" in text
     d.record.report = {"unit_suspects": []}
     assert "UNIT SUSPECTED" not in verdict.sentence(d)
+
+
+def test_a_no_gap_verdict_on_a_suspected_unit_says_so_too():
+    """A unit error can hide a gap as well as make one."""
+    no_gap = verdict.Verdict("no_significant_gap", None, None, None, {"temperature": 0.5, "displacement": 0.8}, [],
+                             {}, [], [], NAN, None)
+    d = _diagnosis(no_gap)
+    d.record.report = {"unit_suspects": ["feed_x_mm_min"]}
+    text = verdict.sentence(d)
+    assert text.startswith("UNIT SUSPECTED: 'feed_x_mm_min'") and "no significant gap" in text

@@ -652,12 +652,15 @@ def sentence(d: Diagnosis) -> str:
     str
         The verdict text.
     """
-    outcome = d.decision.outcome
-    if outcome == "no_significant_gap":
-        return _no_gap_text(d)
+    text = _no_gap_text(d) if d.decision.outcome == "no_significant_gap" else _gap_text(d)
+    return _unit_warning(d) + text
+
+
+def _gap_text(d):
+    """The verdict of a gap: explained or not, what was discovered beyond the library, the air assumed."""
     found = d.discovery is not None and bool(getattr(d.discovery, "items", None))
     resolved = [x.sentence() for x in d.discovery.resolved()] if found else []
-    text = (_not_explained_text(d.decision, bool(resolved)) if outcome == "not_explained"
+    text = (_not_explained_text(d.decision, bool(resolved)) if d.decision.outcome == "not_explained"
             else _explained_text(d))
     if resolved:
         text += "; discovered beyond the library: " + "; ".join(resolved)
@@ -666,13 +669,17 @@ def sentence(d: Diagnosis) -> str:
         text += ("; " + ("" if resolved else "nothing beyond the library was resolved: ")
                  + "not resolved (90 % interval includes 0): " + "; ".join(x.sentence() for x in unresolved))
     assumed = air_assumptions(d, lagged=False)
-    text += "; assumed: " + ", ".join(assumed) if assumed else ""
-    # first, not in the notes alone: a spindle in krpm made the discovery report a 1e5 W source with an interval
+    return text + ("; assumed: " + ", ".join(assumed) if assumed else "")
+
+
+def _unit_warning(d):
+    """What opens a verdict on a record with a column suspected of another unit (not in the notes alone: a
+    spindle in krpm made the discovery report a 1e5 W source with an interval), else ''."""
     suspects = (getattr(d.record, "report", None) or {}).get("unit_suspects") or []
-    if suspects:
-        text = (f"UNIT SUSPECTED: {', '.join(repr(c) for c in suspects)} may be in another unit than its header "
-                "says (see the notes); every figure below takes the header's unit: " + text)
-    return text
+    if not suspects:
+        return ""
+    return (f"UNIT SUSPECTED: {', '.join(repr(c) for c in suspects)} may be in another unit than its header says "
+            "(see the notes); every figure below takes the header's unit: ")
 
 
 def to_json(d: Diagnosis) -> dict[str, object]:
