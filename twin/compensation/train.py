@@ -49,7 +49,6 @@ from .protocol import (
     identification_problem,
     stability_problem,
 )
-from .record_order import in_canonical_order
 from .records import (
     dataset_label,
     distinct,
@@ -310,11 +309,10 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
         check_output_file(out, overwrite, inputs=_input_files(datasets))
     observe = split_names(observe)
     channels = [*split_names(inputs), *observe, target]
-    # the canonical order (first time stamp, then content), never the order given: the fit depends on the order
+    records = on_one_clock([load_dataset(d, column_map, nan_policy, machine, channels=channels,
+                                         reference_samples=reference_samples) for d in datasets])
+    # in the canonical order (first time stamp, then content), never the order given: the fit depends on the order
     # of the rows it stacks, the model must not depend on that of the files (twin.compensation.record_order)
-    records = in_canonical_order(on_one_clock([load_dataset(d, column_map, nan_policy, machine, channels=channels,
-                                                            reference_samples=reference_samples) for d in datasets]),
-                                 channels)
     loaded = joined_when_contiguous(records, channels)
 
     def fit(model_name, model_params):

@@ -453,7 +453,7 @@ class Dataset:
         report.update(_sampling_report(time_s))
         dataset = cls(time_s, values, channels, {"source": str(path), "kind": "measured", "import": report})
         read = [channels[k].name for k in about]
-        return _noted_hours(_checked_sensors(dataset, read), read, time_column)
+        return _noted_time_unit(_checked_sensors(dataset, read), read, time_column)
 
     def __repr__(self):
         span = f"{self.time_s[0]:g}–{self.time_s[-1]:g} s" if len(self) else "empty"
@@ -532,8 +532,7 @@ def ms_hint(dataset: Dataset, column: str = "time_s") -> str | None:
     """
     if len(dataset) < 2:
         return None
-    span_s = float(dataset.time_s[-1] - dataset.time_s[0])
-    step_s = float(np.median(np.diff(dataset.time_s)))
+    span_s, step_s = _span_and_step(dataset)
     if step_s <= SLOW_RECORD_STEP_S or span_s <= SLOW_RECORD_SPAN_S:
         return None
     return (f"{dataset.metadata.get('source', 'the data')}: column {column!r} spans {span_s / 86400:.4g} days in "
@@ -541,7 +540,12 @@ def ms_hint(dataset: Dataset, column: str = "time_s") -> str | None:
             f"(÷ 1000 to s: {span_s / 3600e3:.3g} h in steps of {step_s / 1e3:g} s)? The twin reads it in s")
 
 
-def _noted_hours(dataset, names, column):
+def _span_and_step(dataset):
+    """``(span, median step)`` of a record's time, s: what a time-unit hint judges it by."""
+    return float(dataset.time_s[-1] - dataset.time_s[0]), float(np.median(np.diff(dataset.time_s)))
+
+
+def _noted_time_unit(dataset, names, column):
     """The dataset, once a hint that its time is in hours (:func:`hours_hint`) or ms (:func:`ms_hint`) is logged
     and kept in its import report as ``time_unit_hint``: a hint, not an error, since a real record can look
     alike."""
@@ -637,8 +641,7 @@ def hours_hint(dataset: Dataset, names: Sequence[str], column: str = "time_s") -
     """
     if len(dataset) < 2:
         return None
-    span_s = float(dataset.time_s[-1] - dataset.time_s[0])
-    step_s = float(np.median(np.diff(dataset.time_s)))
+    span_s, step_s = _span_and_step(dataset)
     if span_s >= FAST_RECORD_SPAN_S or step_s >= FAST_RECORD_STEP_S:
         return None
     limits = {"degC": (FAST_HEATING_K_PER_S, "K"), "um": (FAST_DRIFT_UM_PER_S, "µm")}

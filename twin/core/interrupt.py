@@ -99,7 +99,7 @@ def cancel_delivery() -> None:
 
 def _deliver():
     with _retry_lock:
-        if _retry is not None and _retry.is_alive() and threading.current_thread() is _retry:
+        if threading.current_thread() is _retry:     # not cancelled, nor replaced by a newer delivery
             if hasattr(signal, "pthread_kill"):    # to the main thread, so that a sleep or a wait there ends now
                 signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
             else:  # pragma: no cover - Windows
