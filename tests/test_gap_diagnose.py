@@ -245,3 +245,29 @@ def test_cli_truth_writes_a_blind_record(tmp_path):
     assert "spindle" in data.names and "T01" in data.names
     assert not [n for n in data.names if n.startswith(("P_", "ambient"))]
     assert main(["gap", "truth", "--effect", "belt_drive,door_draft", "--out", str(tmp_path / "x.csv")]) == 2
+
+
+def test_a_logging_outage_across_a_spindle_change_is_named_and_its_rows_left_out(machine):
+    """The spindle ran 12000, then 4500 rpm while the logger was off (3-5 h): when is unknown, so the rows after
+    the outage cannot judge the twin.  Before, the outage swamped the timing floor (0.05 -> 0.4 K), and a clear
+    enclosure-convection gap read "no significant gap"."""
+    import re
+
+    from twin.gap.diagnose import diagnose
+
+    data = truth(machine, "convection_enclosure")
+    keep = (data.time_s < 3 * 3600) | (data.time_s > 5 * 3600)
+    cut = Dataset(data.time_s[keep], data.values[keep], data.channels, {"source": "outage.csv"})
+    with pytest.raises(TwinInputError, match=r"outage.csv: .*logging outages \(2\.97–5\.03 h \(spindle_rpm 0 → 10000"
+                                             r".*0 held-out rows.*--holdout") as err:
+        diagnose(cut, machine, n_pairs=0, discovery=False)
+    holdout = float(re.search(r"--holdout ([0-9.]+)", str(err.value)).group(1))
+    few = {"n_pairs": 0, "discovery": False, "effects": ["convection_enclosure"]}
+    d = diagnose(cut, machine, holdout_fraction=holdout, **few)
+    left = d.unknown_inputs.rows
+    assert d.verdict.startswith("INPUTS UNKNOWN: ") and left.sum() > 0
+    assert d.record.time_s[left].min() > 5 * 3600 and not (d.evaluator.hold_rows & left).any()
+    steady = (data.time_s < 0.7 * 3600) | (data.time_s > 1.7 * 3600)     # an hour off while it ran at 9000 rpm
+    d = diagnose(Dataset(data.time_s[steady], data.values[steady], data.channels, {"source": "steady.csv"}),
+                 machine, **few)
+    assert not d.unknown_inputs.outages and "INPUTS UNKNOWN" not in d.verdict

@@ -144,6 +144,15 @@ def test_the_verdict_names_the_zones_taken_as_the_room_air():
         "room zone 'room' (no air sensor) taken as the scenario's ambient"
 
 
+def test_the_verdict_says_feeds_not_measured_were_taken_as_zero():
+    """A record without feed columns was diagnosed with feeds of 0 mm/min, and only a note said so."""
+    feeds = "axis feeds not measured (no feed_x/feed_y/feed_z column): taken as 0 mm/min"
+    d = _diagnosis(_not_explained())
+    d.record.report = {"assumed_inputs": [feeds]}
+    assert verdict.sentence(d).endswith(f"; assumed: {feeds}")
+    assert verdict.to_json(d)["assumptions"] == [feeds]
+
+
 def test_diagnose_help_says_what_the_scenario_supplies():
     """--help claimed the scenario supplies missing "(spindle, feeds, ambient)"; it supplies only the room's."""
     from twin.gap.cli import register

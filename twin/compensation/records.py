@@ -8,13 +8,16 @@ files that continue one another (:func:`joined_when_contiguous`,
 (:func:`bridge_times`, :func:`linear_bridge`); a model that takes a record's
 first row as rest needs it to start with the spindle stopped
 (:func:`check_starts_at_rest`), which a twin record whose duty cycle starts at
-t = 0 gets as an added first row (:func:`with_rest_start`).
+t = 0 gets as an added first row (:func:`with_rest_start`).  A spindle or feed
+column that reads like another unit (krpm, Hz, m/min) is warned about
+(:func:`note_unit_suspects`).
 """
 from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -22,8 +25,12 @@ from numpy.typing import ArrayLike, NDArray
 from models.speed import running
 
 from ..core.dataset import Dataset
+from ..core.unit_hints import TYPICAL_TOP, other_unit_hint
 from ..errors import TwinInputError
 from .record_order import in_canonical_order
+
+if TYPE_CHECKING:
+    from ..core.machine import Machine
 
 log = logging.getLogger("thermal_twin")
 
@@ -171,6 +178,44 @@ def note_long_steps(dataset: Dataset) -> None:
         log.warning("%s: %d step(s) over %g× the usual %g s, the longest %g s after t = %g s; the inputs are held "
                     "over them", dataset_label(dataset), len(long), LONG_STEP_FACTOR, usual, float(steps[k]),
                     float(dataset.time_s[k]))
+
+
+def note_unit_suspects(dataset: Dataset, machine: Machine | None = None) -> None:
+    """Warn, on the ``thermal_twin`` logger, of a spindle column that reads like Hz or krpm under ``_rpm``, or a
+    feed that reads like m/min under ``_mm_min`` (:func:`twin.core.unit_hints.other_unit_hint`, the gap
+    diagnosis's rule), and list those columns in ``dataset.metadata["import"]["unit_suspects"]``.
+
+    A warning, not a refusal: a slow warm-up can be true.  A model trained on such a column takes the header's
+    unit, so one trained on krpm misreads every record in rpm (and the grey-box model's spindle never runs).
+
+    Parameters
+    ----------
+    dataset : Dataset
+        A measured record.
+    machine : Machine, optional
+        Its machine, whose top spindle speed (rpm) and feed (mm/min) judge the columns; without one, the
+        :data:`~twin.core.unit_hints.TYPICAL_TOP` of a machining centre.
+    """
+    suspects = []
+    for ch in dataset.channels:
+        if ch.unit not in TYPICAL_TOP:
+            continue
+        hint = other_unit_hint(ch.column, ch.unit, dataset[ch.name], *_top_of(machine, ch.unit),
+                               consequence=", and a model trained or evaluated on it takes it as given")
+        if hint is not None:
+            log.warning("%s: %s", dataset.metadata.get("source") or dataset_label(dataset), hint)
+            suspects.append(ch.column)
+    if suspects:
+        dataset.metadata.setdefault("import", {})["unit_suspects"] = suspects
+
+
+def _top_of(machine, unit):
+    """``(top, whose)``: the machine's top spindle speed (rpm) or feed (mm/min) by ``unit``, or the typical one
+    (no built machine: none given, or a scenario's machine given by name)."""
+    d = getattr(machine, "definition", None)
+    if d is None:
+        return TYPICAL_TOP[unit], "a typical machining centre (no machine given)"
+    return (d.max_spindle_rpm if unit == "rpm" else d.max_feed_mm_min), f"machine {d.name!r}"
 
 
 def continued_record(first: Dataset, later: Dataset, names: Sequence[str], interval_s: float | None = None

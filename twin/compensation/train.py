@@ -55,6 +55,7 @@ from .records import (
     distinct_labels,
     joined_when_contiguous,
     note_long_steps,
+    note_unit_suspects,
     with_rest_start,
 )
 from .store import CompensationModel, fit_compensation_model, make_estimator
@@ -82,7 +83,8 @@ def load_dataset(spec: Dataset | Path | str, column_map: dict[str, str] | None =
     ``spec`` may be a :class:`Dataset` (returned as is), a CSV path (read with
     its JSON sidecar if there is one, else imported as measured data with
     ``column_map`` and ``nan_policy``; a column mapped to ``"time_s"`` is the
-    time in s), or the name of a scenario, which is
+    time in s; a spindle or feed column that reads like another unit is warned about,
+    :func:`~twin.compensation.records.note_unit_suspects`), or the name of a scenario, which is
     simulated on ``machine`` (default: the scenario's) with its sensor noise.
     A twin record whose duty cycle changes ``channels`` at its start gets the
     state it started from as a first row (:func:`~twin.compensation.records.with_rest_start`),
@@ -133,6 +135,7 @@ def load_dataset(spec: Dataset | Path | str, column_map: dict[str, str] | None =
             ds = Dataset.from_measured_csv(path, column_map=column_map, nan_policy=nan_policy,
                                            time_column=time_cols[0] if time_cols else "time_s",
                                            nan_channels=channels)
+            note_unit_suspects(ds, machine)     # a spindle in krpm trains a model that misreads rpm
     else:
         names = available_scenarios()
         if str(spec) not in names:

@@ -91,7 +91,8 @@ def _start(values):
 def check_air_against_surfaces(source: str, air: Sequence[tuple[str, np.ndarray]],
                                surfaces: Sequence[np.ndarray]) -> None:
     """Stop when an air sensor starts more than :data:`AIR_SURFACE_MARGIN_K` away from the surface thermometers
-    (one of the two in °F under ``_degC``).
+    (one of the two in °F under ``_degC``), or, without an air sensor, when the thermometers start above shop
+    air (:func:`_check_surfaces_without_air`: the whole record in °F).
 
     Parameters
     ----------
@@ -105,10 +106,14 @@ def check_air_against_surfaces(source: str, air: Sequence[tuple[str, np.ndarray]
     Raises
     ------
     TwinInputError
-        Naming the column, its start, the thermometers' and both readings in °F converted.
+        Naming the column, its start, the thermometers' and both readings in °F converted; without air, naming
+        the thermometers' start and it converted.
     """
     starts = [s for s in map(_start, surfaces) if np.isfinite(s)]
     if not starts:
+        return
+    if not air:
+        _check_surfaces_without_air(source, starts)
         return
     surface = float(np.median(starts))
     for column, values in air:
@@ -119,3 +124,18 @@ def check_air_against_surfaces(source: str, air: Sequence[tuple[str, np.ndarray]
                 f"degC: {start - surface:+.3g} K, more than the {AIR_SURFACE_MARGIN_K:g} K air and machine differ "
                 f"by; °F? (°F − 32)/1.8 = {(start - 32.0) / 1.8:.2f} °C for the air "
                 f"({(surface - 32.0) / 1.8:.2f} °C for the thermometers)")
+
+
+def _check_surfaces_without_air(source, starts):
+    """Stop when a record without an air sensor has at least two surface thermometers and most of them start
+    (:func:`_start`, °C) above :data:`SHOP_AIR_MAX_C`: a whole record in °F (20 °C reads 68), which no air sensor
+    gives away.  The lower median of the starts decides (above it: a majority), so one hot thermometer (a spindle
+    housing at 70 °C can be real) never does, nor a lone thermometer."""
+    if len(starts) < 2:
+        return
+    lower_median = float(np.sort(starts)[(len(starts) - 1) // 2])
+    if lower_median > SHOP_AIR_MAX_C:
+        raise TwinInputError(
+            f"{source}: the {len(starts)} surface thermometers start at a median of {lower_median:g} degC, above the "
+            f"{SHOP_AIR_MAX_C:g} degC of shop air, and the record has no air sensor to compare them with: the whole "
+            f"record in °F? (°F − 32)/1.8 = {(lower_median - 32.0) / 1.8:.2f} °C; write the columns in °C")

@@ -43,6 +43,14 @@ from .fit import (
 )
 from .measured import Record, check_scale, match_record, read_measured
 from .model import GapModel
+from .outages import (
+    MAX_HOLDOUT,
+    UnknownInputs,
+    check_rows_left,
+    describe,
+    outage_intervals,
+    unknown_rows,
+)
 from .signals import noise_level, uniform_grid
 from .structure import Structure, build_structure
 
@@ -84,6 +92,7 @@ class Diagnosis:
     timings: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
     skipped: list = field(default_factory=list)
+    unknown_inputs: UnknownInputs | None = None
 
     @property
     def names(self) -> list[str]:
@@ -275,15 +284,17 @@ POSITIONS = (0.0, 0.5, 1.0)
 
 def reconstruct_inputs(machine: Machine, structure: Structure, be: ReducedBackend | FullBackend, grid: np.ndarray,
                        record: Record, sc: Scenario | None, initial: str,
-                       evaluator: Evaluator) -> tuple[GapModel, float, np.ndarray]:
-    """The record's twin with its input change times placed by the data, and the timing floor.
+                       evaluator: Evaluator) -> tuple[GapModel, float, np.ndarray, UnknownInputs]:
+    """The record's twin with its input change times placed by the data, the timing floor and the outages.
 
     The nominal twin runs with every spindle/feed change at the earliest, middle and latest time the sampling
     allows (:data:`POSITIONS`); the placement with the smallest weighted residual on the *fit* rows is kept (a
     logger's convention — a sample that describes the interval before it, or the speed at its instant — is a
     property of the record, chosen on training data).  The timing floor per sensor is the held-out RMS of half
     the residual change between the earliest and latest placements: what ± half a sample of timing does.
-    Returns (model, position, floor (p,)).
+    A logging outage across which an input changed (:mod:`twin.gap.outages`) keeps its change at its middle
+    in all three; the rows after it on which the twin depends on when that change happened are left out of
+    ``evaluator``'s fit and held-out parts.
 
     Parameters
     ----------
@@ -312,16 +323,35 @@ def reconstruct_inputs(machine: Machine, structure: Structure, be: ReducedBacken
         The chosen placement, a fraction of the sample interval (one of :data:`POSITIONS`).
     floor : ndarray, shape (n_sensors,)
         Timing floor per sensor, in the sensor's unit (K, µm, µε).
+    unknown : UnknownInputs
+        The outages and the rows left out.
+
+    Raises
+    ------
+    TwinInputError
+        When the rows left out leave too few fit or held-out rows.
     """
     evaluator.set_weights()
-    models, residuals = {}, {}
-    for position in POSITIONS:
-        models[position] = GapModel(structure, be, measured_drive(machine, grid, record, sc, position),
-                                    record.time_s, initial)
-        residuals[position] = evaluator.residual(models[position].predict())
+    inputs = {"spindle_rpm": record.spindle} if record.spindle is not None else {}
+    inputs.update({f"feed_{a}_mm_min": v for a, v in record.feeds.items()})
+    outage = outage_intervals(record.time_s, inputs)
+
+    def twin(position):
+        return GapModel(structure, be, measured_drive(machine, grid, record, sc, position), record.time_s, initial)
+
+    models = {p: twin(np.where(outage, 0.5, p)) for p in POSITIONS}
+    residuals = {p: evaluator.residual(m.predict()) for p, m in models.items()}
     best = min(POSITIONS, key=lambda p: residuals[p].sse_fit)
     half = 0.5 * (residuals[POSITIONS[-1]].R - residuals[POSITIONS[0]].R)[evaluator.hold_rows]
-    return models[best], best, np.sqrt(np.nanmean(half ** 2, axis=0))
+    floor = np.sqrt(np.nanmean(half ** 2, axis=0))
+    unknown = UnknownInputs(describe(record.time_s, inputs, outage), np.zeros(len(record.time_s), bool))
+    if unknown.outages:
+        early, late = (evaluator.residual(twin(np.where(outage, end, best)).predict()).R for end in (0.0, 1.0))
+        scale = np.fmax(floor, [evaluator.sigma[k] for k in evaluator.kinds])
+        unknown.rows = unknown_rows(record.time_s, unknown.outages[0][0], late - early, scale)
+        check_rows_left(evaluator.fit_rows, evaluator.hold_rows, unknown, record.time_s, record.report["source"])
+        evaluator.leave_out(unknown.rows)
+    return models[best], best, floor, unknown
 
 
 def _fit_library(model, ev, applicable, nominal, n_pairs, progress):
@@ -375,7 +405,7 @@ def split_half_sd(model: GapModel, ev: Evaluator, result: FitResult, effects: Se
     first = np.arange(n) < rows[len(rows) // 2]
     estimates = []
     for half in (ev.fit_rows & first, ev.fit_rows & ~first):
-        sub = Evaluator(ev.Y, ev.cols, ev.kinds, half, ev.hold_rows, ev.noise)
+        sub = Evaluator(ev.Y, ev.cols, ev.kinds, half, ev.hold_rows, ev.noise, ev.block_rows)
         sub.set_weights()
         estimates.append(fit_effects(model, sub, effects, start=result.values).values)
     return np.abs(estimates[1] - estimates[0]) / 2.0
@@ -384,8 +414,8 @@ def split_half_sd(model: GapModel, ev: Evaluator, result: FitResult, effects: Se
 def _read_inputs(measured, machine, scenario, column_map, holdout_fraction, initial, step_s):
     """``(machine, scenario or None, matched record, (split, fit rows, held-out rows), initial)`` of a diagnosis,
     each checked (clear errors for a bad hold-out fraction, time step, record or scenario)."""
-    if not 0.05 <= float(holdout_fraction) <= 0.8:
-        raise TwinInputError(f"holdout_fraction must lie in [0.05, 0.8], got {holdout_fraction}")
+    if not 0.05 <= float(holdout_fraction) <= MAX_HOLDOUT:
+        raise TwinInputError(f"holdout_fraction must lie in [0.05, {MAX_HOLDOUT}], got {holdout_fraction}")
     step_s = float(step_s)
     if not 0.0 < step_s < np.inf:
         raise TwinInputError(f"step_s (--step) must be a positive number of seconds, got {step_s:g}")
@@ -393,7 +423,7 @@ def _read_inputs(measured, machine, scenario, column_map, holdout_fraction, init
     sc = None
     if scenario is not None:
         sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
-    record = match_record(read_measured(measured, column_map), machine)
+    record = match_record(read_measured(measured, column_map), machine, sc)
     rows = _check_length(record, holdout_fraction)
     held_out_s = record.time_s[-1] - rows[0]
     if step_s > held_out_s / 10.0:
@@ -559,8 +589,8 @@ def diagnose(measured: Dataset | str | Path, machine: str | Path | Machine = "vm
     grid = uniform_grid(t[0], t[-1], float(step_s))
     noise = noise_level(record.values)
     ev = Evaluator(record.values, [structure.index[n] for n in record.names], record.kinds, fit_rows, hold_rows,
-                   noise)
-    model, position, timing = reconstruct_inputs(machine, structure, be, grid, record, sc, initial, ev)
+                   noise, block_rows=int(step_s // record.report["sampling_interval_s"]))
+    model, position, timing, unknown = reconstruct_inputs(machine, structure, be, grid, record, sc, initial, ev)
     drive = model.drive
     model.effects = applicable
     nominal = nominal_result(model, ev)
@@ -582,7 +612,7 @@ def diagnose(measured: Dataset | str | Path, machine: str | Path | Machine = "vm
                   n_eff_hold, noise_g,
                   {g: nominal.summary["groups"][g]["hold_rms"] / max(noise_g[g], 1e-9) for g in noise_g},
                   where.phases(drive, t), notes=[*record.report["warnings"], *drive.notes, position_note],
-                  skipped=[e.name for e in library if not e.applicable(machine)])
+                  skipped=[e.name for e in library if not e.applicable(machine)], unknown_inputs=unknown)
     _explain(d, drive, discovery, timings)
     timings["total_s"] = time.perf_counter() - t0
     d.timings = timings

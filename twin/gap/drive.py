@@ -529,15 +529,15 @@ class Operating:
         Channel → samples: ``spindle`` (rpm) and ``feed_x``, ``feed_y``, ``feed_z`` (mm/min), any of them.
     scenario : Scenario, optional
         Supplies the channels not measured (else they are zero).
-    position : float, default 0.5
-        Where between two samples a change is put, as a fraction of the sample interval (0 … 1).
+    position : float or ndarray, shape (n_samples - 1,), default 0.5
+        Where between two samples a change is put, as a fraction of the sample interval (0 … 1); an array
+        gives it per interval.
     """
 
     def __init__(self, times_s: np.ndarray, measured: Mapping[str, np.ndarray], scenario: Scenario | None = None,
-                 position: float = 0.5):
+                 position: float | np.ndarray = 0.5):
         t = np.asarray(times_s, float)
-        self.position = float(position)
-        self.edges = t[:-1] + self.position * np.diff(t)
+        self.edges = t[:-1] + np.asarray(position, float) * np.diff(t)
         self.measured = {k: np.asarray(v, float) for k, v in measured.items()}
         self.scenario = scenario
         self.feeds = "xyz"
@@ -561,7 +561,7 @@ class Operating:
 
 
 def measured_drive(machine: Machine, grid: np.ndarray, record: Record, scenario: Scenario | None = None,
-                   position: float = 0.5) -> MeasuredDrive:
+                   position: float | np.ndarray = 0.5) -> MeasuredDrive:
     """A :class:`MeasuredDrive` for a measured record (see :mod:`twin.gap.measured`) on ``grid``.
 
     Spindle speed and feeds are piecewise-constant signals (:class:`Operating`, change times at ``position``
@@ -578,9 +578,9 @@ def measured_drive(machine: Machine, grid: np.ndarray, record: Record, scenario:
         The measured record matched to the machine.
     scenario : Scenario, optional
         Supplies the spindle, feeds, gradient and room ambient the record lacks.
-    position : float, default 0.5
+    position : float or ndarray, shape (n_samples - 1,), default 0.5
         Where between two differing samples a spindle or feed change is put, fraction of the sample interval
-        (0: earliest, 0.5: midpoint, 1: latest).
+        (0: earliest, 0.5: midpoint, 1: latest); an array gives it per interval.
 
     Returns
     -------
@@ -605,9 +605,6 @@ def measured_drive(machine: Machine, grid: np.ndarray, record: Record, scenario:
                              "holds no value; give the spindle speed, or a scenario that has it")
     else:
         raise TwinInputError("the data has no spindle-speed channel ('spindle_rpm'); give it or a scenario")
-    if not record.feeds:
-        notes.append("no feed channels: " + (f"feeds of scenario {scenario.name!r}" if scenario is not None
-                                             else "feeds taken as zero"))
     operating = Operating(t, measured, scenario, position)
     if record.gradient is not None:
         gradient = np.interp(grid, t, record.gradient)

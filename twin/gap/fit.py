@@ -35,7 +35,8 @@ Evidence.  BIC-like on the held-out rows, relative to the nominal twin:
 BIC = n_eff · ln(SSE_hold / SSE_hold,nominal) + k · ln(n_eff), where n_eff
 counts effectively independent held-out samples (per group: the median over
 channels of n(1 − ρ₁)/(1 + ρ₁), ρ₁ the lag-1 autocorrelation of the nominal
-residual, times the participation ratio of the channels' correlation).
+residual averaged over the twin's time step, n the number of such averages,
+times the participation ratio of the channels' correlation).
 ΔBIC between two models gives the evidence ratio exp(ΔBIC/2).
 """
 from __future__ import annotations
@@ -102,15 +103,25 @@ class Evaluator:
         Rows of the fit part and of the held-out part.
     noise : ndarray, shape (n_channels,), optional
         White-noise level of each channel, channel units (default 0; NaN taken as 0).
+    block_rows : int, default 1
+        Consecutive rows averaged before effectively independent samples are counted (:func:`effective_samples`):
+        as many as span the twin's time step.
     """
 
     def __init__(self, values: np.ndarray, channel_index: Sequence[int] | np.ndarray, kinds: Sequence[str],
-                 fit_rows: np.ndarray, hold_rows: np.ndarray, noise: np.ndarray | None = None):
+                 fit_rows: np.ndarray, hold_rows: np.ndarray, noise: np.ndarray | None = None, block_rows: int = 1):
+        self.block_rows = max(int(block_rows), 1)
         self.Y = np.asarray(values, float)
         self.mask = np.isfinite(self.Y)
         self.Yz = np.where(self.mask, self.Y, 0.0)
         self.cols = np.asarray(channel_index)
         self.kinds = list(kinds)
+        self._set_rows(fit_rows, hold_rows)
+        self.noise = np.zeros(len(self.cols)) if noise is None else np.nan_to_num(np.asarray(noise, float))
+        self.weights = np.ones(len(self.cols))
+        self.sqrt_w = np.ones(len(self.cols))
+
+    def _set_rows(self, fit_rows, hold_rows):
         self.fit_rows = np.asarray(fit_rows, bool)
         self.hold_rows = np.asarray(hold_rows, bool)
         self.fit_mask = self.mask & self.fit_rows[:, None]
@@ -118,9 +129,15 @@ class Evaluator:
         self.n_fit = self.fit_mask.sum(axis=0)
         #: Fit entries of the surface thermometers, which the initial-state nuisance is fitted on when they can be.
         self.state_mask = self.fit_mask & np.isin(self.kinds, STATE_GROUPS)
-        self.noise = np.zeros(len(self.cols)) if noise is None else np.nan_to_num(np.asarray(noise, float))
-        self.weights = np.ones(len(self.cols))
-        self.sqrt_w = np.ones(len(self.cols))
+
+    def leave_out(self, rows: np.ndarray) -> None:
+        """Leave ``rows`` out of the fit and held-out parts (rows whose twin is not known, :mod:`twin.gap.outages`).
+
+        Parameters
+        ----------
+        rows : ndarray of bool, shape (n_times,)
+        """
+        self._set_rows(self.fit_rows & ~rows, self.hold_rows & ~rows)
 
     def groups(self) -> dict[str, list[int]]:
         """The channel groups present, in the order of :data:`GROUPS`.
@@ -278,8 +295,7 @@ def effective_samples(residual: Residual, evaluator: Evaluator, rows: np.ndarray
         R = residual.R[rows][:, idx]
         per = []
         for j in range(R.shape[1]):
-            r = R[:, j]
-            r = r[np.isfinite(r)]
+            r = _block_means(R[:, j][np.isfinite(R[:, j])], evaluator.block_rows)
             if len(r) < 4 or np.std(r) == 0:
                 continue
             r = r - r.mean()
@@ -296,6 +312,14 @@ def effective_samples(residual: Residual, evaluator: Evaluator, rows: np.ndarray
             pr = 1.0
         total += float(np.median(per)) * pr
     return max(total, 2.0)
+
+
+def _block_means(r, size):
+    """Means of consecutive blocks of ``size`` samples (a shorter last block dropped): the residual on the twin's
+    time step, which resolves nothing finer; else white noise at a dense sampling counts as independent evidence
+    about effects that are smooth on that scale (n_eff grew with the sampling rate and with the noise)."""
+    n = len(r) // size * size
+    return r[:n].reshape(-1, size).mean(axis=1) if size > 1 else r
 
 
 # ============================================================================= parameter coordinates

@@ -14,9 +14,10 @@ sampling interval and its regularity go into the import report.
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -24,7 +25,11 @@ from ..core.dataset import ChannelInfo, Dataset, sidecar_path
 from ..core.machine import Machine
 from ..core.machine_definition import MachineDefinition
 from ..core.plausible import check_air_against_surfaces, check_plausible
+from ..core.unit_hints import other_unit_hint
 from ..errors import TwinInputError
+
+if TYPE_CHECKING:
+    from ..core.scenario import Scenario
 
 SENSOR_KINDS = ("temperature", "air", "displacement", "strain")
 #: A measured channel whose range differs from the nominal twin's by more than this factor (either way) is
@@ -35,18 +40,6 @@ SPEED_LIMIT_FACTOR = 1.05
 #: A logged feed above this factor × the machine's top feed is a unit error: a log holds rapid traverses too,
 #: which are faster than the feeds a scenario asks for (typically 2–3 ×).
 FEED_LIMIT_FACTOR = 3.0
-#: A running spindle column that peaks (99th percentile of |n|) at or below this fraction of the machine's top
-#: speed reads like one in Hz or rev/s (60× too small: 1000 … 12000 rpm read 17 … 200) or in krpm (1000× too
-#: small: 12000 rpm reads 12, 0.1 %), and is warned about.  Running: it holds its speed (:func:`_holds_speed`),
-#: which a tachometer's noise at standstill (a few rpm, either sign) does not.  A record that truly peaks there
-#: is possible (a slow warm-up), so it is warned about, not refused, as the Hz warning always was; the warning
-#: names both factors and goes into the report's notes.
-SPINDLE_PEAK_TOO_LOW = 0.02
-#: A feed column whose peak (99th percentile of |f| over the axes' rows) is at or below this fraction of the
-#: machine's top feed reads like one in m/min (1000× too small: 30000 mm/min reads 30, 0.1 %, and a log's
-#: rapid traverses at most 3× that); a thermal test's real feeds reach far above 1 % of the top feed (300 mm/min
-#: on a 30 m/min machine).  Warned about, like the spindle, since a slow finishing record is possible.
-FEED_PEAK_TOO_LOW = 0.01
 CONDITION_UNITS = {"spindle": "rpm", "feed_x": "mm_min", "feed_y": "mm_min", "feed_z": "mm_min",
                    "ambient_gradient": "K_m"}
 
@@ -138,8 +131,9 @@ def check_operating_range(dataset: Dataset, channel: ChannelInfo, values: np.nda
     -------
     str or None
         A warning for the report when the column runs (peak > 0) but its typical peak (99th percentile of |v|)
-        is at or below :data:`SPINDLE_PEAK_TOO_LOW` (spindle: Hz or krpm?) or :data:`FEED_PEAK_TOO_LOW` (feed:
-        m/min?) × the machine's top; else None.
+        is at or below :data:`~twin.core.unit_hints.SPINDLE_PEAK_TOO_LOW` (spindle: Hz or krpm?) or
+        :data:`~twin.core.unit_hints.FEED_PEAK_TOO_LOW` (feed: m/min?) × the machine's top
+        (:func:`twin.core.unit_hints.other_unit_hint`); else None.
 
     Raises
     ------
@@ -157,31 +151,11 @@ def check_operating_range(dataset: Dataset, channel: ChannelInfo, values: np.nda
         raise TwinInputError(f"{source}: column {channel.column!r} has value {values[k]:g} at "
                              f"t = {dataset.time_s[k]:g} s, beyond the ±{limit:g} {what} of machine "
                              f"{definition.name!r}: is the column in another unit?")
-    finite = np.abs(values[np.isfinite(values)])
-    peak = float(np.percentile(finite, 99.0))
     top = definition.max_spindle_rpm if spindle else definition.max_feed_mm_min
-    if not 0.0 < peak <= (SPINDLE_PEAK_TOO_LOW if spindle else FEED_PEAK_TOO_LOW) * top:
-        return None
-    if spindle and not _holds_speed(finite, peak):
-        return None
     culprit = "a spindle in Hz or krpm" if spindle else "feeds in m/min"
-    unit, top_name, guess = (
-        ("rpm", "top speed", f"in Hz (rev/s), the speed is {60 * peak:.0f} rpm (× 60); if in krpm, "
-         f"{1000 * peak:.0f} rpm (× 1000)") if spindle
-        else ("mm/min", "top feed", f"in m/min, the feed is {1000 * peak:.0f} mm/min (× 1000)"))
-    return (f"column {channel.column!r} peaks at about {peak:.4g} {unit} (99th percentile), "
-            f"{100 * peak / top:.2g} % of the {top:g} {unit} {top_name} of machine {definition.name!r}: if it is "
-            f"{guess}, and every heat it drives below is wrong ({culprit} made the search beyond the library "
-            f"'discover' 10^4–10^5 W sources); convert it to {unit}")
-
-
-def _holds_speed(magnitudes, peak):
-    """Whether a spindle column runs: of the consecutive row pairs at or above half its peak (at least 3), at
-    least half change by at most 1 % of the peak (a held speed, not a tachometer's noise at rest)."""
-    on = magnitudes >= 0.5 * peak
-    pairs = on[1:] & on[:-1]
-    steady = pairs & (np.abs(np.diff(magnitudes)) <= 0.01 * peak)
-    return pairs.sum() >= 3 and steady.sum() >= 0.5 * pairs.sum()
+    consequence = (f", and every heat it drives below is wrong ({culprit} made the search beyond the library "
+                   "'discover' 10^4–10^5 W sources)")
+    return other_unit_hint(channel.column, channel.unit, values, top, f"machine {definition.name!r}", consequence)
 
 
 def check_scale(record: Record, predicted: np.ndarray, columns: Mapping[str, str]) -> None:
@@ -315,7 +289,7 @@ class _Channels:
             self.feeds[ch.name[-1]] = filled
 
 
-def match_record(dataset: Dataset, machine: Machine) -> Record:
+def match_record(dataset: Dataset, machine: Machine, scenario: Scenario | str | None = None) -> Record:
     """Match a dataset's channels to a machine; return a :class:`Record` (see the module docstring).
 
     Parameters
@@ -324,6 +298,9 @@ def match_record(dataset: Dataset, machine: Machine) -> Record:
         The measured record (at least 10 rows).
     machine : Machine
         The built machine whose sensors and operating conditions the channels must name.
+    scenario : Scenario or str, optional
+        The scenario that supplies what the record lacks (only named in the report's ``assumed_inputs``,
+        :func:`feed_assumptions`).
 
     Returns
     -------
@@ -350,8 +327,33 @@ def match_record(dataset: Dataset, machine: Machine) -> Record:
                                [v for v, kind in zip(m.cols, m.kinds) if kind == "temperature"])
     values = np.column_stack(m.cols)
     report = _import_report(dataset, m, t, values)
+    report["assumed_inputs"] = feed_assumptions(m.feeds, scenario)
     return Record(t, m.names, m.kinds, values, m.spindle, m.feeds, m.gradient, m.air, report,
                   dict(dataset.metadata))
+
+
+def feed_assumptions(measured_axes: Collection[str], scenario: Scenario | str | None = None) -> list[str]:
+    """What the twin takes for the axis feeds a record lacks, in words for the verdict and the report (a record
+    without feed columns was diagnosed with feeds of 0 mm/min, and nothing but a note said so).
+
+    Parameters
+    ----------
+    measured_axes : collection of str
+        The axes (``x``, ``y``, ``z``) whose feed (mm/min) the record holds.
+    scenario : Scenario or str, optional
+        The scenario that supplies the missing feeds (its name, or the scenario); without one they are 0 mm/min.
+
+    Returns
+    -------
+    list of str
+        One phrase naming the missing ``feed_<axis>`` columns and what they are taken as; empty when every axis
+        is measured.
+    """
+    missing = [f"feed_{a}" for a in "xyz" if a not in measured_axes]
+    if not missing:
+        return []
+    taken = "0 mm/min" if scenario is None else f"those of scenario {getattr(scenario, 'name', scenario)!r}"
+    return [f"axis feeds not measured (no {'/'.join(missing)} column): taken as {taken}"]
 
 
 def _import_report(dataset, m, t, values):

@@ -410,7 +410,8 @@ def _record_lines(d):
             f"- ignored channels: {', '.join(rec['channels_ignored']) or 'none'}",
             f"- NaNs (masked out of the residuals): {nans or 'none'}",
             (f"- inputs: spindle {spindle}; feeds {', '.join(rec['feeds']) or 'none'}; ambient from "
-             f"{', '.join(rec['air_inputs']) or 'the scenario'}")]
+             f"{', '.join(rec['air_inputs']) or 'the scenario'}"),
+            *(f"- assumed: {phrase}" for phrase in rec.get("assumed_inputs", []))]
 
 
 def _grid_line(d):

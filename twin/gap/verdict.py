@@ -653,7 +653,8 @@ def sentence(d: Diagnosis) -> str:
         The verdict text.
     """
     text = _no_gap_text(d) if d.decision.outcome == "no_significant_gap" else _gap_text(d)
-    return _unit_warning(d) + text
+    unknown = getattr(d, "unknown_inputs", None)
+    return _unit_warning(d) + (unknown.sentence(d.record.time_s) if unknown is not None else "") + text
 
 
 def _gap_text(d):
@@ -668,8 +669,14 @@ def _gap_text(d):
         unresolved = d.discovery.unresolved()
         text += ("; " + ("" if resolved else "nothing beyond the library was resolved: ")
                  + "not resolved (90 % interval includes 0): " + "; ".join(x.sentence() for x in unresolved))
-    assumed = air_assumptions(d, lagged=False)
+    assumed = _assumptions(d, lagged=False)
     return text + ("; assumed: " + ", ".join(assumed) if assumed else "")
+
+
+def _assumptions(d, lagged=True):
+    """What the twin took for the inputs the record lacks: feeds (the record's import report) and air
+    (:func:`air_assumptions`)."""
+    return [*(getattr(d.record, "report", None) or {}).get("assumed_inputs", []), *air_assumptions(d, lagged)]
 
 
 def _unit_warning(d):
@@ -710,8 +717,10 @@ def to_json(d: Diagnosis) -> dict[str, object]:
     return strict_json({
         "outcome": v.outcome, "explanation": d.verdict, "model": model.name if model is not None else None,
         "parameters": parameters(model), "discoveries": [x for x in found if x["resolved"]],
-        "not_resolved": [x for x in found if not x["resolved"]], "assumptions": air_assumptions(d),
+        "not_resolved": [x for x in found if not x["resolved"]],
+        "assumptions": _assumptions(d),
         "held_out": held, "flagged_sensors": flagged_table(d),
+        "inputs_unknown": d.unknown_inputs.as_dict() if getattr(d, "unknown_inputs", None) is not None else None,
         "evidence": {**v.evidence(), "worsened_groups": v.worsened, "displaced": v.displaced,
                      "materiality": v.material, "nominal_gap_over_scale": v.nominal_gap,
                      "remaining_gap_over_scale": v.remaining_gap}})

@@ -1,0 +1,93 @@
+"""Inputs of ``twin gap diagnose`` that were taken silently: an empty ``--effects`` list, a negative ``--pairs``, a
+record without feed columns (feeds taken as 0 mm/min, said nowhere but a note), and a whole record in °F with no
+air sensor to give it away."""
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from twin.core.dataset import KIND_OF_UNIT, ChannelInfo, Dataset, split_column
+from twin.errors import TwinInputError
+
+T = np.arange(241) * 120.0                      # 8 h every 2 min
+
+
+def _dataset(columns, source="rig.csv"):
+    """A dataset of ``{column: values}`` (``<name>_<unit>`` columns) with ``source`` as its file."""
+    channels = [ChannelInfo(*split_column(c), KIND_OF_UNIT[split_column(c)[1]]) for c in columns]
+    return Dataset(T, np.column_stack(list(columns.values())), channels, {"source": source})
+
+
+@pytest.fixture(scope="module")
+def machine():
+    from twin.gap.diagnose import _machine
+
+    return _machine("vmc_ram")
+
+
+def _spindle():
+    return np.repeat([0.0, 6000.0, 0.0], -(-len(T) // 3))[:len(T)]
+
+
+@pytest.mark.parametrize("option, value, said", [
+    ("--effects", "", "--effects '' names no effect"),
+    ("--effects", " , ", "--effects ' , ' names no effect"),
+    ("--pairs", "-1", "--pairs -1: the number of top effects paired must be 0 (no pairs) or more"),
+])
+def test_an_empty_effect_list_or_a_negative_pair_count_is_refused(option, value, said, tmp_path, capsys):
+    """``--effects ""`` fell back to the whole library and ``--pairs -1`` to no pairs, both silently."""
+    from twin.cli import main
+
+    code = main(["gap", "diagnose", "--measured", str(tmp_path / "none.csv"), "--out", str(tmp_path / "out"),
+                 option, value])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "\n" not in err and said in err, err
+
+
+def test_a_record_without_feeds_says_they_are_taken_as_zero(machine):
+    from twin.gap.measured import match_record
+
+    columns = {"spindle_rpm": _spindle(), "T01_degC": np.full(len(T), 20.0), "A_top_degC": np.full(len(T), 20.0)}
+    record = match_record(_dataset(columns), machine)
+    assert record.report["assumed_inputs"] == [
+        "axis feeds not measured (no feed_x/feed_y/feed_z column): taken as 0 mm/min"]
+    columns["feed_x_mm_min"] = np.full(len(T), 2000.0)
+    assert match_record(_dataset(columns), machine, "gap_quick_8h").report["assumed_inputs"] == [
+        "axis feeds not measured (no feed_y/feed_z column): taken as those of scenario 'gap_quick_8h'"]
+    columns.update(feed_y_mm_min=columns["feed_x_mm_min"], feed_z_mm_min=columns["feed_x_mm_min"])
+    assert match_record(_dataset(columns), machine).report["assumed_inputs"] == []
+
+
+def test_the_report_lists_the_assumed_feeds(machine):
+    from twin.gap.measured import match_record
+    from twin.gap.report import _record_lines
+
+    columns = {"spindle_rpm": _spindle(), "T01_degC": np.full(len(T), 20.0), "A_top_degC": np.full(len(T), 20.0)}
+    record = match_record(_dataset(columns), machine)
+    model = SimpleNamespace(backend=SimpleNamespace(name="rom"), drive=SimpleNamespace(step_s=60.0))
+    lines = _record_lines(SimpleNamespace(record=record, model=model, names=record.names))
+    assert "- assumed: axis feeds not measured (no feed_x/feed_y/feed_z column): taken as 0 mm/min" in lines
+
+
+def test_a_whole_record_in_fahrenheit_without_air_is_refused(machine):
+    """Room temperature in °F (68) under every _degC column, no air sensor: it had been diagnosed as 68 °C."""
+    from twin.gap.measured import match_record
+
+    columns = {"spindle_rpm": _spindle(), **{f"T0{k}_degC": np.full(len(T), 68.0 + 0.2 * k) for k in range(1, 5)}}
+    with pytest.raises(TwinInputError) as err:
+        match_record(_dataset(columns), machine)
+    message = str(err.value)
+    assert "\n" not in message and message.startswith(
+        "rig.csv: the 4 surface thermometers start at a median of 68.4 degC, above the 50 degC of shop air, and the "
+        "record has no air sensor")
+    assert "°F? (°F − 32)/1.8 = 20.22 °C" in message
+
+
+@pytest.mark.parametrize("starts", [(120.0, 20.0), (120.0, 20.5, 21.0), (70.0,), (70.0, 75.0, 20.0, 21.0)])
+def test_hot_surface_thermometers_short_of_most_of_them_are_not_refused(starts, machine):
+    """A hot spindle housing can be real: neither one hot thermometer nor a lone one decides, only most of two or
+    more."""
+    from twin.gap.measured import match_record
+
+    columns = {"spindle_rpm": _spindle(), **{f"T0{k + 1}_degC": np.full(len(T), s) for k, s in enumerate(starts)}}
+    assert match_record(_dataset(columns), machine).names == [f"T0{k + 1}" for k in range(len(starts))]

@@ -1,0 +1,54 @@
+"""Logging outages: which intervals are outages, and which rows after one the twin cannot be judged on."""
+import numpy as np
+import pytest
+
+from twin.errors import TwinInputError
+from twin.gap.outages import (
+    OUTAGE_MIN_S,
+    UnknownInputs,
+    check_rows_left,
+    describe,
+    outage_intervals,
+    unknown_rows,
+)
+
+
+def _record(step_s, gap_s, before_rpm, after_rpm):
+    t = np.r_[np.arange(0.0, 3600.0, step_s), 3600.0 - step_s + gap_s + np.arange(0.0, 3600.0, step_s)]
+    rpm = np.where(t < 3600.0, before_rpm, after_rpm).astype(float)
+    return t, {"spindle_rpm": rpm}
+
+
+def test_an_outage_is_a_long_interval_with_an_input_change_across_it():
+    t, inputs = _record(120.0, 7200.0, 0, 9000)
+    found = outage_intervals(t, inputs)
+    assert found.sum() == 1 and t[np.flatnonzero(found)[0]] == pytest.approx(3480.0)
+    assert describe(t, inputs, found) == [(3480.0, 10680.0, "spindle_rpm 0 → 9000")]
+
+
+@pytest.mark.parametrize("step_s, gap_s, before, after", [
+    (120.0, 7200.0, 9000, 9000),            # long, but the spindle ran at one speed through it
+    (10.0, 300.0, 0, 9000),                 # 30 samples long, but shorter than OUTAGE_MIN_S: the timing floor's
+    (120.0, 480.0, 0, 9000),                # four samples: a sampling irregularity
+])
+def test_no_outage_without_a_change_or_when_short(step_s, gap_s, before, after):
+    assert gap_s < OUTAGE_MIN_S or before == after
+    t, inputs = _record(step_s, gap_s, before, after)
+    assert not outage_intervals(t, inputs).any()
+
+
+def test_unknown_rows_run_from_the_first_to_the_last_row_over_scale_after_the_start():
+    t = np.arange(20) * 100.0
+    spread = np.zeros((20, 2))
+    spread[2, 0] = 5.0                       # before the outage: not the outage's doing
+    spread[[6, 9], 1] = [-0.3, 0.25]
+    rows = unknown_rows(t, 450.0, spread, np.array([0.1, 0.2]))
+    assert np.flatnonzero(rows).tolist() == [6, 7, 8, 9]
+
+
+def test_too_few_rows_left_is_refused_with_the_outage_and_a_holdout_that_works():
+    t = np.arange(100) * 300.0
+    unknown = UnknownInputs([(15000.0, 18000.0, "spindle_rpm 0 → 9000")], t >= 18000.0)
+    with pytest.raises(TwinInputError, match=r"rec.csv: .*4.17–5.00 h \(spindle_rpm 0 → 9000\).*--holdout 0\.65"):
+        check_rows_left(t < 20000.0, t >= 20000.0, unknown, t, "rec.csv")
+    check_rows_left(t < 10000.0, t >= 10000.0, unknown, t, "rec.csv")   # fit and held-out rows before it: fine

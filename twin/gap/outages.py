@@ -1,0 +1,161 @@
+"""Logging outages across which the operating inputs changed: rows whose twin is not known.
+
+A measured record gives the spindle speed and the feeds only at its samples.
+Between two ordinary samples a change can lie anywhere within one interval,
+and :func:`twin.gap.diagnose.reconstruct_inputs` turns that into the timing
+floor.  Across a logging outage (an interval of more than
+:data:`OUTAGE_FACTOR` typical ones) the spindle may have run, stopped or
+changed speed several times: what the machine did there is unknown, and its
+heat shows in every sensor for hours after.  Such an interval, when an input
+differs across it, is an *outage*; it is left out of the timing floor (it would
+swamp the floor of every other change and hide a real gap), and the rows
+after it on which the twin depends on when the change happened are left out
+of the fits and of the evidence: the twin with the change at the outage's
+start and at its end differ there by more than the channel's scale.  The
+diagnosis says so in its verdict, rather than judging the twin on inputs
+nobody recorded.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import TwinInputError
+
+#: An interval longer than this many typical (median) intervals and than :data:`OUTAGE_MIN_S`, with an input that
+#: differs across it, is an outage; a shorter one is a sampling irregularity, which the timing floor covers.
+OUTAGE_FACTOR = 5.0
+#: The shortest outage, s: shorter than the structure's thermal time constants (tens of minutes and more), an
+#: unlogged interval moves the twin about as much as a sample of timing does.
+OUTAGE_MIN_S = 600.0
+#: The fewest fit and held-out rows a diagnosis keeps once the rows after outages are left out.
+MIN_ROWS = 10
+#: The largest hold-out fraction the diagnosis takes (:func:`twin.gap.diagnose.diagnose`).
+MAX_HOLDOUT = 0.8
+
+
+@dataclass
+class UnknownInputs:
+    """Outages and the rows they leave out.
+
+    Attributes
+    ----------
+    outages : list of (float, float, str)
+        Start and end of each outage, s, and what changed across it (e.g. ``spindle 0 → 10000 rpm``).
+    rows : ndarray of bool, shape (n_times,)
+        Rows left out of the fits and the evidence.
+    """
+
+    outages: list
+    rows: np.ndarray
+
+    def as_dict(self) -> dict[str, object]:
+        """The outages (``start_s``, ``end_s``, ``change``) and the number of rows left out, for JSON."""
+        return {"outages": [{"start_s": a, "end_s": b, "change": what} for a, b, what in self.outages],
+                "rows_left_out": int(self.rows.sum())}
+
+    def sentence(self, time_s: np.ndarray) -> str:
+        """What the verdict opens with, or '' without outages.
+
+        Parameters
+        ----------
+        time_s : ndarray, shape (n_times,)
+            The record's sample times, s.
+        """
+        if not self.outages:
+            return ""
+        spans = _spans(self.outages)
+        left = time_s[self.rows]
+        until = (f"the {int(self.rows.sum())} rows from {left[0] / 3600:.2f} to {left[-1] / 3600:.2f} h, where the "
+                 "twin depends on when the change happened, are left out of the fits and the evidence"
+                 if left.size else "no row depends on it beyond the channels' scales")
+        return (f"INPUTS UNKNOWN: the operating inputs changed during logging outages, {spans}; {until}; "
+                "what follows judges the other rows: ")
+
+
+def _spans(outages):
+    return "; ".join(f"{a / 3600:.2f}–{b / 3600:.2f} h ({what})" for a, b, what in outages)
+
+
+def outage_intervals(time_s: np.ndarray, inputs: dict[str, np.ndarray]) -> np.ndarray:
+    """Which sample intervals are outages (see the module docstring).
+
+    Parameters
+    ----------
+    time_s : ndarray, shape (n_times,)
+        Sample times, s, increasing.
+    inputs : dict of str to ndarray, shape (n_times,)
+        Measured operating inputs by name (spindle in rpm, feeds in mm/min); NaN where not read.
+
+    Returns
+    -------
+    ndarray of bool, shape (n_times - 1,)
+    """
+    steps = np.diff(np.asarray(time_s, float))
+    long = (steps > OUTAGE_FACTOR * np.median(steps)) & (steps >= OUTAGE_MIN_S)
+    changed = np.zeros(len(steps), bool)
+    for values in inputs.values():
+        v = np.asarray(values, float)
+        changed |= ~np.isclose(v[1:], v[:-1], rtol=1e-6, atol=1e-9) & np.isfinite(v[1:]) & np.isfinite(v[:-1])
+    return long & changed
+
+
+def describe(time_s: np.ndarray, inputs: dict[str, np.ndarray], intervals: np.ndarray) -> list:
+    """(start s, end s, what changed) of each outage interval."""
+    out = []
+    for i in np.flatnonzero(intervals):
+        what = ", ".join(f"{name} {v[i]:g} → {v[i + 1]:g}" for name, v in inputs.items() if v[i] != v[i + 1])
+        out.append((float(time_s[i]), float(time_s[i + 1]), what))
+    return out
+
+
+def unknown_rows(time_s: np.ndarray, start_s: float, spread: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Rows after the first outage's start where the twin's spread over the outages' change times exceeds the scale.
+
+    Parameters
+    ----------
+    time_s : ndarray, shape (n_times,)
+        Sample times, s.
+    start_s : float
+        Start of the first outage, s.
+    spread : ndarray, shape (n_times, n_channels)
+        The twin with every outage's change at its end minus at its start, channel units (NaN where not read).
+    scale : ndarray, shape (n_channels,)
+        Each channel's scale (its tolerance, noise or timing floor), channel units.
+
+    Returns
+    -------
+    ndarray of bool, shape (n_times,)
+        Every row from the first to the last at which some channel's |spread| exceeds its scale.
+    """
+    over = np.flatnonzero(np.any(np.abs(np.nan_to_num(spread)) > scale, axis=1) & (time_s > start_s))
+    rows = np.zeros(len(time_s), bool)
+    if over.size:
+        rows[over[0]:over[-1] + 1] = True
+    return rows
+
+
+def check_rows_left(fit_rows: np.ndarray, hold_rows: np.ndarray, unknown: UnknownInputs, time_s: np.ndarray,
+                    source: str) -> None:
+    """Refuse a record whose outages leave too few fit or held-out rows (:data:`MIN_ROWS`).
+
+    Raises
+    ------
+    TwinInputError
+        Naming the record, the outages and the rows left.
+    """
+    fit, hold = int((fit_rows & ~unknown.rows).sum()), int((hold_rows & ~unknown.rows).sum())
+    if min(fit, hold) >= MIN_ROWS:
+        return
+    first, last = time_s[unknown.rows][[0, -1]]
+    # the split at 70 % of the way to the first outage: the fit part keeps most rows before it, the held-out the rest
+    fraction = 1.0 - 0.7 * (unknown.outages[0][0] - time_s[0]) / (time_s[-1] - time_s[0])
+    move = (f"or hold out the last {fraction:.2f} (--holdout {fraction:.2f}), which judges the twin on the rows "
+            "before the outage" if fraction <= MAX_HOLDOUT else "and the rows before the outage are too few to "
+            "judge the twin on")
+    raise TwinInputError(
+        f"{source}: the operating inputs changed during logging outages ({_spans(unknown.outages)}), and the rows "
+        f"where the twin depends on when ({first / 3600:.2f}–{last / 3600:.2f} h) leave {fit} fit and {hold} "
+        f"held-out rows (at least {MIN_ROWS} of each are needed): the record cannot tell whether the twin has a "
+        f"gap there; give a record without the outage (or with the inputs logged through it), {move}")
