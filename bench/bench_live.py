@@ -23,6 +23,7 @@ Prints:
     python bench/bench_live.py --calibrate     # the training grid of the noise model and the setting it picks
     python bench/bench_live.py --calibrate-xy  # the X and Y bands on the training records and the factors picked
     python bench/bench_live.py --visibility    # per part: how much Z a watt moves and how much the thermometers see
+    python bench/bench_live.py --warm-start    # a machine that ran 2 h before the session: the start prior's bands
 
 ``--calibrate`` runs the observer with each setting of :data:`GRID` on the *training* records only (never the
 held-out or seen ones) and applies :func:`choose_setting`.  ``--calibrate-xy`` runs the shipped observer without
@@ -239,6 +240,49 @@ def visibility(rom, names):
     print()
 
 
+#: The warm starts: full-FE records (60 s) replayed from 2 h on, the first 2 h of spindle running never shown.
+WARM_STARTS = ("heat_cool_9000", "iso230_3_spindle")
+WARM_START_S = 7200.0
+WARM_SEEDS = (3, 4, 5)
+WARM_MINUTES = (0, 10, 30, 60)
+
+
+def warm_start(rom, names):
+    """Per warm start and noise seed: the Z estimate ± band against the truth at :data:`WARM_MINUTES` after the start,
+    and the Z coverage over the first hour and the whole replay, with the observer told the machine was at rest (the
+    prior before 2026-11-28) and with its past unknown (the default)."""
+    from twin.gap.truth import PhysicsChange, physics_truth
+
+    print(f"warm starts: full FE at 60 s, replayed from t = {WARM_START_S:g} s; thermometers {', '.join(names)}\n")
+    print("| record | seed | start prior | " + " | ".join(f"Z at {m} min (µm)" for m in WARM_MINUTES)
+          + " | Z in band, first hour | Z in band, whole replay |")
+    print("|---|---:|---|" + "---:|" * (len(WARM_MINUTES) + 2))
+    for scenario in WARM_STARTS:
+        record = physics_truth(scenario, PhysicsChange(time_step_s=60.0, output_step_s=60.0), noise=False)
+        for seed in WARM_SEEDS:
+            for at_rest in (True, False):
+                print(f"| {scenario} | {seed} | {'at rest' if at_rest else 'past unknown'} | "
+                      + warm_row(rom, names, record, seed, at_rest), flush=True)
+    print()
+
+
+def warm_row(rom, names, record, seed, at_rest):
+    """The row of :func:`warm_start` for one record, seed and start prior (its cells after the prior's)."""
+    from twin.live.multiple_model import live_observer
+
+    keep = record.time_s >= WARM_START_S
+    T, air = protocol.readings(record, names, seed)
+    t, z = record.time_s[keep], record["Z"][keep]
+    drift, band = live_observer(rom, names, at_rest=at_rest).run(t, record["spindle"][keep], air[keep], T[keep])
+    inside = np.abs(drift[:, 2] - z) <= band[:, 2]
+    cells = []
+    for minutes in WARM_MINUTES:
+        k = int(np.searchsorted(t, t[0] + 60.0 * minutes))
+        cells.append(f"{drift[k, 2]:.2f} ± {band[k, 2]:.2f} (true {z[k]:.2f})")
+    hour = t - t[0] <= 3600.0
+    return " | ".join(cells) + f" | {100 * inside[hour].mean():.1f} % | {100 * inside.mean():.1f} % |"
+
+
 def opcua_throughput(rom, names, speed):
     """Replay a ROM record through a loopback OPC UA server into the live client; print the samples/s."""
     from twin.live.cli import replay_session
@@ -266,6 +310,8 @@ def main(argv=None):
     parser.add_argument("--calibrate-xy", action="store_true",
                         help="only the X and Y bands on the training records and the band factors chosen")
     parser.add_argument("--visibility", action="store_true", help="only the per-part Z and thermometer response per W")
+    parser.add_argument("--warm-start", action="store_true",
+                        help="only the warm starts: full-FE records replayed from 2 h on, the start prior's bands")
     args = parser.parse_args(argv)
 
     names = list(DEFAULT_THERMOMETERS)
@@ -278,6 +324,9 @@ def main(argv=None):
         return
     if args.visibility:
         visibility(rom, names)
+        return
+    if args.warm_start:
+        warm_start(rom, names)
         return
     if not args.opcua_only:
         for name in ("held-out", "seen (second held-out)", "seen (first held-out)", "seen"):

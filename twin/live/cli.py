@@ -29,8 +29,8 @@ EXIT_NOT_OBSERVED = 1
 #: Exit code of a session ended by Ctrl-C: the shell's code for a process ended by SIGINT (128 + 2), as ``twin``'s.
 EXIT_INTERRUPTED = 130
 #: Which bands the calibration checked (docs/live.md, "Calibration protocol"), said in every summary.
-BANDS_NOTE = ("bands: the Z band is calibrated on training FE records (92.2 % held-out coverage); the X band × 5 "
-              "and the Y band × 1.25, factors chosen on the same training records, held 82.0 % and 97.6 % on the "
+BANDS_NOTE = ("bands: the Z band is calibrated on training FE records (92.1 % held-out coverage); the X band × 5 "
+              "and the Y band × 1.25, factors chosen on the same training records, held 82.0 % and 97.8 % on the "
               "held-out records, X below the 90–99 % aimed at (docs/live.md, \"Which bands are calibrated\")")
 #: The dataset channel kinds a replay option can name (a measured CSV's °C columns are all "temperature";
 #: a thermometer may be a camera spot).
@@ -71,9 +71,9 @@ def _observer(args, default):
         placed = read_placement(args.thermometers_from, args.placement_axis)
         rom = placement_rom(cached_rom(machine, args.order, keep_basis=True), machine, placed)
         thermometers = split_names(args.thermometers) or placed.names
-        return live_observer(rom, thermometers, placed.sensors), thermometers
+        return live_observer(rom, thermometers, placed.sensors, at_rest=args.at_rest), thermometers
     thermometers = split_names(args.thermometers) or list(default)
-    return live_observer(cached_rom(machine, args.order), thermometers), thermometers
+    return live_observer(cached_rom(machine, args.order), thermometers, at_rest=args.at_rest), thermometers
 
 
 def _channels_of(dataset, kinds):
@@ -418,5 +418,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--duration", type=float, help="stop after this many wall seconds (default: run until stopped)")
     p.add_argument("--late-after", type=float, default=1.0,
                    help="wall seconds to wait for a sample's missing readings before fusing it (default 1)")
+    p.add_argument("--at-rest", action="store_true",
+                   help="the machine stood idle in the room air for hours before the session: start from its "
+                        "equilibrium with the room (default: its past is unknown, and the first bands say so)")
     add_overwrite(p, "file")
     p.set_defaults(func=cmd_live)

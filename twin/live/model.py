@@ -101,6 +101,9 @@ DISCREPANCY_SHARE = 0.95
 CONCENTRATED_SHARE = 0.95
 #: Grid spacing and cube edge of the candidate cells of the concentrated source, m.
 CONCENTRATED_GRID_M = 0.2
+#: RMS about idle of the spindle's load over a machine's unknown past, fraction of its power at top speed: a load
+#: anywhere between idle and top speed, uniformly (1/√3), the prior of a start whose history is not known.
+LOAD_RMS = 1.0 / np.sqrt(3.0)
 
 
 @dataclass(frozen=True)
@@ -133,6 +136,12 @@ class NoiseModel:
         Thermometer-level model error not carried by the disturbances, K (rms).
     start_spread_K : float
         Prior standard deviation of the start state about the idle steady state in the room air, K.
+    start_at_rest : bool
+        The machine is known to have stood idle in the room air long enough to be in equilibrium with it: the start
+        prior is that state with :attr:`start_spread_K` only (:meth:`ObserverModel.prior`, the observer's only prior
+        until 2026-11-28).  False (the default): its past is unknown, and the observer starts from two priors, at
+        rest and with its past unknown (:meth:`ObserverModel.prior`), weighed by the first readings
+        (:class:`~twin.live.observer.DriftObserver`).
     """
 
     source_power: float = 0.3
@@ -145,6 +154,7 @@ class NoiseModel:
     correlation_time_s: float = 4 * 3600.0
     model_error_K: float = 0.05
     start_spread_K: float = 0.3
+    start_at_rest: bool = False
 
 
 @dataclass(frozen=True)
@@ -437,7 +447,7 @@ class ObserverModel:
         first = next((j for j, d in enumerate(self.disturbances) if d.consider), self.q)
         #: the consider states (the considered disturbances, after the estimated ones), or None
         self.consider = slice(self.n + first, self.n + self.q) if first < self.q else None
-        self._steps = {}
+        self._steps, self._operating = {}, None
 
     # ------------------------------------------------------------------ disturbances
     def _disturbances(self):
@@ -652,18 +662,25 @@ class ObserverModel:
             rows.append(out)
         return tuple(rows)
 
-    def prior(self, room_C: float) -> tuple[np.ndarray, np.ndarray]:
-        """Start state and covariance: the idle steady state in ``room_C`` (°C), spread along the uniform field.
+    def prior(self, room_C: float, unknown_past: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Start state and covariance: the idle steady state in ``room_C`` (°C), spread along the uniform field, and
+        with ``unknown_past`` by :meth:`operating_moment` in the plant state.
+
+        The mean is the machine at rest either way (the operating moment is about rest: a cold start is at its
+        centre).  A machine whose spindle ran before the session is warm in a way the thermometers show only in
+        part, and the prior at rest alone held a drift of −40 µm to be 2 µm ± 1 µm (2026-11-28).
 
         Parameters
         ----------
         room_C : float
             Room air, °C.
+        unknown_past : bool
+            The machine's past is unknown (else: at rest in equilibrium with the room air).
 
         Returns
         -------
         tuple of numpy.ndarray
-            x₀ (N,) and P₀ (N, N).
+            x₀ (N,) and P₀ (N, N), in the states' units (°C, W, K, 1) and their squares.
         """
         rom, n, q, nm = self.rom, self.n, self.q, self.noise
         u = self.plant_inputs(0.0, room_C)[0]
@@ -674,9 +691,46 @@ class ObserverModel:
         P0 = np.zeros((self.size, self.size))
         P0[:n, :n] = spread ** 2 * np.outer(s, s) + (0.1 * spread) ** 2 * np.diag(
             np.r_[np.full(rom.order, s[:rom.order] @ s[:rom.order] / rom.order), np.ones(n - rom.order)])
+        if unknown_past:
+            P0[:n, :n] += self.operating_moment()
         P0[n:n + q, n:n + q] = np.diag(np.square(self.sigmas))
         P0[n + q:, n + q:] = np.diag(self._offset_variances)
         return x0, P0
+
+    def operating_moment(self) -> np.ndarray:
+        """The second moment about rest of the plant state under plausible operation, (n, n) in °C² (the modal
+        coordinates' units squared).
+
+        The stationary covariance (continuous Lyapunov equation) of the plant (modes and lagged airs, with the
+        lagged airs' own process noise) driven by two Gauss–Markov inputs of the model's correlation time
+        :attr:`NoiseModel.correlation_time_s`: the spindle's load (its power at top speed × :data:`LOAD_RMS`)
+        and the room air's past about its present reading (σ :attr:`NoiseModel.ambient_K`, every read zone).
+        Zero-mean about rest.  The disturbances are left out: with their stationary effect in the prior, the
+        first readings' sensor offsets were taken for heat (Z error 0.5 → 2 µm RMS on cold-start held-out
+        records, 2026-11-28).  Computed once per model.
+        """
+        if self._operating is None:
+            from scipy.linalg import solve_continuous_lyapunov
+
+            A, Qc = self._history_system()
+            moment = solve_continuous_lyapunov(A, -Qc)[:self.n, :self.n]
+            self._operating = 0.5 * (moment + moment.T)
+        return self._operating.copy()
+
+    def _history_system(self):
+        """``(A, Qc)``: the plant with the spindle's load and the room air's past appended as two Gauss–Markov
+        inputs (:meth:`operating_moment`)."""
+        n, nm = self.n, self.noise
+        idle = self.plant_inputs(0.0, 0.0)[0]
+        steps = np.column_stack([self.plant_inputs(float(self.rom.limits["max_spindle_rpm"]), 0.0)[0] - idle,
+                                 self.plant_inputs(0.0, 1.0)[0] - idle])
+        rate = 1.0 / nm.correlation_time_s
+        A, Qc = np.zeros((n + 2, n + 2)), np.zeros((n + 2, n + 2))
+        A[:n, :n], Qc[:n, :n] = self._A0[:n, :n], self._Qc[:n, :n]
+        A[:n, n:] = self._B[:n, :len(idle)] @ steps
+        A[n:, n:] = -rate * np.eye(2)
+        Qc[n:, n:] = np.diag(2.0 * rate * np.square([LOAD_RMS, nm.ambient_K]))
+        return A, Qc
 
     def plant_inputs(self, spindle_rpm: ArrayLike, room_C: ArrayLike, feed_mm_min: dict | None = None) -> np.ndarray:
         """Plant inputs (k, m) for spindle speeds (rpm), room air (°C; every read zone at it) and feeds (mm/min).

@@ -182,8 +182,8 @@ BAND_INFLATION = (5.0, 1.25, 1.0)
 
 
 def live_observer(rom: ReducedModel, thermometers: list[str], sensors: dict | None = None,
-                  hypotheses_W: tuple[float, ...] | None = None,
-                  band_inflation: ArrayLike | None = None) -> DriftObserver | MultipleModelObserver:
+                  hypotheses_W: tuple[float, ...] | None = None, band_inflation: ArrayLike | None = None,
+                  at_rest: bool = False) -> DriftObserver | MultipleModelObserver:
     """The observer ``twin live`` runs: the shipped noise model with the unread-source hypotheses.
 
     Parameters
@@ -195,6 +195,9 @@ def live_observer(rom: ReducedModel, thermometers: list[str], sensors: dict | No
     band_inflation : array_like, optional
         (3,) factors on the X, Y, Z band's half-width, 1 (default :data:`BAND_INFLATION`; ``(1, 1, 1)``: the
         filter's own ±1.96 σ).
+    at_rest : bool
+        The machine is known to have stood idle in the room air before the start
+        (:attr:`~twin.live.model.NoiseModel.start_at_rest`); default: its past is unknown.
 
     Returns
     -------
@@ -203,7 +206,8 @@ def live_observer(rom: ReducedModel, thermometers: list[str], sensors: dict | No
     """
     sizes = HYPOTHESES_W if hypotheses_W is None else tuple(hypotheses_W)
     inflation = BAND_INFLATION if band_inflation is None else band_inflation
+    noise = dataclasses.replace(NOISE, start_at_rest=bool(at_rest))
     if len(sizes) == 1:
-        return DriftObserver(rom, thermometers, dataclasses.replace(NOISE, concentrated_W=sizes[0]), sensors=sensors,
+        return DriftObserver(rom, thermometers, dataclasses.replace(noise, concentrated_W=sizes[0]), sensors=sensors,
                              band_inflation=inflation)
-    return MultipleModelObserver(rom, thermometers, sizes, sensors=sensors, band_inflation=inflation)
+    return MultipleModelObserver(rom, thermometers, sizes, noise, sensors=sensors, band_inflation=inflation)

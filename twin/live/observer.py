@@ -26,6 +26,7 @@ designed.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,6 +43,10 @@ Z95 = 1.959963984540054
 #: scores 55σ or more on a machine near 25 °C).  Twice the largest model error of the training records (9.5σ, T09
 #: beside the unmodelled 60 W belt drive), since a model error the gate rejected could not be learnt.
 INNOVATION_GATE = 20.0
+#: Prior probability that the machine stood at rest in the room air before the session, 1: the start prior is a
+#: Gaussian sum of "at rest" and "past unknown" (:meth:`DriftObserver.start`), weighed by the first readings.  Even
+#: odds: the observer is not told which.
+REST_PRIOR_WEIGHT = 0.5
 
 
 def gated(scores: ArrayLike, recent: ArrayLike | None = None) -> np.ndarray:
@@ -243,12 +248,21 @@ class DriftObserver(RecordRunner):
         self.field_names = self.model.field_names
         self._power, self._kf = {}, None
         self._room = np.r_[self.model.plant_inputs(0.0, 1.0)[0] - self.model.plant_inputs(0.0, 0.0)[0], 0.0]
-        self.time_s, self._rpm = None, 0.0
+        self.time_s, self._rpm, self._rest = None, 0.0, None
+        #: the weight the first readings gave the at-rest start prior (NaN until they came; :meth:`start`)
+        self.rest_weight = np.nan
         self._gate = InnovationGate(len(self.thermometers))
 
     # ------------------------------------------------------------------ filtering
     def start(self, time_s: float, room_C: float) -> DriftObserver:
-        """Start from the idle steady state in the room air ``room_C`` (°C) at ``time_s`` (s).
+        """Start from the idle steady state in the room air ``room_C`` (°C) at ``time_s`` (s), its past unknown.
+
+        Unless the noise model says the machine stood at rest (:attr:`~twin.live.model.NoiseModel.start_at_rest`),
+        the prior is a Gaussian sum: at rest or with an unknown past (:meth:`~twin.live.model.ObserverModel.prior`),
+        weighed :data:`REST_PRIOR_WEIGHT` and by how well each predicts the first thermometer readings, then
+        collapsed to one Gaussian (:meth:`_weigh_start`).  The
+        first readings of a warm machine rule out the rest; those of a machine at rest favour it, and their sensor
+        offsets are not taken for heat.
 
         Parameters
         ----------
@@ -264,6 +278,10 @@ class DriftObserver(RecordRunner):
         """
         model = self.model
         x0, P0 = model.prior(room_C)
+        #: the at-rest prior's covariance, carried beside the unknown past's until the first readings weigh them
+        self._rest = None if model.noise.start_at_rest else P0
+        if self._rest is not None:
+            P0 = model.prior(room_C, unknown_past=True)[1]
         F, _, G, Q = model.matrices(1.0)
         self._kf = ModalKalmanFilter(self.rom.order, F, G, model.H, model.J, Q, model.R, model.consider,
                                      model.couplings).reset(x0, P0)
@@ -397,11 +415,33 @@ class DriftObserver(RecordRunner):
         prepared, self._prepared = self._prepared, None
         if rejected.any():
             y, prepared = np.where(rejected, np.nan, y), None
-        nis = self._kf.update(y, self._u, prepared)
         used = int(np.isfinite(y).sum())
+        nis = self._weigh_start(y, prepared) if used and self._rest is not None else self._kf.update(y, self._u,
+                                                                                                      prepared)
         if dt is not None and used:
             self._adapt(nis / used, dt)
         return self._estimate(used, rejected)
+
+    def _weigh_start(self, y, prepared):
+        """Update both start priors with the first readings ``y`` (°C), weigh them by :data:`REST_PRIOR_WEIGHT` and
+        their likelihoods, and keep the mixture's mean and covariance (moment matching); returns the NIS of the
+        unknown past's update.  The filter's log-likelihood becomes the mixture's (the hypotheses' weights)."""
+        kf, u = self._kf, self._u
+        x, rest, self._rest = kf.x, self._rest, None
+        nis = kf.update(y, u, prepared)
+        parts = [(kf.x, kf.P, np.log1p(-REST_PRIOR_WEIGHT) + kf.log_likelihood)]
+        kf.x, kf.P = x, rest
+        kf.update(y, u)
+        parts.append((kf.x, kf.P, np.log(REST_PRIOR_WEIGHT) + kf.log_likelihood))
+        logs = np.array([part[2] for part in parts])
+        w = np.exp(logs - logs.max())
+        kf.log_likelihood = float(logs.max() + np.log(w.sum()))
+        w /= w.sum()
+        mean = sum(wi * xi for wi, (xi, _, _) in zip(w, parts))
+        P = sum(wi * (Pi + np.outer(xi - mean, xi - mean)) for wi, (xi, Pi, _) in zip(w, parts))
+        kf.x, kf.P = mean, 0.5 * (P + P.T)
+        self.rest_weight = float(w[1])
+        return nis
 
     def expected_readings(self, time_s: float, spindle_rpm: float, room_C: float) -> np.ndarray:
         """The thermometer readings the model predicts for the next sample, without changing the observer.
@@ -440,6 +480,12 @@ class DriftObserver(RecordRunner):
             Q = Q.copy()
             Q[n:n + q, n:n + q] *= self.inflation
         kf.F, kf.G, kf.Q = F, G, Q
+        if self._rest is not None:
+            # no reading yet: the at-rest prior's covariance follows the same dynamics (the means are one)
+            x, P = kf.x, kf.P
+            kf.P = self._rest
+            self._rest = kf.predict(self._u).P
+            kf.x, kf.P = x, P
         kf.predict(self._u)
 
     def _adapt(self, nis_per_reading, dt):
@@ -501,6 +547,9 @@ class DriftObserver(RecordRunner):
 NOISE = NoiseModel(discrepancy=0.05, concentrated_W=0.0)
 #: The adaptive widening (:class:`Adaptation`): a 1 h window, chosen with κ on the training records.
 ADAPTATION = Adaptation(window_s=3600.0)
+#: :data:`NOISE` for a machine known to stand at rest in the room air at the start (the model runs of
+#: :func:`choose_thermometers` start so, and its choice does not depend on the start prior).
+AT_REST = dataclasses.replace(NOISE, start_at_rest=True)
 
 
 def choose_thermometers(rom: ReducedModel, k: int = 6, axis: str = "Z", candidates: list[str] | None = None,
@@ -508,9 +557,9 @@ def choose_thermometers(rom: ReducedModel, k: int = 6, axis: str = "Z", candidat
     """Greedy choice of ``k`` ROM thermometers that minimise the observer's posterior std of ``axis``.
 
     Model-based (no record is used, so no scenario is favoured): for each candidate added to the set
-    chosen so far, the observer runs for ``horizon_s`` at ``step_s`` at full spindle speed in 20 °C air, reading
-    what the nominal model predicts (so the innovations are zero and the covariance follows the model); the
-    candidate giving the smallest final drift std is kept.
+    chosen so far, the observer (started at rest, :data:`AT_REST`) runs for ``horizon_s`` at ``step_s`` at full
+    spindle speed in 20 °C air, reading what the nominal model predicts (so the innovations are zero and the
+    covariance follows the model); the candidate giving the smallest final drift std is kept.
 
     Parameters
     ----------
@@ -543,7 +592,7 @@ def choose_thermometers(rom: ReducedModel, k: int = 6, axis: str = "Z", candidat
         for name in names:
             if name in chosen:
                 continue
-            band = _final_band(DriftObserver(rom, chosen + [name]), rpm, step_s, horizon_s)[j]
+            band = _final_band(DriftObserver(rom, chosen + [name], AT_REST), rpm, step_s, horizon_s)[j]
             if best is None or band < best[0]:
                 best = (band, name)
         chosen.append(best[1])
