@@ -52,3 +52,12 @@ def test_too_few_rows_left_is_refused_with_the_outage_and_a_holdout_that_works()
     with pytest.raises(TwinInputError, match=r"rec.csv: .*4.17–5.00 h \(spindle_rpm 0 → 9000\).*--holdout 0\.65"):
         check_rows_left(t < 20000.0, t >= 20000.0, unknown, t, "rec.csv")
     check_rows_left(t < 10000.0, t >= 10000.0, unknown, t, "rec.csv")   # fit and held-out rows before it: fine
+    unknown.rows[:] = False                                              # the few rows are not the outage's doing
+    check_rows_left(t < 29000.0, t >= 29000.0, unknown, t, "rec.csv")
+
+
+def test_an_input_not_read_on_one_side_is_not_named_as_changed():
+    t, inputs = _record(120.0, 7200.0, 0, 9000)
+    inputs["feed_x_mm_min"] = np.where(t < 3600.0, np.nan, 500.0)
+    found = outage_intervals(t, inputs)
+    assert describe(t, inputs, found) == [(3480.0, 10680.0, "spindle_rpm 0 → 9000")]

@@ -96,16 +96,22 @@ def outage_intervals(time_s: np.ndarray, inputs: dict[str, np.ndarray]) -> np.nd
     long = (steps > OUTAGE_FACTOR * np.median(steps)) & (steps >= OUTAGE_MIN_S)
     changed = np.zeros(len(steps), bool)
     for values in inputs.values():
-        v = np.asarray(values, float)
-        changed |= ~np.isclose(v[1:], v[:-1], rtol=1e-6, atol=1e-9) & np.isfinite(v[1:]) & np.isfinite(v[:-1])
+        changed |= _changed(values)
     return long & changed
+
+
+def _changed(values):
+    """Per interval: the input read on both sides, and different (bool, n_times - 1)."""
+    v = np.asarray(values, float)
+    return ~np.isclose(v[1:], v[:-1], rtol=1e-6, atol=1e-9) & np.isfinite(v[1:]) & np.isfinite(v[:-1])
 
 
 def describe(time_s: np.ndarray, inputs: dict[str, np.ndarray], intervals: np.ndarray) -> list:
     """(start s, end s, what changed) of each outage interval."""
+    changes = {name: _changed(v) for name, v in inputs.items()}
     out = []
     for i in np.flatnonzero(intervals):
-        what = ", ".join(f"{name} {v[i]:g} → {v[i + 1]:g}" for name, v in inputs.items() if v[i] != v[i + 1])
+        what = ", ".join(f"{name} {v[i]:g} → {v[i + 1]:g}" for name, v in inputs.items() if changes[name][i])
         out.append((float(time_s[i]), float(time_s[i + 1]), what))
     return out
 
@@ -146,7 +152,7 @@ def check_rows_left(fit_rows: np.ndarray, hold_rows: np.ndarray, unknown: Unknow
         Naming the record, the outages and the rows left.
     """
     fit, hold = int((fit_rows & ~unknown.rows).sum()), int((hold_rows & ~unknown.rows).sum())
-    if min(fit, hold) >= MIN_ROWS:
+    if min(fit, hold) >= MIN_ROWS or not unknown.rows.any():
         return
     first, last = time_s[unknown.rows][[0, -1]]
     # the split at 70 % of the way to the first outage: the fit part keeps most rows before it, the held-out the rest
