@@ -319,7 +319,7 @@ def _block_means(r, size):
     time step, which resolves nothing finer; else white noise at a dense sampling counts as independent evidence
     about effects that are smooth on that scale (n_eff grew with the sampling rate and with the noise)."""
     n = len(r) // size * size
-    return r[:n].reshape(-1, size).mean(axis=1) if size > 1 else r
+    return r[:n].reshape(-1, size).mean(axis=1)
 
 
 # ============================================================================= parameter coordinates

@@ -416,8 +416,10 @@ class DriftObserver(RecordRunner):
         if rejected.any():
             y, prepared = np.where(rejected, np.nan, y), None
         used = int(np.isfinite(y).sum())
-        nis = self._weigh_start(y, prepared) if used and self._rest is not None else self._kf.update(y, self._u,
-                                                                                                      prepared)
+        if used and self._rest is not None:
+            nis = self._weigh_start(y, prepared)
+        else:
+            nis = self._kf.update(y, self._u, prepared)
         if dt is not None and used:
             self._adapt(nis / used, dt)
         return self._estimate(used, rejected)
