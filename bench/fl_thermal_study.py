@@ -234,8 +234,8 @@ def timing_study(frame, repeats=3):
             times.append(time.perf_counter() - start)
         print(f"\ngrey-box 2 poles, rpm + t4, fit on all {len(X)} rows of part 1 ({ch}{label}): "
               f"{min(times):.2f} s best of {repeats} (max {max(times):.2f} s), {model.n_iterations_} residual "
-              f"evaluations in the best start, time constants {np.round(model.time_constants_ / 3600, 2)} h, "
-              f"b = {model.exponent_:.2f}, training RMSE {model.training_rmse_:.2f} µm")
+              f"evaluations in the best start, {model.parameter_summary()}, training RMSE "
+              f"{model.training_rmse_:.2f} µm")
 
 
 def split_study(frame) -> None:

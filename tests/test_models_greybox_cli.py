@@ -66,6 +66,17 @@ def test_greybox_trains_saves_and_continues_a_warm_record(records, tmp_path):
         evaluate(loaded, [later], reference="train", history=later)
 
 
+def test_train_prints_the_fitted_time_constants_and_exponent_with_their_intervals(records, capsys, tmp_path):
+    training, _, _ = records
+    path = tmp_path / "train.csv"
+    training.write(path)
+    assert main(["train", str(path), "--inputs", "spindle,air", "--target", "Z", "--model", "greybox", "--out",
+                 str(tmp_path / "gb.json")]) == 0
+    out = capsys.readouterr().out
+    assert f"\n  fitted {CompensationModel.load(tmp_path / 'gb.json').estimator.parameter_summary()}\n" in out
+    assert re.search(r"fitted τ1 = [\d.]+ h \(90 %: [\d.]+ … [\d.]+\), τ2 = .*; b = 1\.6 \(90 %: ", out)
+
+
 def test_static_model_continues_from_the_training_reference(records):
     training, later, _ = records
     cm = train([training], "air", "Z", model="mlr")

@@ -18,6 +18,9 @@ from ..infra.cli_common import (
 from ..infra.progress import progress_bar
 
 # Handlers import the library inside them, never up here: start-up time (`twin --help` must not load scipy).
+# So twin.core.unit_hints.TYPICAL_TOP is copied here for --help (tests/test_train_input_units.py keeps it equal).
+TYPICAL_TOP_RPM = 12000
+TYPICAL_TOP_FEED_M_MIN = 30
 
 
 def _datasets_help():
@@ -38,8 +41,9 @@ def cmd_train(args: argparse.Namespace) -> None:
 
     cm = train(args.datasets, args.inputs, args.target, model=args.model, params=parse_params(args.param),
                out=args.out, zero_reference=not args.no_zero_reference, reference_samples=args.reference_samples,
-               column_map=_column_map(args), nan_policy=args.nan_policy, overwrite=args.overwrite,
-               select=args.select, allow_unstable=args.allow_unstable, observe=args.observe)
+               column_map=_column_map(args), nan_policy=args.nan_policy, machine=args.machine,
+               overwrite=args.overwrite, select=args.select, allow_unstable=args.allow_unstable,
+               observe=args.observe)
     if "selection" in cm.metadata:
         print(f"--select auto {cm.metadata['selection']['reason']}")
     if "unstable" in cm.metadata:
@@ -50,6 +54,9 @@ def cmd_train(args: argparse.Namespace) -> None:
     for label, s in cm.metadata["training_metrics"].items():
         print(f"  {label}: RMSE {s['rmse']:.3g}, max residual {s['max_residual']:.3g} {cm.target_unit}, "
               f"improvement {s['improvement_percent']:.1f} %")
+    parameters = getattr(cm.estimator, "parameter_summary", None)   # the grey-box model's τ and b, with intervals
+    if parameters is not None:
+        print(f"  fitted {parameters()}")
     print(f"model saved to {args.out}")
 
 
@@ -64,7 +71,7 @@ def cmd_evaluate(args: argparse.Namespace) -> None:
     from .train import evaluate
 
     ev = evaluate(args.model, args.datasets, out_dir=args.out, column_map=_column_map(args),
-                  nan_policy=args.nan_policy, plots=not args.no_plots, overwrite=args.overwrite,
+                  nan_policy=args.nan_policy, machine=args.machine, plots=not args.no_plots, overwrite=args.overwrite,
                   reference=args.reference, history=args.history, gap=args.gap)
     print(ev.table(), end="")
     if ev.out_dir is not None:
@@ -115,6 +122,11 @@ def _add_data_options(p):
                    "other columns are kept and harm nothing); keep: missing readings of the thermometers the "
                    "model observes (--observe), left out of its fit and skipped by its filter (anywhere else "
                    "they are refused)")
+    p.add_argument("--machine", help="machine name or TOML path of the records, read without a mesh: a measured "
+                   "CSV's spindle and feed columns are warned about when they peak where one in krpm or Hz (feeds: "
+                   "m/min) would, judged against its top speed and feed (default: a typical machining centre's "
+                   f"{TYPICAL_TOP_RPM} rpm and {TYPICAL_TOP_FEED_M_MIN} m/min); a scenario named among the datasets "
+                   "runs on it (default: the scenario's machine)")
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -25,12 +25,13 @@ from numpy.typing import ArrayLike, NDArray
 from models.speed import running
 
 from ..core.dataset import Dataset
-from ..core.unit_hints import TYPICAL_TOP, other_unit_hint
+from ..core.unit_hints import TYPICAL_TOP, other_unit_hint, top_of
 from ..errors import TwinInputError
 from .record_order import in_canonical_order
 
 if TYPE_CHECKING:
     from ..core.machine import Machine
+    from ..core.machine_definition import MachineDefinition
 
 log = logging.getLogger("thermal_twin")
 
@@ -180,7 +181,7 @@ def note_long_steps(dataset: Dataset) -> None:
                     float(dataset.time_s[k]))
 
 
-def note_unit_suspects(dataset: Dataset, machine: Machine | None = None) -> None:
+def note_unit_suspects(dataset: Dataset, machine: Machine | MachineDefinition | None = None) -> None:
     """Warn, on the ``thermal_twin`` logger, of a spindle column that reads like Hz or krpm under ``_rpm``, or a
     feed that reads like m/min under ``_mm_min`` (:func:`twin.core.unit_hints.other_unit_hint`, the gap
     diagnosis's rule), and list those columns in ``dataset.metadata["import"]["unit_suspects"]``.
@@ -192,30 +193,22 @@ def note_unit_suspects(dataset: Dataset, machine: Machine | None = None) -> None
     ----------
     dataset : Dataset
         A measured record.
-    machine : Machine, optional
-        Its machine, whose top spindle speed (rpm) and feed (mm/min) judge the columns; without one, the
-        :data:`~twin.core.unit_hints.TYPICAL_TOP` of a machining centre.
+    machine : Machine or MachineDefinition, optional
+        Its machine (built or only read), whose top spindle speed (rpm) and feed (mm/min) judge the columns;
+        without one, the :data:`~twin.core.unit_hints.TYPICAL_TOP` of a machining centre.
     """
+    definition = getattr(machine, "definition", machine)
     suspects = []
     for ch in dataset.channels:
         if ch.unit not in TYPICAL_TOP:
             continue
-        hint = other_unit_hint(ch.column, ch.unit, dataset[ch.name], *_top_of(machine, ch.unit),
+        hint = other_unit_hint(ch.column, ch.unit, dataset[ch.name], *top_of(definition, ch.unit),
                                consequence=", and a model trained or evaluated on it takes it as given")
         if hint is not None:
             log.warning("%s: %s", dataset.metadata.get("source") or dataset_label(dataset), hint)
             suspects.append(ch.column)
     if suspects:
         dataset.metadata.setdefault("import", {})["unit_suspects"] = suspects
-
-
-def _top_of(machine, unit):
-    """``(top, whose)``: the machine's top spindle speed (rpm) or feed (mm/min) by ``unit``, or the typical one
-    (no built machine: none given, or a scenario's machine given by name)."""
-    d = getattr(machine, "definition", None)
-    if d is None:
-        return TYPICAL_TOP[unit], "a typical machining centre (no machine given)"
-    return (d.max_spindle_rpm if unit == "rpm" else d.max_feed_mm_min), f"machine {d.name!r}"
 
 
 def continued_record(first: Dataset, later: Dataset, names: Sequence[str], interval_s: float | None = None

@@ -35,6 +35,8 @@ from models.speed import STANDSTILL_RPM, running
 
 from ..core.clock import on_one_clock
 from ..core.dataset import Dataset, finite_or_none, name_listing, sidecar_path
+from ..core.machine import build_machine
+from ..core.machine_definition import MachineDefinition, load_machine
 from ..core.scenario import available_scenarios
 from ..core.simulate import simulate
 from ..errors import TwinInputError
@@ -75,15 +77,16 @@ log = logging.getLogger("thermal_twin")
 
 # ----------------------------------------------------------------------------- datasets
 def load_dataset(spec: Dataset | Path | str, column_map: dict[str, str] | None = None,
-                 nan_policy: Literal["error", "interpolate", "drop", "keep"] = "error", machine: Machine | None = None,
-                 noise: bool = True, label: str | None = None, channels: Sequence[str] | None = None,
-                 rest_start: bool = True, reference_samples: int = 1) -> Dataset:
+                 nan_policy: Literal["error", "interpolate", "drop", "keep"] = "error",
+                 machine: Machine | MachineDefinition | str | Path | None = None, noise: bool = True,
+                 label: str | None = None, channels: Sequence[str] | None = None, rest_start: bool = True,
+                 reference_samples: int = 1) -> Dataset:
     """A :class:`Dataset` from a path or a scenario name.
 
     ``spec`` may be a :class:`Dataset` (returned as is), a CSV path (read with
     its JSON sidecar if there is one, else imported as measured data with
     ``column_map`` and ``nan_policy``; a column mapped to ``"time_s"`` is the
-    time in s; a spindle or feed column that reads like another unit is warned about,
+    time in s; a spindle or feed column that reads like another unit for ``machine`` is warned about,
     :func:`~twin.compensation.records.note_unit_suspects`), or the name of a scenario, which is
     simulated on ``machine`` (default: the scenario's) with its sensor noise.
     A twin record whose duty cycle changes ``channels`` at its start gets the
@@ -98,8 +101,11 @@ def load_dataset(spec: Dataset | Path | str, column_map: dict[str, str] | None =
         Measured CSV column → ``<name>_<unit>`` (or ``time_s``); given, a sidecar is ignored.
     nan_policy : {"error", "interpolate", "drop", "keep"}, default "error"
         NaNs in a measured CSV ("keep" leaves them to the caller).
-    machine : Machine, optional
-        The machine a scenario runs on (default: the scenario's).
+    machine : Machine, MachineDefinition, str or Path, optional
+        The machine of the records, built, read, or a name or TOML path (read without a mesh): its top spindle
+        speed (rpm) and feed (mm/min) judge a measured CSV's columns (default: a typical machining centre's,
+        :data:`~twin.core.unit_hints.TYPICAL_TOP`), and a scenario runs on it, built when it is not (default: the
+        scenario's machine).
     noise : bool, default True
         Add the scenario's sensor noise (seeded).
     label : str, optional
@@ -123,6 +129,8 @@ def load_dataset(spec: Dataset | Path | str, column_map: dict[str, str] | None =
     """
     if isinstance(spec, Dataset):
         return with_rest_start(spec, channels, reference_samples) if rest_start else spec
+    if isinstance(machine, (str, Path)):
+        machine = load_machine(machine)
     path = Path(str(spec))
     if path.exists():
         if sidecar_path(path).exists() and column_map is None:
@@ -137,14 +145,20 @@ def load_dataset(spec: Dataset | Path | str, column_map: dict[str, str] | None =
                                            nan_channels=channels)
             note_unit_suspects(ds, machine)     # a spindle in krpm trains a model that misreads rpm
     else:
-        names = available_scenarios()
-        if str(spec) not in names:
-            raise TwinInputError(f"{spec!r} is neither a dataset file nor a scenario; scenarios: {names}")
-
-        ds = simulate(str(spec), machine, noise=noise).dataset
+        ds = _simulated(str(spec), machine, noise)
     if label:
         ds.metadata["label"] = label
     return with_rest_start(ds, channels, reference_samples) if rest_start else ds
+
+
+def _simulated(scenario, machine, noise):
+    """The dataset of a shipped ``scenario`` run on ``machine`` (a definition is built; None: the scenario's own),
+    with its sensor noise if ``noise``; a name that is not a scenario is refused with the list."""
+    names = available_scenarios()
+    if scenario not in names:
+        raise TwinInputError(f"{scenario!r} is neither a dataset file nor a scenario; scenarios: {names}")
+    built = build_machine(definition=machine) if isinstance(machine, MachineDefinition) else machine
+    return simulate(scenario, built, noise=noise).dataset
 
 
 def _input_files(specs):
@@ -239,8 +253,9 @@ class Evaluation:
 def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], target: str, model: str = "anfis",
           params: dict | None = None, out: Path | str | None = None, zero_reference: bool = True,
           reference_samples: int = 1, column_map: dict[str, str] | None = None,
-          nan_policy: Literal["error", "interpolate", "drop", "keep"] = "error", machine: Machine | None = None,
-          overwrite: bool = False, select: str | None = None, allow_unstable: bool = False,
+          nan_policy: Literal["error", "interpolate", "drop", "keep"] = "error",
+          machine: Machine | MachineDefinition | str | Path | None = None, overwrite: bool = False,
+          select: str | None = None, allow_unstable: bool = False,
           observe: str | list[str] | None = None) -> CompensationModel:
     """Fit a compensation model on datasets (paths, scenario names or :class:`Dataset`) and save it to ``out``.
 
@@ -439,8 +454,9 @@ def _first_sound_fit(selection, fit, datasets, params):
 
 def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset | Path | str],
              out_dir: Path | str | None = None, column_map: dict[str, str] | None = None,
-             nan_policy: Literal["error", "interpolate", "drop", "keep"] = "error", machine: Machine | None = None,
-             plots: bool = True, overwrite: bool = False, reference: Literal["own", "train"] = "own",
+             nan_policy: Literal["error", "interpolate", "drop", "keep"] = "error",
+             machine: Machine | MachineDefinition | str | Path | None = None, plots: bool = True,
+             overwrite: bool = False, reference: Literal["own", "train"] = "own",
              history: Dataset | Path | str | None = None, gap: Literal["refuse", "interpolate"] = "refuse"
              ) -> Evaluation:
     """Score a model (a :class:`CompensationModel` or a saved model path) on datasets.

@@ -37,6 +37,10 @@ ABSOLUTE_ZERO_C = -273.15
 #: dataset and CSV copies; step inputs and their quadrature), used to refuse a scenario up front.
 BYTES_PER_SAMPLE = 8 * 64 * 4
 BYTES_PER_STEP = 8 * 16 * 6
+#: An ambient CSV's time column short of the scenario is said to look like minutes (hours) when, read so, it
+#: would cover the scenario up to this many times over; a file in s that is short, but not 8× short, is just
+#: short (a file 0 … 72000 s under a 24 h scenario is not a 50-day record in minutes).
+UNIT_GUESS_MAX_COVER = 8.0
 TOP_KEYS = {"scenario", "initial", "ambient", "segments", "events", "noise", "outputs", "iso230_3"}
 
 
@@ -579,7 +583,8 @@ def _one_segment(seg: Table):
     return length, rpm, feed
 
 
-def _ambient(root: Table, base_dir: Path):
+def _ambient(root: Table, base_dir: Path, duration_s: float):
+    """``[ambient]`` of a scenario of ``duration_s`` s (a CSV must cover it), its file in ``base_dir``."""
     a = root.table("ambient")
     kind = a.string("kind", "constant", choices={"constant", "sinusoid", "piecewise", "csv"})
     common = {"kind", "vertical_gradient_K_per_m", "hvac_amplitude_K", "hvac_period_min"}
@@ -609,7 +614,7 @@ def _ambient(root: Table, base_dir: Path):
         params.update(times_s=times, values_C=values)
     else:
         a.check_keys(common | {"file", "time_column", "value_column"})
-        params.update(_ambient_csv(a, base_dir, swing))
+        params.update(_ambient_csv(a, base_dir, swing, duration_s))
     return Ambient(kind, params, a.number("vertical_gradient_K_per_m", 0.0))
 
 
@@ -620,7 +625,9 @@ def _check_with_ripple(values: np.ndarray, swing: float, where: str, hint: Calla
     check_ambient_C(np.concatenate([values - swing, values + swing]), where, lambda i: hint(i % n) + suffix)
 
 
-def _ambient_csv(a: Table, base_dir: Path, swing: float):
+def _ambient_csv(a: Table, base_dir: Path, swing: float, duration_s: float):
+    """Times (s) and temperatures (°C) of an ambient CSV, checked: numbers, strictly increasing times, plausible
+    temperatures (widened by the HVAC ripple ``swing``, K), and times covering the scenario's ``duration_s`` s."""
     import pandas as pd
 
     path = Path(a.string("file"))
@@ -651,7 +658,30 @@ def _ambient_csv(a: Table, base_dir: Path, swing: float):
         raise DefinitionError(f"{a.where('file')} {path}: column {time_col!r} must increase strictly: "
                               f"row {k + 3} has {t[k + 1]:g} after {t[k]:g}")
     _check_with_ripple(v, swing, f"{a.where('file')} {path}", lambda i: f": column {value_col!r}, row {i + 2}")
+    _check_covers(f"{a.where('file')} {path}", time_col, t, duration_s)
     return {"times_s": t, "values_C": v}
+
+
+def _check_covers(where: str, column: str, t: np.ndarray, duration_s: float) -> None:
+    """Refuse an ambient CSV whose times ``t`` (s, increasing) do not reach from the scenario's start (0 s) to its
+    end (``duration_s``, s).
+
+    Beyond the file's ends the twin holds its first and last readings, so a day logged in minutes or hours under
+    a header in s (0 … 1440, 0 … 24), or timed from another origin (clock times), would have been read as a room
+    at one temperature.  The end is checked first: a short file's span tells its unit, whatever its origin.
+    """
+    if t[-1] < duration_s:
+        cover = (t[-1] - t[0]) / duration_s
+        guess = next((f"the times look like {unit}: write them in s (× {factor:g})"
+                      for factor, unit in ((60.0, "minutes"), (HOUR, "hours"))
+                      if 1.0 <= cover * factor <= UNIT_GUESS_MAX_COVER),
+                     f"past {t[-1]:g} s the twin would hold the last reading: give readings up to {duration_s:g} s")
+        raise DefinitionError(f"{where}: column {column!r} spans {t[0]:g} … {t[-1]:g} s, short of the scenario's "
+                              f"{duration_s:g} s ({duration_s / HOUR:g} h): {guess}")
+    if t[0] > 0.0:
+        raise DefinitionError(f"{where}: column {column!r} starts at {t[0]:g} s, after the scenario's start (0 s), "
+                              "and before it the twin would hold the first reading: the times count from the "
+                              f"scenario's start; subtract {t[0]:g} s (clock times?) or add a reading at 0 s")
 
 
 def _memory_limit_bytes():
@@ -721,7 +751,7 @@ def load_scenario(scenario: str | Path) -> Scenario:
         time_step_s=step,
         theta=1.0 if scheme == "backward_euler" else 0.5,
         segments=segments,
-        ambient=_ambient(root, path.parent),
+        ambient=_ambient(root, path.parent, duration),
         events=events,
         initial=initial,
         noise=noise_spec,

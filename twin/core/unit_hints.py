@@ -3,12 +3,18 @@ under ``_rpm``, feeds in m/min under ``_mm_min``.
 
 Both the gap diagnosis (:func:`twin.gap.measured.check_operating_range`) and the compensation models
 (``twin train``/``twin evaluate`` on a measured CSV, :func:`twin.compensation.records.note_unit_suspects`)
-warn with :func:`other_unit_hint`, so the rule and its words are the same everywhere.  A warning, never a
-refusal: a slow warm-up or slow finishing feeds can be true.
+warn with :func:`other_unit_hint`, so the rule and its words are the same everywhere; a column is judged
+against its machine's top speed or feed (:func:`machine_top`), or a typical machining centre's when no machine
+is given (:func:`top_of`).  A warning, never a refusal: a slow warm-up or slow finishing feeds can be true.
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
+
+if TYPE_CHECKING:
+    from .machine_definition import MachineDefinition
 
 #: A running spindle column that peaks (99th percentile of |n|) at or below this fraction of the machine's top
 #: speed reads like one in Hz or rev/s (60× too small: 1000 … 12000 rpm read 17 … 200) or in krpm (1000× too
@@ -25,6 +31,45 @@ FEED_PEAK_TOO_LOW = 0.01
 #: machining centre's spindle (vmc_ram 12000 rpm, machine_a 9000) and the feed a machine definition defaults to
 #: (30 m/min); rpm and mm/min, by the column's unit.
 TYPICAL_TOP = {"rpm": 12000.0, "mm_min": 30000.0}
+
+
+def machine_top(definition: MachineDefinition, unit: str) -> float:
+    """A machine's top spindle speed (rpm) for a channel in ``rpm``, else its top feed (mm/min).
+
+    Parameters
+    ----------
+    definition : MachineDefinition
+        The machine (``max_spindle_rpm``, ``max_feed_mm_min``).
+    unit : str
+        The channel's unit: ``rpm`` (a spindle speed) or ``mm_min`` (a feed).
+
+    Returns
+    -------
+    float
+        rpm or mm/min, by ``unit``.
+    """
+    return definition.max_spindle_rpm if unit == "rpm" else definition.max_feed_mm_min
+
+
+def top_of(definition: MachineDefinition | None, unit: str) -> tuple[float, str]:
+    """The top a channel in ``unit`` is judged against, and whose it is, for :func:`other_unit_hint`.
+
+    Parameters
+    ----------
+    definition : MachineDefinition, optional
+        The machine; without one, :data:`TYPICAL_TOP`.
+    unit : str
+        ``rpm`` or ``mm_min``.
+
+    Returns
+    -------
+    tuple of (float, str)
+        The top (rpm or mm/min, :func:`machine_top`) and its owner, ``"machine 'vmc_ram'"`` or
+        ``"a typical machining centre (no machine given)"``.
+    """
+    if definition is None:
+        return TYPICAL_TOP[unit], "a typical machining centre (no machine given)"
+    return machine_top(definition, unit), f"machine {definition.name!r}"
 
 
 def other_unit_hint(column: str, unit: str, values: np.ndarray, top: float, owner: str,
