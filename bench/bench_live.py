@@ -24,6 +24,7 @@ Prints:
     python bench/bench_live.py --calibrate-xy  # the X and Y bands on the training records and the factors picked
     python bench/bench_live.py --visibility    # per part: how much Z a watt moves and how much the thermometers see
     python bench/bench_live.py --warm-start    # a machine that ran 2 h before the session: the start prior's bands
+    python bench/bench_live.py --resume        # a twin restarted after 10–120 min away: its saved state or the prior
 
 ``--calibrate`` runs the observer with each setting of :data:`GRID` on the *training* records only (never the
 held-out or seen ones) and applies :func:`choose_setting`.  ``--calibrate-xy`` runs the shipped observer without
@@ -283,6 +284,69 @@ def warm_row(rom, names, record, seed, at_rest):
     return " | ".join(cells) + f" | {100 * inside[hour].mean():.1f} % | {100 * inside.mean():.1f} % |"
 
 
+#: Resumes (``twin live --state``): full-FE records (60 s), the twin saved after this long (s) and back after each
+#: time away (min) it never saw; the spindle stops during the longer ones.
+RESUMES = (("heat_cool_9000", 1800.0), ("iso230_3_spindle", 7200.0))
+RESUME_AWAY_MIN = (10, 30, 60, 120)
+RESUME_WINDOW_S = 1800.0
+
+
+def resume_start(rom, names):
+    """Per record, noise seed and time away: the Z band and error over the first 30 min back, of the twin resumed
+    from the state it saved and of one started from the start prior (its past unknown: what a restart without
+    ``--state`` does); then both pooled per time away."""
+    from twin.gap.truth import PhysicsChange, physics_truth
+
+    print(f"resumes: full FE at 60 s; Z over the first {RESUME_WINDOW_S / 60:g} min back; thermometers "
+          f"{', '.join(names)}\n")
+    print("| record | seed | saved at (min) | away (min) | start | Z at the first sample (µm) | mean Z band (µm) | "
+          "Z RMS error (µm) | Z in band |")
+    print("|---|---:|---:|---:|---|---:|---:|---:|---:|")
+    pooled = {}
+    for scenario, saved_s in RESUMES:
+        record = physics_truth(scenario, PhysicsChange(time_step_s=60.0, output_step_s=60.0), noise=False)
+        for seed in WARM_SEEDS:
+            for away, start, cells in resume_rows(rom, names, record, saved_s, seed):
+                pooled.setdefault((away, start), []).append(cells)
+                print(f"| {scenario} | {seed} | {saved_s / 60:g} | {away} | {start} | {cells[0]} | {cells[1]:.2f} | "
+                      f"{cells[2]:.2f} | {100 * cells[3]:.1f} % |", flush=True)
+    print("\n| away (min) | start | mean Z band (µm) | Z RMS error (µm) | Z in band |\n|---:|---|---:|---:|---:|")
+    for (away, start), rows in pooled.items():
+        band, error, inside = np.mean([r[1:] for r in rows], axis=0)
+        print(f"| {away} | {start} | {band:.2f} | {error:.2f} | {100 * inside:.1f} % |")
+    print()
+
+
+def resume_rows(rom, names, record, saved_s, seed):
+    """``(away min, start, (first Z cell, mean band, RMS error, share in band))`` of :func:`resume_start` for one
+    record and seed: the state saved at ``saved_s`` s, then each time away resumed and started afresh."""
+    import tempfile
+    from pathlib import Path
+
+    from twin.live.multiple_model import live_observer
+    from twin.live.resume import read_state, resume, write_state
+
+    T, air = protocol.readings(record, names, seed)
+    t, rpm, z = record.time_s, record["spindle"], record["Z"]
+    first = live_observer(rom, names)
+    keep = t <= saved_s
+    first.run(t[keep], rpm[keep], air[keep], T[keep])
+    with tempfile.TemporaryDirectory() as folder:
+        state = Path(folder) / "state.json"
+        write_state(state, first)
+        for away in RESUME_AWAY_MIN:
+            back = (t >= saved_s + 60.0 * away) & (t <= saved_s + 60.0 * away + RESUME_WINDOW_S)
+            for start in ("resumed", "past unknown"):
+                observer = live_observer(rom, names)
+                if start == "resumed":
+                    resume(observer, read_state(state, observer), t[back][0])
+                drift, band = observer.run(t[back], rpm[back], air[back], T[back])
+                error = drift[:, 2] - z[back]
+                yield away, start, (f"{drift[0, 2]:.2f} ± {band[0, 2]:.2f} (true {z[back][0]:.2f})",
+                                    band[:, 2].mean(), np.sqrt(np.mean(error ** 2)),
+                                    np.mean(np.abs(error) <= band[:, 2]))
+
+
 def opcua_throughput(rom, names, speed):
     """Replay a ROM record through a loopback OPC UA server into the live client; print the samples/s."""
     from twin.live.cli import replay_session
@@ -312,6 +376,8 @@ def main(argv=None):
     parser.add_argument("--visibility", action="store_true", help="only the per-part Z and thermometer response per W")
     parser.add_argument("--warm-start", action="store_true",
                         help="only the warm starts: full-FE records replayed from 2 h on, the start prior's bands")
+    parser.add_argument("--resume", action="store_true",
+                        help="only the resumes: a saved state against the start prior after 10–120 min away")
     args = parser.parse_args(argv)
 
     names = list(DEFAULT_THERMOMETERS)
@@ -327,6 +393,9 @@ def main(argv=None):
         return
     if args.warm_start:
         warm_start(rom, names)
+        return
+    if args.resume:
+        resume_start(rom, names)
         return
     if not args.opcua_only:
         for name in ("held-out", "seen (second held-out)", "seen (first held-out)", "seen"):

@@ -7,7 +7,7 @@ from pathlib import Path
 from .interrupt import raise_if_interrupted
 
 
-def write_text_atomic(path: str | Path, text: str) -> Path:
+def write_text_atomic(path: str | Path, text: str, after_interrupt: bool = False) -> Path:
     """Write ``text`` (UTF-8) to a hidden ``.<name>.partial`` beside ``path``, then rename it into place.
 
     The content reaches the disk before the rename, and the rename before the
@@ -20,6 +20,9 @@ def write_text_atomic(path: str | Path, text: str) -> Path:
         The file to write; its folder must exist.
     text : str
         The content.
+    after_interrupt : bool, default False
+        Write it after a Ctrl-C too (a live twin's state, whose saving is part of stopping); by default a Ctrl-C,
+        even one a library swallowed, cancels the result.
 
     Returns
     -------
@@ -33,7 +36,8 @@ def write_text_atomic(path: str | Path, text: str) -> Path:
         file.flush()
         os.fsync(file.fileno())
     try:
-        raise_if_interrupted()           # no result after a Ctrl-C, even one a library swallowed
+        if not after_interrupt:
+            raise_if_interrupted()
     except KeyboardInterrupt:
         tmp.unlink(missing_ok=True)
         raise

@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import sys
+from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
 from ..errors import TwinInputError
@@ -74,6 +75,22 @@ def _observer(args, default):
         return live_observer(rom, thermometers, placed.sensors, at_rest=args.at_rest), thermometers
     thermometers = split_names(args.thermometers) or list(default)
     return live_observer(cached_rom(machine, args.order), thermometers, at_rest=args.at_rest), thermometers
+
+
+@contextmanager
+def _kept(args, observer):
+    """``observer`` kept in ``--state`` (:class:`~twin.live.resume.KeptObserver`: resumed from it, saved to it, last
+    when the session ends, however it ends), or as it is without ``--state``."""
+    if not args.state:
+        yield observer
+        return
+    from .resume import KeptObserver
+
+    kept = KeptObserver(observer, args.state)
+    try:
+        yield kept
+    finally:
+        kept.save()
 
 
 def _channels_of(dataset, kinds):
@@ -199,9 +216,10 @@ def _run_replay(args):
     # before the observer is built (seconds); the thermometers are checked once it has chosen them
     check_replay_channels(dataset, args.replay, {"--spindle": [args.spindle], "--room-air": [args.room_air]})
     observer, thermometers = _observer(args, DEFAULT_THERMOMETERS)
-    stats, wall = asyncio.run(replay_session(dataset, thermometers, observer, args.speed, args.room_air,
-                                             args.spindle, args.port, args.log, source=args.replay,
-                                             late_after_s=args.late_after))
+    with _kept(args, observer) as observer:
+        stats, wall = asyncio.run(replay_session(dataset, thermometers, observer, args.speed, args.room_air,
+                                                 args.spindle, args.port, args.log, source=args.replay,
+                                                 late_after_s=args.late_after))
     print(f"replayed {len(dataset)} samples of {Path(args.replay).name} at {args.speed:g}× in {wall:.1f} s")
     return stats, thermometers, dataset
 
@@ -236,8 +254,9 @@ def _run_endpoint(args):
         observer, thermometers = _observer(args, node_map.thermometers)
     except TwinInputError as exc:
         raise TwinInputError(f"{args.node_map}: {exc}") from None
-    client = LiveClient(args.endpoint, node_map, observer, args.log, late_after_s=args.late_after)
-    return asyncio.run(client.run(max_wall_s=args.duration or np.inf)), thermometers, None
+    with _kept(args, observer) as observer:
+        client = LiveClient(args.endpoint, node_map, observer, args.log, late_after_s=args.late_after)
+        return asyncio.run(client.run(max_wall_s=args.duration or np.inf)), thermometers, None
 
 
 def _print_summary(stats, thermometers, dataset):
@@ -279,6 +298,19 @@ def _input_files(args):
     if args.thermometers_from:
         files.append(Path(args.thermometers_from) / CHOSEN_FILE)
     return tuple(f for f in files if f is not None)
+
+
+def _check_state_file(args):
+    """Refuse a ``--state`` that is a folder, one of the command's input files, or its log (or the log's ``.part``):
+    the state is read and written there."""
+    from pathlib import Path
+
+    from ..infra.outdir import check_output_file
+    from .client import partial_path
+
+    state = check_output_file(args.state, overwrite=True, inputs=_input_files(args))
+    if args.log and state in {Path(p).expanduser().resolve() for p in (args.log, partial_path(args.log))}:
+        raise TwinInputError(f"--state {args.state}: the file of --log too; the state needs a file of its own")
 
 
 def _not_observed(stats, server):
@@ -356,6 +388,8 @@ def cmd_live(args: argparse.Namespace) -> int:
         raise TwinInputError(f"--duration must be a finite number of seconds > 0, got {args.duration:g}")
     from pathlib import Path
 
+    if args.state:
+        _check_state_file(args)
     if args.log:
         from ..infra.outdir import check_output_file
         from .client import partial_path
@@ -421,5 +455,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--at-rest", action="store_true",
                    help="the machine stood idle in the room air for hours before the session: start from its "
                         "equilibrium with the room (default: its past is unknown, and the first bands say so)")
+    p.add_argument("--state", metavar="FILE",
+                   help="keep the observer's state in FILE (JSON, written atomically every 30 wall s and when the "
+                        "session stops): a session started with FILE there goes on from it, across the time away "
+                        "with the inputs unknown (up to 8 h; docs/live.md, \"Resuming from a saved state\")")
     add_overwrite(p, "file")
     p.set_defaults(func=cmd_live)

@@ -74,7 +74,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike
 
-from models.kalman import discretize
+from models.kalman import discretize, noise_covariance
 
 from ..core.noise import MODELS
 from ..errors import TwinInputError
@@ -717,19 +717,52 @@ class ObserverModel:
             self._operating = 0.5 * (moment + moment.T)
         return self._operating.copy()
 
-    def _history_system(self):
+    def unknown_inputs(self, dt: float, spindle_rpm: float) -> tuple[np.ndarray, np.ndarray]:
+        """The plant state's response over ``dt`` s to inputs nobody read, about idle in the last room air read.
+
+        The inputs are those of :meth:`operating_moment` — the spindle's load and the room air, Gauss–Markov
+        about idle and the room air's reading — conditioned on what was read last: the load then was that of
+        ``spindle_rpm``, and the room air its reading.  So the known load is forgotten at the correlation time
+        (its mean decays as e^(−t/τ)) while the unknown part grows from nothing towards the operating moment;
+        after many τ this is the unknown-past prior about rest.  The response to idle in the room air, the
+        disturbances and the plant's own noise are not in it: they are the observer's ordinary prediction.
+
+        Parameters
+        ----------
+        dt : float
+            The time without readings, s.
+        spindle_rpm : float
+            The last spindle speed read, rpm.
+
+        Returns
+        -------
+        tuple of numpy.ndarray
+            The mean (n,) and the covariance (n, n) of the plant state's response, °C and °C².
+        """
+        from scipy.linalg import expm
+
+        n = self.n
+        A, Qc = self._history_system(spindle_rpm)
+        Qc[:n, :n] = 0.0                   # the plant's own noise is in the ordinary prediction's Q
+        return expm(A * dt)[:n, -1], noise_covariance(A, Qc, dt)[:n, :n]
+
+    def _history_system(self, known_rpm=None):
         """``(A, Qc)``: the plant with the spindle's load and the room air's past appended as two Gauss–Markov
-        inputs (:meth:`operating_moment`)."""
+        inputs (:meth:`operating_moment`); with ``known_rpm`` (rpm) a third, noiseless one: the load at that speed,
+        of unit start and forgotten at the same rate (:meth:`unknown_inputs`)."""
         n, nm = self.n, self.noise
         idle = self.plant_inputs(0.0, 0.0)[0]
-        steps = np.column_stack([self.plant_inputs(float(self.rom.limits["max_spindle_rpm"]), 0.0)[0] - idle,
-                                 self.plant_inputs(0.0, 1.0)[0] - idle])
+        columns = [self.plant_inputs(float(self.rom.limits["max_spindle_rpm"]), 0.0)[0] - idle,
+                   self.plant_inputs(0.0, 1.0)[0] - idle]
+        if known_rpm is not None:
+            columns.append(self.plant_inputs(float(known_rpm), 0.0)[0] - idle)
+        steps, k = np.column_stack(columns), len(columns)
         rate = 1.0 / nm.correlation_time_s
-        A, Qc = np.zeros((n + 2, n + 2)), np.zeros((n + 2, n + 2))
+        A, Qc = np.zeros((n + k, n + k)), np.zeros((n + k, n + k))
         A[:n, :n], Qc[:n, :n] = self._A0[:n, :n], self._Qc[:n, :n]
         A[:n, n:] = self._B[:n, :len(idle)] @ steps
-        A[n:, n:] = -rate * np.eye(2)
-        Qc[n:, n:] = np.diag(2.0 * rate * np.square([LOAD_RMS, nm.ambient_K]))
+        A[n:, n:] = -rate * np.eye(k)
+        Qc[n:n + 2, n:n + 2] = np.diag(2.0 * rate * np.square([LOAD_RMS, nm.ambient_K]))
         return A, Qc
 
     def plant_inputs(self, spindle_rpm: ArrayLike, room_C: ArrayLike, feed_mm_min: dict | None = None) -> np.ndarray:

@@ -125,12 +125,25 @@ class MultipleModelObserver(RecordRunner):
             self._weigh(0.0 if before is None else float(time_s) - before)
         return self._mixture(estimates)
 
+    def bridge(self, time_s: float) -> MultipleModelObserver:
+        """Predict every hypothesis to ``time_s`` (s) across a time when nobody read the inputs
+        (:meth:`DriftObserver.bridge`), the weights leaking towards equal over it; returns the observer."""
+        dt = float(time_s) - self.time_s
+        for member in self.members:
+            member.bridge(time_s)
+        self._leak(dt)
+        return self
+
+    def _leak(self, dt):
+        """Leak the weights towards equal over ``dt`` s (a hypothesis that lost may come back)."""
+        leak = -np.expm1(-dt / self.switching_time_s)
+        self.weights = (1.0 - leak) * self.weights + leak / len(self.weights)
+
     def _weigh(self, dt):
         """Leak the weights towards equal over ``dt`` s, then multiply by each filter's likelihood of the readings."""
-        leak = -np.expm1(-dt / self.switching_time_s)
-        prior = (1.0 - leak) * self.weights + leak / len(self.weights)
+        self._leak(dt)
         log_likelihood = np.array([member.log_likelihood for member in self.members])
-        posterior = prior * np.exp(log_likelihood - log_likelihood.max())
+        posterior = self.weights * np.exp(log_likelihood - log_likelihood.max())
         self.weights = posterior / posterior.sum()
 
     def _mixture(self, estimates):

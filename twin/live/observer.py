@@ -184,6 +184,40 @@ class Estimate:
     rejected: np.ndarray | None = None
 
 
+@dataclass
+class FilterState:
+    """What a :class:`DriftObserver` knows after a sample: enough to go on from it in another session.
+
+    Attributes
+    ----------
+    time_s : float
+        Machine time of the last sample fused, s.
+    last_step_s : float
+        The step before it, s: the sample interval, which a resume predicts as an ordinary step.
+    spindle_rpm : float
+        The last spindle speed read, rpm.
+    room_C : float
+        The last room air read, °C.
+    mean : numpy.ndarray
+        (N,) the state's estimate, in the states' units (°C, W, K, 1).
+    covariance : numpy.ndarray
+        (N, N) its covariance, in their squares.
+    nis : float
+        The adaptive widening's average NIS per reading, 1.
+    inflation : float
+        The adaptive factor on the disturbances' process noise, 1.
+    """
+
+    time_s: float
+    last_step_s: float
+    spindle_rpm: float
+    room_C: float
+    mean: np.ndarray
+    covariance: np.ndarray
+    nis: float
+    inflation: float
+
+
 class RecordRunner:
     """What every observer of this package shares: filtering a whole record sample by sample with ``step``."""
 
@@ -249,6 +283,8 @@ class DriftObserver(RecordRunner):
         self._power, self._kf = {}, None
         self._room = np.r_[self.model.plant_inputs(0.0, 1.0)[0] - self.model.plant_inputs(0.0, 0.0)[0], 0.0]
         self.time_s, self._rpm, self._rest = None, 0.0, None
+        #: the last prediction step, s: the sample interval (None until a second sample came)
+        self.last_step_s = None
         #: the weight the first readings gave the at-rest start prior (NaN until they came; :meth:`start`)
         self.rest_weight = np.nan
         self._gate = InnovationGate(len(self.thermometers))
@@ -286,7 +322,7 @@ class DriftObserver(RecordRunner):
         self._kf = ModalKalmanFilter(self.rom.order, F, G, model.H, model.J, Q, model.R, model.consider,
                                      model.couplings).reset(x0, P0)
         self.time_s, self._u = float(time_s), np.r_[model.plant_inputs(0.0, room_C)[0], 1.0]
-        self._rpm, self._air, self._prepared = 0.0, float(room_C), None
+        self._rpm, self._air, self._prepared, self.last_step_s = 0.0, float(room_C), None, None
         self._nis, self.inflation = 1.0, 1.0
         self._gate = InnovationGate(len(self.thermometers))
         return self
@@ -362,7 +398,7 @@ class DriftObserver(RecordRunner):
         elif time_s <= self.time_s:
             raise TwinInputError(f"observer: sample time {time_s} s is not after the previous {self.time_s} s")
         else:
-            dt = float(time_s) - self.time_s
+            dt = self.last_step_s = float(time_s) - self.time_s
             self._rpm, self._air, self._u = self._inputs(spindle_rpm, room_C)
             self._predict(dt)
             self.time_s = float(time_s)
@@ -444,6 +480,79 @@ class DriftObserver(RecordRunner):
         kf.x, kf.P = mean, 0.5 * (P + P.T)
         self.rest_weight = float(w[1])
         return nis
+
+    # ------------------------------------------------------------------ across sessions
+    def state(self) -> FilterState | None:
+        """What the observer knows now, to go on from it in another session (:meth:`restore`).
+
+        Returns
+        -------
+        FilterState or None
+            None before the first readings weighed the start priors (until then it knows nothing the start prior
+            would not give again) or before a second sample (no sample interval yet).
+        """
+        if not self.started or self._rest is not None or self.last_step_s is None:
+            return None
+        kf = self._kf
+        return FilterState(self.time_s, self.last_step_s, self._rpm, self._air, kf.x.copy(), kf.P.copy(), self._nis,
+                           self.inflation)
+
+    def restore(self, state: FilterState) -> DriftObserver:
+        """Go on from ``state`` (:meth:`state`, of an observer of the same model) as if its samples had been fused
+        here.  The innovation gate's memory of the last few samples' scores starts afresh.
+
+        Parameters
+        ----------
+        state : FilterState
+            The state to go on from.
+
+        Returns
+        -------
+        self : DriftObserver
+            The observer at ``state.time_s``.
+        """
+        self.start(state.time_s, state.room_C)
+        self._rest = None
+        self._kf.x, self._kf.P = np.array(state.mean, float), np.array(state.covariance, float)
+        self._rpm, self._nis, self.inflation = float(state.spindle_rpm), float(state.nis), float(state.inflation)
+        self.last_step_s = float(state.last_step_s)
+        return self
+
+    def bridge(self, time_s: float) -> DriftObserver:
+        """Predict to ``time_s`` (s) across a time when nobody read the inputs (the twin was not running).
+
+        The ordinary prediction with the last inputs held — so the considered errors that scale with the physics
+        (a power model, a film coefficient) act as they did when the machine was last seen — with the held load's
+        response replaced by that of the inputs nobody read (:meth:`~twin.live.model.ObserverModel.unknown_inputs`):
+        the last speed's load forgotten at the correlation time, the load and the room air unknown about it, more
+        so the longer the time.  The thermometer offsets, constant, are kept as they were.
+
+        Parameters
+        ----------
+        time_s : float
+            Machine time to predict to, s; after the present one.
+
+        Returns
+        -------
+        self : DriftObserver
+            The observer at ``time_s``.
+
+        Raises
+        ------
+        TwinInputError
+            If ``time_s`` is not after the present time.
+        """
+        if not time_s > self.time_s:
+            raise TwinInputError(f"observer: cannot bridge to {time_s} s, not after the present {self.time_s} s")
+        dt, n = float(time_s) - self.time_s, self.model.n
+        self._u, idle = self._inputs(self._rpm, self._air)[2], self._inputs(0.0, self._air)[2]
+        self._predict(dt)
+        mean, covariance = self.model.unknown_inputs(dt, self._rpm)
+        # the held load's response out (the ordinary prediction's), the forgotten load's in
+        self._kf.x[:n] += mean - self.model.matrices(dt)[2][:n] @ (self._u - idle)
+        self._kf.P[:n, :n] += covariance
+        self.time_s = float(time_s)
+        return self
 
     def expected_readings(self, time_s: float, spindle_rpm: float, room_C: float) -> np.ndarray:
         """The thermometer readings the model predicts for the next sample, without changing the observer.
