@@ -192,6 +192,41 @@ def test_across_a_stop_while_away_the_resumed_twin_beats_the_start_prior(tmp_pat
     assert np.mean(band[:, 2]) < 0.9 * np.mean(fresh_band[:, 2]), (np.mean(band[:, 2]), np.mean(fresh_band[:, 2]))
 
 
+def test_a_time_without_samples_inside_a_session_is_bridged_as_a_resume_is(tmp_path, record, observer_factory):
+    """One session whose samples stop from 30 min to 2 h 40 min (a dropped connection, a stalled logger) goes on as
+    the twin resumed after a stop over that time does (above: 2.0 µm RMS and a 7.4 µm band with the new sample's
+    inputs held over the whole interval)."""
+    from twin.live.resume import KeptObserver
+
+    _, dataset = record
+    path, back = tmp_path / "state.json", 9600.0
+    first, session = KeptObserver(observer_factory(), path), observer_factory()
+    for observer in (first, session):
+        _step_all(observer, _arrays(dataset, end_s=1800.0))
+    assert first.save()
+    arrays = _arrays(dataset, back, back + 1800.0)
+    drift, band = session.run(*arrays)
+    resumed_drift, resumed_band = KeptObserver(observer_factory(), path).run(*arrays)
+    np.testing.assert_allclose(drift, resumed_drift, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(band, resumed_band, rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("last_step_s, interval_s, unread_s", [
+    (60.0, 299.0, 0.0),         # a few samples lost: the held inputs' timing error is a sample's
+    (60.0, 540.0, 0.0),         # 9 intervals, but under 10 min
+    (60.0, 700.0, 640.0),       # bridged up to the last ordinary interval
+    (600.0, 1200.0, 0.0),       # a logger sampling every 10 min missed one
+    (600.0, 3600.0, 3000.0)])
+def test_only_an_interval_far_beyond_the_sampling_is_taken_as_unread(observer_factory, last_step_s, interval_s,
+                                                                      unread_s):
+    from twin.live.observer import unread_time
+
+    observer = observer_factory().members[0]
+    assert unread_time(observer, 100.0) == 0.0                 # not started
+    observer.time_s, observer.last_step_s = 1000.0, last_step_s
+    assert unread_time(observer, 1000.0 + interval_s) == pytest.approx(unread_s)
+
+
 # ----------------------------------------------------------------------------- refusals (the file and its model)
 @pytest.fixture(scope="module")
 def observer_factory(rom):

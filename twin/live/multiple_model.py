@@ -35,6 +35,7 @@ from .observer import (
     InnovationGate,
     RecordRunner,
     axis_factors,
+    unread_time,
 )
 
 
@@ -112,6 +113,9 @@ class MultipleModelObserver(RecordRunner):
         Estimate or None
             The mixture's estimate; None until a room air reading has started the observer.
         """
+        unread = unread_time(self.members[0], time_s)
+        if unread:
+            self.bridge(self.time_s + unread)
         before = self.time_s
         y = np.asarray(temperatures_C, float).reshape(len(self.thermometers))
         steps = [member.advance(time_s, spindle_rpm, room_C) for member in self.members]
