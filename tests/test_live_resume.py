@@ -250,6 +250,8 @@ def _edited(saved, path, edit):
     (lambda d: d["filters"][1].update(covariance=[[1.0]]), "filters[1].covariance", "[[1.0]]"),
     (lambda d: d["filters"][0].update(nis="1"), "filters[0].nis", "'1'"),
     (lambda d: d.pop("time_s"), "time_s", "missing"),
+    (lambda d: d.update(weights=[0.0, 0.0]), "weights", "[0.0, 0.0]"),
+    (lambda d: d["filters"][0]["covariance"][0].__setitem__(1, 1.0), "filters[0].covariance", "[["),
 ])
 def test_a_state_of_another_model_or_malformed_is_refused_naming_file_field_and_value(tmp_path, saved,
                                                                                      observer_factory, edit, field,
@@ -341,7 +343,7 @@ def test_a_ctrl_c_saves_the_state_of_the_last_sample_fused(tmp_path, record, mon
 
 
 def test_a_state_that_is_not_finite_is_never_written(tmp_path, record, observer_factory):
-    from twin.live.resume import KeptObserver
+    from twin.live.resume import KeptObserver, write_state
 
     _, dataset = record
     path = tmp_path / "state.json"
@@ -349,8 +351,50 @@ def test_a_state_that_is_not_finite_is_never_written(tmp_path, record, observer_
     _step_all(kept, _arrays(dataset, end_s=120.0))
     before = path.read_bytes()
     kept.observer.members[1]._kf.P[0, 0] = np.nan
-    assert not kept.save()
+    assert not write_state(path, kept.observer)
     assert path.read_bytes() == before
+
+
+def test_a_sample_that_fails_halfway_leaves_the_state_of_the_sample_before(tmp_path, record, observer_factory,
+                                                                           monkeypatch):
+    """Both hypotheses had predicted to the new sample when the second one's update failed (a Ctrl-C or an error
+    there): the save on the way out writes the state after the last whole sample, not the half-made one (which a
+    resume would predict over the same interval twice)."""
+
+    from twin.live.resume import KeptObserver
+
+    _, dataset = record
+    path = tmp_path / "state.json"
+    kept = KeptObserver(observer_factory(), path, every_s=np.inf)
+    times, *rest = _arrays(dataset, end_s=1800.0)
+    _step_all(kept, (times[:-1], *(r[:-1] for r in rest)))
+    whole = kept.observer.members[1].state()
+
+    def fails(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(kept.observer.members[1], "fuse", fails)
+    with pytest.raises(KeyboardInterrupt):
+        kept.step(times[-1], *(r[-1] for r in rest))
+    assert kept.observer.members[0].time_s == times[-1]                  # half-way: the first had moved on
+    assert kept.save()
+    saved = json.loads(path.read_text())
+    assert saved["time_s"] == times[-2]
+    np.testing.assert_array_equal(saved["filters"][1]["mean"], whole.mean)
+
+
+def test_a_speed_read_before_the_first_room_air_is_not_replaced_by_the_saved_one(tmp_path, saved, observer_factory):
+    """OPC UA sends each node's first value on its own: a speed alone, then the room air with no speed."""
+    from twin.live.resume import KeptObserver
+
+    state = tmp_path / "state.json"
+    shutil.copy(saved, state)
+    kept = KeptObserver(observer_factory(), state)
+    t = json.loads(state.read_text())["time_s"]
+    assert kept.step(t + 60.0, 0.0, np.nan, np.full(len(THERMOMETERS), np.nan)) is None
+    kept.step(t + 120.0, np.nan, 20.0, np.full(len(THERMOMETERS), np.nan))
+    assert kept.start_note.startswith("resumed from")
+    assert [m._rpm for m in kept.observer.members] == [0.0, 0.0]       # the saved state's was 9000 rpm
 
 
 CHILD = """

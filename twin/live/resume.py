@@ -110,13 +110,33 @@ def write_atomic(path: str | Path, text: str) -> Path:
     return write_text_atomic(path, text, after_interrupt=True)
 
 
-def state_text(observer: DriftObserver | MultipleModelObserver) -> str | None:
-    """The state file's content for ``observer`` now (see the module docstring).
+def snapshot(observer: DriftObserver | MultipleModelObserver) -> tuple[list, np.ndarray]:
+    """Copies of every hypothesis's :class:`~twin.live.observer.FilterState` (None before one is kept) and the
+    weights, as they are now: what :func:`state_text` writes.
+
+    Parameters
+    ----------
+    observer : DriftObserver or MultipleModelObserver
+        The observer, between two samples (inside one its hypotheses may stand at different times).
+
+    Returns
+    -------
+    tuple of (list, numpy.ndarray)
+        The filter states and the (m,) weights.
+    """
+    return [m.state() for m in _members(observer)], np.array(getattr(observer, "weights", np.ones(1)), float)
+
+
+def state_text(observer: DriftObserver | MultipleModelObserver, kept: tuple[list, np.ndarray] | None = None
+               ) -> str | None:
+    """The state file's content for ``observer`` now, or for its :func:`snapshot` ``kept`` (see the module docstring).
 
     Parameters
     ----------
     observer : DriftObserver or MultipleModelObserver
         The observer.
+    kept : tuple, optional
+        A :func:`snapshot` of it, taken between two samples; default one taken now.
 
     Returns
     -------
@@ -125,11 +145,10 @@ def state_text(observer: DriftObserver | MultipleModelObserver) -> str | None:
         readings and a second sample), or a state that is not finite (a failed filter must not replace the last
         good state).
     """
-    states = [m.state() for m in _members(observer)]
+    states, weights = snapshot(observer) if kept is None else kept
     if any(s is None or not (np.all(np.isfinite(s.mean)) and np.all(np.isfinite(s.covariance))) for s in states):
         return None
     t = states[0].time_s
-    weights = getattr(observer, "weights", np.ones(1))
     return json.dumps({
         "format": FORMAT, "version": VERSION, "saved_utc": timestamp(t).isoformat(), "time_s": t,
         "sample_interval_s": states[0].last_step_s, "model": model_identity(observer),
@@ -138,8 +157,10 @@ def state_text(observer: DriftObserver | MultipleModelObserver) -> str | None:
                      "mean": s.mean.tolist(), "covariance": s.covariance.tolist()} for s in states]})
 
 
-def write_state(path: str | Path, observer: DriftObserver | MultipleModelObserver) -> bool:
-    """Write ``observer``'s state to ``path`` atomically (:func:`state_text`, :func:`write_atomic`).
+def write_state(path: str | Path, observer: DriftObserver | MultipleModelObserver,
+                kept: tuple[list, np.ndarray] | None = None) -> bool:
+    """Write ``observer``'s state (or its :func:`snapshot` ``kept``) to ``path`` atomically (:func:`state_text`,
+    :func:`write_atomic`).
 
     Parameters
     ----------
@@ -147,13 +168,15 @@ def write_state(path: str | Path, observer: DriftObserver | MultipleModelObserve
         The state file.
     observer : DriftObserver or MultipleModelObserver
         The observer.
+    kept : tuple, optional
+        A :func:`snapshot` of it; default one taken now.
 
     Returns
     -------
     bool
         Whether it was written (False: nothing to keep yet, or not finite; the file is left as it was).
     """
-    text = state_text(observer)
+    text = state_text(observer, kept)
     if text is not None:
         write_atomic(path, text)
     return text is not None
@@ -238,9 +261,12 @@ def _check_identity(fields, observer):
 
 
 def _filter(fields, time_s, step_s, size):
+    covariance = fields.array("covariance", (size, size))
+    # a covariance edited by hand: a filter would go on from it and give bands of no meaning
+    if np.abs(covariance - covariance.T).max() > 1e-9 * np.abs(covariance).max() or np.any(np.diag(covariance) < 0):
+        raise fields.problem("covariance", "not a symmetric matrix with a non-negative diagonal")
     return FilterState(time_s, step_s, fields.number("spindle_rpm"), fields.number("room_C"),
-                       fields.array("mean", (size,)), fields.array("covariance", (size, size)), fields.number("nis"),
-                       fields.number("inflation"))
+                       fields.array("mean", (size,)), covariance, fields.number("nis"), fields.number("inflation"))
 
 
 def read_state(path: str | Path, observer: DriftObserver | MultipleModelObserver) -> SavedState:
@@ -283,7 +309,10 @@ def read_state(path: str | Path, observer: DriftObserver | MultipleModelObserver
     time_s, step_s = fields.number("time_s"), fields.number("sample_interval_s")
     if not step_s > 0:
         raise fields.problem("sample_interval_s", "not a positive number of seconds")
-    return SavedState(path, time_s, str(fields.get("saved_utc")), step_s, fields.array("weights", (len(members),)),
+    weights = fields.array("weights", (len(members),))
+    if np.any(weights < 0) or not weights.sum() > 0:
+        raise fields.problem("weights", "not weights ≥ 0 with a positive sum")
+    return SavedState(path, time_s, str(fields.get("saved_utc")), step_s, weights / weights.sum(),
                       [_filter(_Fields(path, f, f"filters[{k}]."), time_s, step_s, m.model.size)
                        for k, (f, m) in enumerate(zip(filters, members))])
 
@@ -368,6 +397,8 @@ class KeptObserver(RecordRunner):
         #: which start the observer took, once the first sample with a room air came (None before)
         self.start_note = None
         self._next_save = -np.inf
+        self._kept = None               # the state after the last sample fused (snapshot)
+        self._read_rpm = np.nan         # a speed read before the first room air
 
     @property
     def time_s(self) -> float | None:
@@ -392,12 +423,19 @@ class KeptObserver(RecordRunner):
         Estimate or None
             As the observer's.
         """
-        if self.start_note is None and self.observer.time_s is None and np.isfinite(room_C):
-            self.start_note = self._start(float(time_s))
-            log.info("live: %s", self.start_note)
+        if self.start_note is None and self.observer.time_s is None:
+            self._read_rpm = spindle_rpm if np.isfinite(spindle_rpm) else self._read_rpm
+            if np.isfinite(room_C):
+                self.start_note = self._start(float(time_s))
+                log.info("live: %s", self.start_note)
+                # a speed reported only on change may have come before the room air: the resumed filter's saved
+                # speed must not stand in for it
+                spindle_rpm = self._read_rpm
         e = self.observer.step(time_s, spindle_rpm, room_C, temperatures_C)
-        if e is not None and time.monotonic() >= self._next_save:
-            self.save()
+        if e is not None:
+            self._kept = snapshot(self.observer)
+            if time.monotonic() >= self._next_save:
+                self.save()
         return e
 
     def _start(self, time_s):
@@ -406,9 +444,10 @@ class KeptObserver(RecordRunner):
         return resume(self.observer, self.saved, time_s)
 
     def save(self) -> bool:
-        """Write the state now (:func:`write_state`); returns whether it was written (the next save is due
-        :attr:`every_s` after one that was)."""
-        written = write_state(self.path, self.observer)
+        """Write the state after the last sample fused (:func:`write_state`; never one caught inside a sample by an
+        error or a Ctrl-C); returns whether it was written (the next save is due :attr:`every_s` after one that
+        was)."""
+        written = self._kept is not None and write_state(self.path, self.observer, self._kept)
         if written:
             self._next_save = time.monotonic() + self.every_s
         return written
