@@ -11,9 +11,10 @@ assumes white residuals; an output error that lasts hours makes it several times
 2. whatever correlation the whitened scores ``W_t v_t`` keep is taken up by a Bartlett (Newey–West) estimator
    with Andrews' AR(1) plug-in bandwidth;
 3. the fit absorbs the slowest part of the noise into its parameters, which leaves the residual less
-   persistent than the noise: the scores are scaled up by ``n_eff / (n_eff − k)``, with ``n_eff`` the
-   effective number of independent rows (``n γ₀ / long-run variance``, summed over the outputs) and ``k`` the
-   parameters fitted, and an interval takes Student's t with ``n_eff − k`` degrees of freedom.
+   persistent than the noise: the scores are scaled up by ``n_eff / (n_eff − k)`` (the variance by its square,
+   twice the usual small-sample correction: a heuristic, chosen on the coverage bench below, not derived), with
+   ``n_eff`` the effective number of independent rows (``n γ₀ / long-run variance``, summed over the outputs)
+   and ``k`` the parameters fitted, and an interval takes Student's t with ``n_eff − k`` degrees of freedom.
 
 On a grey-box fit of a known 2-node network with AR(1) noise of 30 min correlation (48 h at 60 s), the Bartlett
 estimator alone covered the time constants and the exponent 69–73 % of the time at a nominal 90 %, this one
