@@ -41,8 +41,9 @@ VERSION = 1
 SAVE_EVERY_S = 30.0
 #: The longest time away a session resumes across, s: twice the disturbances' 4 h correlation time.  By then the
 #: load read last is forgotten (e^(−2) of it left) and the unknown inputs' covariance has grown to 98 % of the
-#: unknown-past prior's (1 − e^(−4)), so the saved state knows little more of the heat than the start prior, and
-#: the start prior can still find the machine at rest (a night or a weekend away), which a bridge cannot.
+#: unknown-past prior's (1 − e^(−4)) (the structure's slowest modes still remember the saved heat, the inputs
+#: driving them no longer do), and the start prior can still find the machine at rest (a night or a weekend
+#: away), which a bridge cannot.
 RESUME_HORIZON_S = 8 * 3600.0
 
 
