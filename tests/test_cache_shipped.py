@@ -35,7 +35,7 @@ def test_every_shipped_file_has_a_matching_checksum():
     assert sorted(SHIPPED_CACHE.glob("*.sha256")) == [sidecar(p) for p in files]
 
 
-@pytest.mark.parametrize("machine, size_m", [("vmc_ram", None), ("vmc_ram", 0.035), ("machine_a", None)])
+@pytest.mark.parametrize("machine, size_m", [("vmc_ram", None), ("vmc_ram", 0.035), ("vmc_ram", 0.0675), ("machine_a", None)])
 def test_shipped_mesh_and_operator_are_used_with_an_empty_user_cache(no_rebuild, machine, size_m):
     model = build_machine(machine, size_m)
     assert model.mesh_path.parent == SHIPPED_CACHE and model.operator_path.parent == SHIPPED_CACHE

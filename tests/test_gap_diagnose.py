@@ -267,6 +267,10 @@ def test_a_logging_outage_across_a_spindle_change_is_named_and_its_rows_left_out
     left = d.unknown_inputs.rows
     assert d.verdict.startswith("INPUTS UNKNOWN: ") and left.sum() > 0
     assert d.record.time_s[left].min() > 5 * 3600 and not (d.evaluator.hold_rows & left).any()
+    unread = data.values.copy()
+    unread[(data.time_s >= 3 * 3600) & (data.time_s <= 5 * 3600), :4] = np.nan   # spindle and feeds, rows logged
+    with pytest.raises(TwinInputError, match=r"unread.csv: .*logging outages \(2\.97–5\.03 h \(spindle_rpm 0 → 10000"):
+        diagnose(Dataset(data.time_s, unread, data.channels, {"source": "unread.csv"}), machine, **few)
     steady = (data.time_s < 0.7 * 3600) | (data.time_s > 1.7 * 3600)     # an hour off while it ran at 9000 rpm
     d = diagnose(Dataset(data.time_s[steady], data.values[steady], data.channels, {"source": "steady.csv"}),
                  machine, **few)

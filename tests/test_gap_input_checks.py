@@ -29,10 +29,16 @@ def _spindle():
     return np.repeat([0.0, 6000.0, 0.0], -(-len(T) // 3))[:len(T)]
 
 
+NO_PAIRS = "n_pairs (--pairs) must be a whole number of top effects to pair, 0 (no pairs) or more, got "
+NO_EFFECT = ("names no effect: give effects of the library (a list or a comma list), or leave it out for the whole "
+             "library")
+
+
 @pytest.mark.parametrize("option, value, said", [
-    ("--effects", "", "--effects '' names no effect"),
-    ("--effects", " , ", "--effects ' , ' names no effect"),
-    ("--pairs", "-1", "--pairs -1: the number of top effects paired must be 0 (no pairs) or more"),
+    ("--effects", "", f"effects (--effects) '' {NO_EFFECT}"),
+    ("--effects", " , ", f"effects (--effects) ' , ' {NO_EFFECT}"),
+    ("--effects", "belt_drive,belt_drive", "effects (--effects) names effect 'belt_drive' more than once"),
+    ("--pairs", "-1", NO_PAIRS + "-1"),
 ])
 def test_an_empty_effect_list_or_a_negative_pair_count_is_refused(option, value, said, tmp_path, capsys):
     """``--effects ""`` fell back to the whole library and ``--pairs -1`` to no pairs, both silently."""
@@ -41,7 +47,47 @@ def test_an_empty_effect_list_or_a_negative_pair_count_is_refused(option, value,
     code = main(["gap", "diagnose", "--measured", str(tmp_path / "none.csv"), "--out", str(tmp_path / "out"),
                  option, value])
     err = capsys.readouterr().err.strip()
-    assert code == 2 and "\n" not in err and said in err, err
+    assert code == 2 and "\n" not in err and err.endswith(said), err
+
+
+@pytest.fixture
+def unbuilt(monkeypatch):
+    """Fail loudly if a diagnosis got as far as building its machine (meshing): the arguments are checked first."""
+    from twin.gap import diagnose
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the machine was built before the arguments were checked")
+    monkeypatch.setattr(diagnose, "_machine", refuse)
+
+
+@pytest.mark.parametrize("arguments, said", [
+    ({"n_pairs": -1}, NO_PAIRS + "-1"),
+    ({"n_pairs": 1.5}, NO_PAIRS + "1.5"),
+    ({"n_pairs": None}, NO_PAIRS + "None"),
+    ({"effects": []}, f"effects (--effects) [] {NO_EFFECT}"),
+    ({"effects": ""}, f"effects (--effects) '' {NO_EFFECT}"),
+    ({"effects": ["belt_drive", "belt_drive"]}, "effects (--effects) names effect 'belt_drive' more than once"),
+    ({"effects": "belt_drive, belt_drive"}, "effects (--effects) names effect 'belt_drive' more than once"),
+    ({"holdout_fraction": 1.5}, "holdout_fraction must lie in [0.05, 0.8], got 1.5"),
+    ({"step_s": 0.0}, "step_s (--step) must be a positive number of seconds, got 0"),
+])
+def test_the_python_api_refuses_what_the_command_line_refuses(arguments, said, tmp_path, unbuilt):
+    """``diagnose(n_pairs=-1)`` had fitted no pairs and ``effects=[]`` the whole library, silently: the checks
+    were in the command line only.  They are the API's now, so both say the same."""
+    from twin.gap.diagnose import diagnose
+
+    with pytest.raises(TwinInputError) as err:
+        diagnose(tmp_path / "none.csv", **arguments)
+    assert str(err.value) == said
+
+
+def test_effects_may_be_a_comma_list_as_on_the_command_line(tmp_path, unbuilt):
+    """A comma list is split as ``--effects`` splits it (one name as a string had been read letter by letter)."""
+    from twin.gap.diagnose import diagnose
+
+    for effects in ("belt_drive", "belt_drive, convection_room", ["belt_drive"], None):
+        with pytest.raises(AssertionError, match="the machine was built"):
+            diagnose(tmp_path / "none.csv", effects=effects)
 
 
 def test_a_record_without_feeds_says_they_are_taken_as_zero(machine):

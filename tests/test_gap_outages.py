@@ -8,6 +8,7 @@ from twin.gap.outages import (
     UnknownInputs,
     check_rows_left,
     describe,
+    held_across,
     outage_intervals,
     unknown_rows,
 )
@@ -61,3 +62,32 @@ def test_an_input_not_read_on_one_side_is_not_named_as_changed():
     inputs["feed_x_mm_min"] = np.where(t < 3600.0, np.nan, 500.0)
     found = outage_intervals(t, inputs)
     assert describe(t, inputs, found) == [(3480.0, 10680.0, "spindle_rpm 0 → 9000")]
+
+
+def test_an_input_not_read_on_logged_rows_is_an_outage_from_its_last_reading_to_its_next():
+    """Rows logged every 2 min with the spindle column empty from 1 h to 3 h: as unknown as rows not logged."""
+    t = np.arange(0.0, 4 * 3600.0 + 1, 120.0)
+    rpm = np.where(t < 3600.0, 0.0, 9000.0)
+    rpm[(t >= 3600.0) & (t < 3 * 3600.0)] = np.nan
+    found = outage_intervals(t, {"spindle_rpm": rpm})
+    assert np.flatnonzero(found).tolist() == list(range(29, 90))     # from the row at 0.97 h to the one at 3 h
+    assert describe(t, {"spindle_rpm": rpm}, found) == [(3480.0, 10800.0, "spindle_rpm 0 → 9000")]
+    short = np.where(t < 3600.0, 0.0, 9000.0)
+    short[(t >= 3600.0) & (t < 3600.0 + 480.0)] = np.nan            # four readings lost: a sampling irregularity
+    assert not outage_intervals(t, {"spindle_rpm": short}).any()
+
+
+def test_an_outage_change_is_moved_to_its_start_or_its_end():
+    values = np.array([0.0, 0.0, 0.0, 5.0, 5.0, 5.0, 7.0])            # filled: the step at the unread run's middle
+    outage = np.array([False, True, True, True, True, False])          # rows 1 … 5 unknown between
+    assert held_across(values, outage, "start").tolist() == [0, 0, 5, 5, 5, 5, 7]
+    assert held_across(values, outage, "end").tolist() == [0, 0, 0, 0, 0, 5, 7]
+    assert held_across(values, np.zeros(6, bool), "start").tolist() == values.tolist()
+
+
+def test_a_speed_not_read_is_filled_as_a_step_at_the_middle_not_a_ramp():
+    from twin.gap.measured import _fill_steps
+
+    t = np.arange(10.0) * 60.0
+    rpm = np.array([0.0, np.nan, np.nan, np.nan, np.nan, 9000.0, 9000.0, np.nan, 4500.0, np.nan])
+    assert _fill_steps(t, rpm).tolist() == [0, 0, 0, 9000, 9000, 9000, 9000, 9000, 4500, 4500]

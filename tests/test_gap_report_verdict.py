@@ -194,3 +194,20 @@ def test_a_no_gap_verdict_on_a_suspected_unit_says_so_too():
     d.record.report = {"unit_suspects": ["feed_x_mm_min"]}
     text = verdict.sentence(d)
     assert text.startswith("UNIT SUSPECTED: 'feed_x_mm_min'") and "no significant gap" in text
+
+
+def test_a_no_gap_verdict_lists_the_assumptions_too():
+    """Feeds taken as 0 mm/min, or a zone taken as the room air, can hide a gap as well as make one: only a gap
+    verdict had said "assumed: …"."""
+    feeds = "axis feeds not measured (no feed_x/feed_y/feed_z column): taken as 0 mm/min"
+    drive = SimpleNamespace(zones=["room", "enclosure", "front"], room_zone="room", lags_s={"enclosure": 10800.0},
+                            fallback_room=None)
+    no_gap = verdict.Verdict("no_significant_gap", None, None, None, {"temperature": 0.5, "displacement": 0.8}, [],
+                             {}, [], [], NAN, None)
+    d = _diagnosis(no_gap, drive=drive, air=[("A_top", "room", 0.0, np.zeros(3))])
+    d.record.report = {"assumed_inputs": [feeds]}
+    text = verdict.sentence(d)
+    assert text.startswith("no significant gap: ")
+    assert text.endswith(f"; assumed: {feeds}, zone 'front' (no air sensor) taken as the room air")
+    d.record.report, d.model.drive = {}, None
+    assert "assumed" not in verdict.sentence(d)

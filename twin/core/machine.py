@@ -115,6 +115,7 @@ class Machine:
     operator_seconds: float
     mesh_path: Path
     operator_path: Path
+    mesh_size_m: float | None = None  # the target edge length the mesh was made with, m (None: not known)
 
     @property
     def name(self) -> str:
@@ -526,6 +527,7 @@ def build_machine(machine: str | Path = "vmc_ram", mesh_size_m: float | None = N
         Mesh, thermal system, output operator and channels, with the meshing and operator times (s).
     """
     definition = definition or load_machine(machine)
+    mesh_size_m = definition.geometry.mesh_size_m if mesh_size_m is None else mesh_size_m
     mesh, info = build_mesh(definition.geometry, mesh_size_m)
     groups, _ = _facet_groups(definition, mesh)
     thermal, materials = _thermal_system(definition, mesh, groups)
@@ -534,7 +536,7 @@ def build_machine(machine: str | Path = "vmc_ram", mesh_size_m: float | None = N
     feedthrough, air = _air_feedthrough(definition, thermal)
     channels += [Channel(s.name, "air", "degC", 1.0, s.label, s.position) for s in air]
     return Machine(definition, mesh, thermal, outputs, feedthrough, channels, info.seconds,
-                   time.perf_counter() - start, info.path, operator_path)
+                   time.perf_counter() - start, info.path, operator_path, float(mesh_size_m))
 
 
 def reassemble(machine: Machine, definition: MachineDefinition) -> Machine:
@@ -580,7 +582,8 @@ def reassemble(machine: Machine, definition: MachineDefinition) -> Machine:
         raise DefinitionError(f"{definition.source}: the reassembled thermal numbering differs from the machine's")
     feedthrough, _ = _air_feedthrough(definition, thermal)
     return Machine(definition, machine.mesh, thermal, machine.outputs, feedthrough, list(machine.channels),
-                   machine.mesh_seconds, machine.operator_seconds, machine.mesh_path, machine.operator_path)
+                   machine.mesh_seconds, machine.operator_seconds, machine.mesh_path, machine.operator_path,
+                   machine.mesh_size_m)
 
 
 def convection_summary(machine: Machine) -> tuple[list[tuple[str, float, float, str]], float]:

@@ -7,13 +7,7 @@ import sys
 from pathlib import Path
 
 from ..errors import TwinInputError
-from ..infra.cli_common import (
-    add_overwrite,
-    check_distinct,
-    mesh_size,
-    read_column_map,
-    split_names,
-)
+from ..infra.cli_common import add_overwrite, mesh_size, read_column_map
 from ..infra.outdir import check_output_file, check_output_folder
 from ..infra.progress import progress_bar
 
@@ -38,12 +32,11 @@ def cmd_diagnose(args: argparse.Namespace) -> None:
     from .report import write_report
     from .verdict import role
 
-    effects = _effects_and_pairs(args)
     given = (args.measured, sidecar_path(args.measured), args.column_map, args.scenario, args.machine)
     check_output_folder(args.out, args.overwrite, inputs=given)
     d = diagnose(args.measured, machine=args.machine, scenario=args.scenario,
                  column_map=read_column_map(args.column_map), holdout_fraction=args.holdout,
-                 effects=effects, n_pairs=args.pairs, backend=args.backend,
+                 effects=args.effects, n_pairs=args.pairs, backend=args.backend,
                  step_s=args.step, progress=progress_bar("fitting effects", unit="fit"))
     out = write_report(d, args.out, render=not args.no_render, overwrite=args.overwrite)
     for warning in d.record.report["warnings"]:
@@ -56,24 +49,6 @@ def cmd_diagnose(args: argparse.Namespace) -> None:
         print("  (a model ranked above the named one adds an effect to it that the decision rules do not accept: "
               "the named effect leaves no significant gap, or the addition is not material; see report.md)")
     print(f"report in {out}/report.md ({d.timings['total_s']:.0f} s)")
-
-
-def _effects_and_pairs(args: argparse.Namespace) -> list[str] | None:
-    """``--effects`` as a list of names (None without the option: the whole library), ``--pairs`` checked.
-
-    An empty list (``--effects ""`` or ``","``) would have fallen back to the whole library, and a negative
-    ``--pairs`` was taken as none: both are refused, naming the option and the value.
-    """
-    if args.pairs < 0:
-        raise TwinInputError(f"--pairs {args.pairs}: the number of top effects paired must be 0 (no pairs) or more")
-    if args.effects is None:
-        return None
-    names = split_names(args.effects)
-    if not names:
-        raise TwinInputError(f"--effects {args.effects!r} names no effect: give a comma list of effects of the "
-                             "library, or leave --effects out for the whole library")
-    check_distinct("--effects", names, "effect")
-    return names
 
 
 def cmd_benchmark(args: argparse.Namespace) -> None:

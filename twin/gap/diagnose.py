@@ -15,19 +15,25 @@ in the scales.  When a gap remains, the effect discovery of
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from numbers import Integral
 from pathlib import Path
 
 import numpy as np
+
+from meshes.tomlspec import DefinitionError
 
 from ..core.dataset import Dataset
 from ..core.machine import Machine, build_machine
 from ..core.scenario import Scenario, load_scenario
 from ..errors import TwinInputError
+from ..infra.cli_common import check_distinct, split_names
 from ..infra.sweep import cached
 from . import attribution, verdict, where
+from .discretisation import discretisation_floor
 from .drive import measured_drive
 from .effects import Effect, library_by_name
 from .engine import FullBackend, ReducedBackend, make_backend
@@ -48,6 +54,7 @@ from .outages import (
     UnknownInputs,
     check_rows_left,
     describe,
+    held_across,
     outage_intervals,
     unknown_rows,
 )
@@ -332,12 +339,12 @@ def reconstruct_inputs(machine: Machine, structure: Structure, be: ReducedBacken
         When the rows left out leave too few fit or held-out rows.
     """
     evaluator.set_weights()
-    inputs = {"spindle_rpm": record.spindle} if record.spindle is not None else {}
-    inputs.update({f"feed_{a}_mm_min": v for a, v in record.feeds.items()})
+    inputs = dict(record.read_inputs)
     outage = outage_intervals(record.time_s, inputs)
 
-    def twin(position):
-        return GapModel(structure, be, measured_drive(machine, grid, record, sc, position), record.time_s, initial)
+    def twin(position, inputs_of=record):
+        return GapModel(structure, be, measured_drive(machine, grid, inputs_of, sc, position), record.time_s,
+                        initial)
 
     models = {p: twin(np.where(outage, 0.5, p)) for p in POSITIONS}
     residuals = {p: evaluator.residual(m.predict()) for p, m in models.items()}
@@ -346,12 +353,41 @@ def reconstruct_inputs(machine: Machine, structure: Structure, be: ReducedBacken
     floor = np.sqrt(np.nanmean(half ** 2, axis=0))
     unknown = UnknownInputs(describe(record.time_s, inputs, outage), np.zeros(len(record.time_s), bool))
     if unknown.outages:
-        early, late = (evaluator.residual(twin(np.where(outage, end, best)).predict()).R for end in (0.0, 1.0))
+        early, late = (evaluator.residual(twin(np.where(outage, end, best), _held(record, outage, side)).predict()).R
+                       for side, end in (("start", 0.0), ("end", 1.0)))
         scale = np.fmax(floor, [evaluator.sigma[k] for k in evaluator.kinds])
         unknown.rows = unknown_rows(record.time_s, unknown.outages[0][0], late - early, scale)
         check_rows_left(evaluator.fit_rows, evaluator.hold_rows, unknown, record.time_s, record.report["source"])
         evaluator.leave_out(unknown.rows)
     return models[best], best, floor, unknown
+
+
+def _held(record, outage, side):
+    """The record with every outage's input change at the outage's ``side`` (:func:`twin.gap.outages.held_across`)."""
+    spindle = None if record.spindle is None else held_across(record.spindle, outage, side)
+    return dataclasses.replace(record, spindle=spindle,
+                               feeds={a: held_across(v, outage, side) for a, v in record.feeds.items()})
+
+
+def _judge(model, ev, names, timing, nominal, ranking, timings, notes, backend="rom", engine_options=None):
+    """``(scales, decision)``: the verdict on the timing floor, and, when the nominal twin has a gap, again with
+    every sensor's discretisation floor (which only widens σ_j, so it cannot make a gap where there is none),
+    measured with the nominal twin's ``backend`` and ``engine_options``.  A coarser mesh that cannot be made
+    leaves the floor out, and ``notes`` says why."""
+    scales = verdict.scales(ev, names, timing)
+    decision = verdict.decide(nominal, ranking, scales)
+    if decision.outcome == "no_significant_gap":
+        return scales, decision
+    t0 = time.perf_counter()
+    try:
+        floor = discretisation_floor(model, nominal, ev,
+                                     lambda m, effects: engine(m, effects, backend, **(engine_options or {})))
+    except DefinitionError as exc:
+        notes.append(f"discretisation floor not measured (the verdict is judged without it): {exc}")
+        return scales, decision
+    timings["discretisation_s"] = time.perf_counter() - t0
+    scales = verdict.scales(ev, names, timing, floor)
+    return scales, verdict.decide(nominal, ranking, scales)
 
 
 def _fit_library(model, ev, applicable, nominal, n_pairs, progress):
@@ -528,9 +564,27 @@ def _better_start(d, after_winner, after_nominal):
     return after_winner
 
 
+def _checked_choices(effects, n_pairs):
+    """The effect names of ``effects`` (a sequence or a comma list; None: the whole library), after refusing an
+    empty or repeated list and an ``n_pairs`` that is not a whole number ≥ 0 — the rules of ``--effects`` and
+    ``--pairs`` too, which hand their values on unchecked (an empty list had meant the whole library, a negative
+    count no pairs)."""
+    if isinstance(n_pairs, bool) or not isinstance(n_pairs, Integral) or n_pairs < 0:
+        raise TwinInputError(f"n_pairs (--pairs) must be a whole number of top effects to pair, 0 (no pairs) or "
+                             f"more, got {n_pairs!r}")
+    if effects is None:
+        return None
+    names = split_names(effects)
+    if not names:
+        raise TwinInputError(f"effects (--effects) {effects!r} names no effect: give effects of the library (a list "
+                             "or a comma list), or leave it out for the whole library")
+    check_distinct("effects (--effects)", names, "effect")
+    return names
+
+
 def diagnose(measured: Dataset | str | Path, machine: str | Path | Machine = "vmc_ram",
              scenario: str | Path | Scenario | None = None, column_map: dict[str, str] | None = None,
-             holdout_fraction: float = 0.3, effects: Sequence[str] | None = None, n_pairs: int = 3,
+             holdout_fraction: float = 0.3, effects: str | Sequence[str] | None = None, n_pairs: int = 3,
              backend: str = "rom", step_s: float = DEFAULT_STEP_S, initial: str | None = None,
              progress: Callable[[int, int], None] | None = None,
              engine_options: Mapping[str, int | float | bool] | None = None, discovery: bool = True) -> Diagnosis:
@@ -548,11 +602,12 @@ def diagnose(measured: Dataset | str | Path, machine: str | Path | Machine = "vm
         CSV column → ``<name>_<unit>`` for measured CSVs.
     holdout_fraction : float, default 0.3
         The last fraction of the record (by time) held out from the fits, in [0.05, 0.8].
-    effects : sequence of str, optional
-        Names of library effects to consider (default: all that apply to the machine).
+    effects : str or sequence of str, optional
+        Names of library effects to consider, a sequence or a comma list (as ``--effects``), none twice
+        (default: all that apply to the machine).
     n_pairs : int, default 3
         Pairs fitted: the leading single effect with every other one, and the pairs among the top ``n_pairs``
-        singles (0: no pairs).
+        singles (0: no pairs; a whole number ≥ 0).
     backend : str, default "rom"
         ``rom`` (parametric reduced model) or ``fe`` (full finite elements, slow).
     step_s : float, default :data:`DEFAULT_STEP_S`
@@ -575,8 +630,10 @@ def diagnose(measured: Dataset | str | Path, machine: str | Path | Machine = "vm
     Raises
     ------
     TwinInputError
-        On a bad hold-out fraction, an unreadable or too short record, or unknown effects, channels or units.
+        On a bad hold-out fraction, time step, pair count or effect list (empty, or naming one twice; these before
+        any work), an unreadable or too short record, or unknown effects, channels or units.
     """
+    effects = _checked_choices(effects, n_pairs)
     timings = {}
     t0 = time.perf_counter()
     machine, sc, record, (split, fit_rows, hold_rows), initial = _read_inputs(
@@ -601,8 +658,9 @@ def diagnose(measured: Dataset | str | Path, machine: str | Path | Machine = "vm
     singles, pairs, ranking, n_eff_hold = _fit_library(model, ev, applicable, nominal, n_pairs, progress)
     timings["fits_s"] = time.perf_counter() - t1
 
-    scales = verdict.scales(ev, record.names, timing)
-    decision = verdict.decide(nominal, ranking, scales)
+    judge_notes = []
+    scales, decision = _judge(model, ev, record.names, timing, nominal, ranking, timings, judge_notes, backend,
+                              engine_options)
     if decision.winner is not None:
         _widen(model, ev, decision.winner, applicable)
     noise_g = {g: float(np.nanmedian(noise[idx])) for g, idx in ev.groups().items()}
@@ -611,7 +669,7 @@ def diagnose(measured: Dataset | str | Path, machine: str | Path | Machine = "vm
     d = Diagnosis(machine, record, model, ev, float(split), nominal, singles, pairs, ranking, decision, scales,
                   n_eff_hold, noise_g,
                   {g: nominal.summary["groups"][g]["hold_rms"] / max(noise_g[g], 1e-9) for g in noise_g},
-                  where.phases(drive, t), notes=[*record.report["warnings"], *drive.notes, position_note],
+                  where.phases(drive, t), notes=[*record.report["warnings"], *drive.notes, position_note, *judge_notes],
                   skipped=[e.name for e in library if not e.applicable(machine)], unknown_inputs=unknown)
     _explain(d, drive, discovery, timings)
     timings["total_s"] = time.perf_counter() - t0

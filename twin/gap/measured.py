@@ -25,7 +25,7 @@ from ..core.dataset import ChannelInfo, Dataset, sidecar_path
 from ..core.machine import Machine
 from ..core.machine_definition import MachineDefinition
 from ..core.plausible import check_air_against_surfaces, check_plausible
-from ..core.unit_hints import other_unit_hint
+from ..core.unit_hints import machine_top, other_unit_hint
 from ..errors import TwinInputError
 
 if TYPE_CHECKING:
@@ -58,6 +58,9 @@ class Record:
     air: list                        # (name, zone, height above the reference m, values (n,) filled)
     report: dict = field(default_factory=dict)
     metadata: dict = field(default_factory=dict)
+    #: the measured operating inputs as read (``spindle_rpm``, ``feed_x_mm_min`` …; NaN where not read), which
+    #: :mod:`twin.gap.outages` judges; ``spindle`` and ``feeds`` are them filled in time
+    read_inputs: dict = field(default_factory=dict)
 
     @property
     def mask(self) -> np.ndarray:
@@ -93,6 +96,17 @@ def read_measured(data: Dataset | str | Path, column_map: dict[str, str] | None 
 def _fill(t, v):
     ok = np.isfinite(v)
     return np.interp(t, t[ok], v[ok])
+
+
+def _fill_steps(t, v):
+    """A piecewise-constant input (a speed, a feed) filled where not read: the reading before up to the middle of
+    the unread time, the one after from there (a ramp between them would be a speed nobody ran)."""
+    ok = np.flatnonzero(np.isfinite(v))
+    after = np.clip(np.searchsorted(ok, np.arange(len(t))), 0, len(ok) - 1)
+    before = np.clip(after - 1, 0, len(ok) - 1)
+    before = np.where(ok[after] == np.arange(len(t)), after, before)
+    nearer = np.where(t - t[ok[before]] <= t[ok[after]] - t, ok[before], ok[after])
+    return v[nearer]
 
 
 def _nan_runs(t, v):
@@ -142,8 +156,8 @@ def check_operating_range(dataset: Dataset, channel: ChannelInfo, values: np.nda
     """
     source = dataset.metadata.get("source", "the data")
     spindle = channel.name == "spindle"
-    limit = (SPEED_LIMIT_FACTOR * definition.max_spindle_rpm if spindle
-             else FEED_LIMIT_FACTOR * definition.max_feed_mm_min)
+    top = machine_top(definition, CONDITION_UNITS[channel.name])
+    limit = (SPEED_LIMIT_FACTOR if spindle else FEED_LIMIT_FACTOR) * top
     what = "spindle speed (rpm)" if spindle else "feed (mm/min), rapid traverses allowed for,"
     bad = np.flatnonzero(np.abs(values) > limit)
     if bad.size:
@@ -151,7 +165,6 @@ def check_operating_range(dataset: Dataset, channel: ChannelInfo, values: np.nda
         raise TwinInputError(f"{source}: column {channel.column!r} has value {values[k]:g} at "
                              f"t = {dataset.time_s[k]:g} s, beyond the ±{limit:g} {what} of machine "
                              f"{definition.name!r}: is the column in another unit?")
-    top = definition.max_spindle_rpm if spindle else definition.max_feed_mm_min
     culprit = "a spindle in Hz or krpm" if spindle else "feeds in m/min"
     consequence = (f", and every heat it drives below is wrong ({culprit} made the search beyond the library "
                    "'discover' 10^4–10^5 W sources)")
@@ -220,6 +233,7 @@ class _Channels:
         self.feeds, self.air, self.ignored, self.empty = {}, [], [], []
         self.empty_columns, self.warnings = {}, []    # condition → its empty column; notes for the report
         self.spindle = self.gradient = None
+        self.read_inputs = {}                          # operating inputs as read, NaN where not (Record.read_inputs)
         self.air_columns = []                          # (CSV column, values °C with NaNs) of the air inputs
         self.unit_suspects = []                        # condition columns warned about as in another unit
 
@@ -276,17 +290,18 @@ class _Channels:
             if warning:
                 self.warnings.append(warning)
                 self.unit_suspects.append(ch.column)
-        filled = _fill(self.t, v)
         if ch.name == "spindle":
             lowest = np.nanmin(v)
             if lowest < 0.0:
                 self.warnings.append(f"column {ch.column!r} reads down to {lowest:g} rpm: its magnitude is "
                                      "the spindle speed (reverse rotation, a tachometer's noise at rest)")
-            self.spindle = np.abs(filled)
+            self.read_inputs["spindle_rpm"] = np.abs(v)
+            self.spindle = _fill_steps(self.t, np.abs(v))
         elif ch.name == "ambient_gradient":
-            self.gradient = filled
+            self.gradient = _fill(self.t, v)
         else:
-            self.feeds[ch.name[-1]] = filled
+            self.read_inputs[f"{ch.name}_mm_min"] = v
+            self.feeds[ch.name[-1]] = _fill_steps(self.t, v)
 
 
 def match_record(dataset: Dataset, machine: Machine, scenario: Scenario | str | None = None) -> Record:
@@ -329,7 +344,7 @@ def match_record(dataset: Dataset, machine: Machine, scenario: Scenario | str | 
     report = _import_report(dataset, m, t, values)
     report["assumed_inputs"] = feed_assumptions(m.feeds, scenario)
     return Record(t, m.names, m.kinds, values, m.spindle, m.feeds, m.gradient, m.air, report,
-                  dict(dataset.metadata))
+                  dict(dataset.metadata), m.read_inputs)
 
 
 def feed_assumptions(measured_axes: Collection[str], scenario: Scenario | str | None = None) -> list[str]:

@@ -6,8 +6,9 @@ and :func:`twin.gap.diagnose.reconstruct_inputs` turns that into the timing
 floor.  Across a logging outage (an interval of more than
 :data:`OUTAGE_FACTOR` typical ones) the spindle may have run, stopped or
 changed speed several times: what the machine did there is unknown, and its
-heat shows in every sensor for hours after.  Such an interval, when an input
-differs across it, is an *outage*; it is left out of the timing floor (it would
+heat shows in every sensor for hours after.  Rows logged with the input left
+empty are the same (its outage runs from the last row that read it to the
+next).  Such an interval, when an input differs across it, is an *outage*; it is left out of the timing floor (it would
 swamp the floor of every other change and hide a real gap), and the rows
 after it on which the twin depends on when the change happened are left out
 of the fits and of the evidence: the twin with the change at the outage's
@@ -81,6 +82,9 @@ def _spans(outages):
 def outage_intervals(time_s: np.ndarray, inputs: dict[str, np.ndarray]) -> np.ndarray:
     """Which sample intervals are outages (see the module docstring).
 
+    An input that is not read (NaN) on rows that were logged is as unknown there as across an interval without
+    rows: its outage runs from the last row that read it to the next, over every interval between.
+
     Parameters
     ----------
     time_s : ndarray, shape (n_times,)
@@ -92,27 +96,68 @@ def outage_intervals(time_s: np.ndarray, inputs: dict[str, np.ndarray]) -> np.nd
     -------
     ndarray of bool, shape (n_times - 1,)
     """
-    steps = np.diff(np.asarray(time_s, float))
-    long = (steps > OUTAGE_FACTOR * np.median(steps)) & (steps >= OUTAGE_MIN_S)
-    changed = np.zeros(len(steps), bool)
+    t = np.asarray(time_s, float)
+    typical = np.median(np.diff(t))
+    out = np.zeros(len(t) - 1, bool)
     for values in inputs.values():
-        changed |= _changed(values)
-    return long & changed
+        for a, b in _unknown_spans(t, values, typical):
+            out[a:b] = True
+    return out
 
 
-def _changed(values):
-    """Per interval: the input read on both sides, and different (bool, n_times - 1)."""
+def _unknown_spans(t, values, typical):
+    """``(a, b)``: consecutive rows that read the input, far enough apart for an outage, with different values."""
     v = np.asarray(values, float)
-    return ~np.isclose(v[1:], v[:-1], rtol=1e-6, atol=1e-9) & np.isfinite(v[1:]) & np.isfinite(v[:-1])
+    read = np.flatnonzero(np.isfinite(v))
+    a, b = read[:-1], read[1:]
+    span = t[b] - t[a]
+    changed = ~np.isclose(v[b], v[a], rtol=1e-6, atol=1e-9)
+    hit = (span > OUTAGE_FACTOR * typical) & (span >= OUTAGE_MIN_S) & changed
+    return list(zip(a[hit].tolist(), b[hit].tolist()))
+
+
+def _runs(intervals):
+    """``(a, b)`` of each run of consecutive outage intervals: from row a to row b."""
+    edges = np.diff(np.r_[0, np.asarray(intervals, int), 0])
+    return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist()))
 
 
 def describe(time_s: np.ndarray, inputs: dict[str, np.ndarray], intervals: np.ndarray) -> list:
-    """(start s, end s, what changed) of each outage interval."""
-    changes = {name: _changed(v) for name, v in inputs.items()}
+    """(start s, end s, what changed) of each run of outage intervals: the inputs read on both sides of it (the last
+    reading before, the first after) that differ."""
     out = []
-    for i in np.flatnonzero(intervals):
-        what = ", ".join(f"{name} {v[i]:g} → {v[i + 1]:g}" for name, v in inputs.items() if changes[name][i])
-        out.append((float(time_s[i]), float(time_s[i + 1]), what))
+    for a, b in _runs(intervals):
+        what = []
+        for name, values in inputs.items():
+            v = np.asarray(values, float)
+            before, after = v[:a + 1][np.isfinite(v[:a + 1])], v[b:][np.isfinite(v[b:])]
+            if before.size and after.size and not np.isclose(after[0], before[-1], rtol=1e-6, atol=1e-9):
+                what.append(f"{name} {before[-1]:g} → {after[0]:g}")
+        out.append((float(time_s[a]), float(time_s[b]), ", ".join(what)))
+    return out
+
+
+def held_across(values: np.ndarray, intervals: np.ndarray, side: str) -> np.ndarray:
+    """An input with each outage's change moved to the outage's ``side``: its rows inside a run of outage
+    intervals hold the value after the run (``"start"``: the change came first) or before it (``"end"``).
+
+    Parameters
+    ----------
+    values : ndarray, shape (n_times,)
+        The input as filled in time (a step at each unread run's middle).
+    intervals : ndarray of bool, shape (n_times - 1,)
+        The outage intervals.
+    side : {"start", "end"}
+        Where the change goes.
+
+    Returns
+    -------
+    ndarray, shape (n_times,)
+        A copy; the change then lies in the run's first (``start``) or last (``end``) interval.
+    """
+    out = np.array(values, float)
+    for a, b in _runs(intervals):
+        out[a + 1:b] = out[b] if side == "start" else out[a]
     return out
 
 

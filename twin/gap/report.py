@@ -25,6 +25,7 @@ from ..infra.tables import markdown_table
 from .attribution import RESOLVED
 from .diagnose import Diagnosis
 from .discovery import render_discoveries
+from .discretisation import COARSENING
 from .fit import GROUP_UNIT
 from .verdict import parameters, role, strict_json
 from .verdict import to_json as verdict_json
@@ -32,6 +33,8 @@ from .verdict import to_json as verdict_json
 #: Largest constant offset of a thermometer in calibration, K (a type K thermocouple's class 2 tolerance is
 #: ±2.5 K up to 333 °C; a class B Pt100's ±0.8 K at 100 °C).
 THERMOMETER_ACCURACY_K = 3.0
+#: How many sensors the data section names with their discretisation floor (the largest against σ_g).
+LARGEST_FLOORS = 4
 GROUP_LABEL = {"temperature": "surface temperatures", "air": "air sensors", "displacement": "TCP drift",
                "strain": "strain lines"}
 
@@ -117,6 +120,7 @@ def to_json(d: Diagnosis) -> dict[str, object]:
         "split_s": d.split_s, "noise": d.noise, "gap_over_noise": d.gap_over_noise,
         "gap_over_tolerance": d.gap_over_tolerance, "group_scale": d.scales.group,
         "sensor_scale": d.scales.sensor, "timing_floor": d.scales.timing_sensor,
+        "discretisation_floor": d.scales.discretisation_sensor or None,
         "nominal": {**res(d.nominal), "channels": d.nominal.summary["channels"],
                     "offsets": dict(zip(d.names, d.nominal.residual.offsets.tolist())),
                     "initial_state": d.nominal.residual.nuisance},
@@ -430,7 +434,22 @@ def _split_lines(d):
              f"rows); effective independent held-out samples n_eff = {d.n_eff_hold:.0f}"),
             f"- noise level (median per group, from second differences): {noise}",
             ("- timing floor (held-out RMS change of the nominal twin when the input change times move by ± half a "
-             f"sample): {floor}")]
+             f"sample): {floor}"),
+            _discretisation_line(d)]
+
+
+def _discretisation_line(d):
+    """The largest per-sensor discretisation floors, or why none was measured."""
+    floors = d.scales.discretisation_sensor
+    head = (f"- discretisation floor (held-out RMS change of the nominal twin on a {COARSENING:g}× coarser mesh, "
+            "same backend; it widens σ_j, not σ_g): ")
+    if not floors:
+        why = ("the nominal twin leaves no gap without it" if d.decision.outcome == "no_significant_gap"
+               else "see the notes")
+        return head + f"not measured ({why})"
+    kinds = dict(zip(d.names, d.evaluator.kinds, strict=True))
+    largest = sorted(floors, key=lambda n: floors[n] / d.scales.group[kinds[n]], reverse=True)[:LARGEST_FLOORS]
+    return head + "largest " + ", ".join(f"{n} {floors[n]:.3g} {GROUP_UNIT[kinds[n]]}" for n in largest)
 
 
 def _offset_lines(d):
@@ -469,7 +488,8 @@ def _where_section(d, figures):
     L += _table(rows, ["channel group", "fit RMS", "held-out RMS", "held-out max", "held-out RMS / noise",
                        "scale σ_g", "held-out RMS / σ_g"])
     L += ["", f"![residuals]({figures['residuals']})", "",
-          "Per sensor (σ_j = max(noise, tolerance) with the timing floor; after = with the named effect):", ""]
+          ("Per sensor (σ_j = max(noise, tolerance) with the timing and discretisation floors; after = with the "
+           "named effect):"), ""]
     rows = []
     for j, n in enumerate(d.names):
         s = d.nominal.summary["channels"][n]

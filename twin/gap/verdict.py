@@ -5,7 +5,9 @@ noise level and the model tolerance), and every sensor j its own σ_j = max(nois
 widened in quadrature by the *timing floor*: how far the nominal twin's held-out prediction moves when the
 piecewise-constant inputs (spindle, feeds) are reconstructed with their change times at the earliest and at the
 latest time the sampling allows (:func:`twin.gap.diagnose.reconstruct_inputs`).  A residual of that size is
-what the record's sampling cannot resolve, so it is no evidence of an effect.
+what the record's sampling cannot resolve, so it is no evidence of an effect.  When the nominal twin has a gap,
+σ_j is widened again by the sensor's *discretisation floor* (:mod:`twin.gap.discretisation`): how far its
+held-out prediction moves on a coarser mesh, what the twin's own mesh cannot resolve there.
 
 A *gap* is a held-out RMS above :data:`NOISE_FACTOR` × σ_g in some group, or above :data:`SENSOR_FACTOR` × σ_j
 at some single sensor.  The sensor test keeps one thermometer with a 7× residual from being averaged away in a
@@ -57,9 +59,11 @@ class Scales:
     sensor: dict
     timing_group: dict = field(default_factory=dict)
     timing_sensor: dict = field(default_factory=dict)
+    discretisation_sensor: dict = field(default_factory=dict)
 
 
-def scales(evaluator: Evaluator, names: Sequence[str], timing: np.ndarray | None = None) -> Scales:
+def scales(evaluator: Evaluator, names: Sequence[str], timing: np.ndarray | None = None,
+           discretisation: np.ndarray | None = None) -> Scales:
     """:class:`Scales` of an evaluator with weights set; ``timing`` (p,) is the per-sensor timing floor or None.
 
     Parameters
@@ -70,22 +74,27 @@ def scales(evaluator: Evaluator, names: Sequence[str], timing: np.ndarray | None
         Names of the evaluator's channels.
     timing : ndarray, shape (p,), optional
         Per-sensor timing floor, channel units (K, µm, µε); NaN counts as 0, None as 0 everywhere.
+    discretisation : ndarray, shape (p,), optional
+        Per-sensor discretisation floor, channel units; widens σ_j only (NaN or None as 0).
 
     Returns
     -------
     Scales
-        σ_g and σ_j widened in quadrature by the timing floor, and the floors themselves (group: their RMS).
+        σ_g widened in quadrature by the timing floor, σ_j by the timing and discretisation floors, and the
+        floors themselves (timing per group: their RMS; discretisation per sensor, only when given).
     """
     noise = np.nan_to_num(evaluator.noise)
     timing = np.zeros(len(names)) if timing is None else np.nan_to_num(np.asarray(timing, float))
+    mesh = np.zeros(len(names)) if discretisation is None else np.nan_to_num(np.asarray(discretisation, float))
     sensor, t_sensor, group, t_group = {}, {}, {}, {}
     for g, idx in evaluator.groups().items():
         t_group[g] = float(np.sqrt(np.mean(timing[idx] ** 2)))
         group[g] = float(np.hypot(evaluator.sigma[g], t_group[g]))
         for j in idx:
             t_sensor[names[j]] = float(timing[j])
-            sensor[names[j]] = float(np.hypot(max(noise[j], GROUP_FLOOR[g]), timing[j]))
-    return Scales(group, sensor, t_group, t_sensor)
+            sensor[names[j]] = float(np.linalg.norm([max(noise[j], GROUP_FLOOR[g]), timing[j], mesh[j]]))
+    d_sensor = {} if discretisation is None else {n: float(v) for n, v in zip(names, mesh, strict=True)}
+    return Scales(group, sensor, t_group, t_sensor, d_sensor)
 
 
 def group_ratios(result: FitResult, sc: Scales) -> dict[str, float]:
@@ -546,9 +555,38 @@ def _held_out_line(d, model):
 def _no_gap_text(d):
     """The verdict when the nominal twin leaves no significant gap."""
     worst_sensor = worst(sensor_ratios(d.nominal, d.scales).values())
-    return ("no significant gap: the nominal twin's held-out residual is within noise, tolerance and timing "
+    text = ("no significant gap: the nominal twin's held-out residual is within noise, tolerance and timing "
             f"floor in every channel group (at most {worst(d.decision.nominal_gap.values()):.1f} × σ_g) and at every "
             f"sensor (at most {worst_sensor:.1f} × σ_j)")
+    limited = mesh_limited(d.nominal, d.scales)
+    if limited:
+        text += ("; within the twin's discretisation floor only (the twin's mesh cannot tell a gap of that size "
+                 "there): " + ", ".join(f"{n} ({d.scales.discretisation_sensor[n]:.3g})" for n in limited))
+    return text
+
+
+def mesh_limited(result: FitResult, sc: Scales) -> list[str]:
+    """Sensors whose held-out RMS is a gap against σ_j without the discretisation floor, and none with it.
+
+    Parameters
+    ----------
+    result : FitResult
+        A fitted model (or the nominal twin).
+    sc : Scales
+        σ per group and per sensor, channel units.
+
+    Returns
+    -------
+    list of str
+        Sensor names, in channel order.
+    """
+    out = []
+    for n, floor in sc.discretisation_sensor.items():
+        rms, sigma = result.summary["channels"][n]["hold_rms"], sc.sensor[n]
+        without = np.sqrt(max(sigma ** 2 - floor ** 2, 0.0))
+        if SENSOR_FACTOR * without < rms <= SENSOR_FACTOR * sigma:
+            out.append(n)
+    return out
 
 
 def _rejection_reasons(v, resolved=True):
@@ -650,15 +688,19 @@ def sentence(d: Diagnosis) -> str:
     Returns
     -------
     str
-        The verdict text.
+        The verdict text; whatever its kind, it ends with ``assumed: …`` when the twin took inputs the record
+        lacks (feeds not measured, zones without an air sensor).
     """
     text = _no_gap_text(d) if d.decision.outcome == "no_significant_gap" else _gap_text(d)
     unknown = getattr(d, "unknown_inputs", None)
-    return _unit_warning(d) + (unknown.sentence(d.record.time_s) if unknown is not None else "") + text
+    # every kind says what was assumed: feeds taken as 0 can hide a gap as well as make one
+    assumed = _assumptions(d, lagged=False)
+    return (_unit_warning(d) + (unknown.sentence(d.record.time_s) if unknown is not None else "") + text
+            + ("; assumed: " + ", ".join(assumed) if assumed else ""))
 
 
 def _gap_text(d):
-    """The verdict of a gap: explained or not, what was discovered beyond the library, the air assumed."""
+    """The verdict of a gap: explained or not, and what was discovered beyond the library."""
     found = d.discovery is not None and bool(getattr(d.discovery, "items", None))
     resolved = [x.sentence() for x in d.discovery.resolved()] if found else []
     text = (_not_explained_text(d.decision, bool(resolved)) if d.decision.outcome == "not_explained"
@@ -669,8 +711,7 @@ def _gap_text(d):
         unresolved = d.discovery.unresolved()
         text += ("; " + ("" if resolved else "nothing beyond the library was resolved: ")
                  + "not resolved (90 % interval includes 0): " + "; ".join(x.sentence() for x in unresolved))
-    assumed = _assumptions(d, lagged=False)
-    return text + ("; assumed: " + ", ".join(assumed) if assumed else "")
+    return text
 
 
 def _assumptions(d, lagged=True):
