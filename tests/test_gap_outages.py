@@ -10,8 +10,14 @@ from twin.gap.outages import (
     describe,
     held_across,
     outage_intervals,
+    outage_spans,
     unknown_rows,
 )
+
+
+def _found(t, inputs):
+    spans = outage_spans(t, inputs)
+    return spans, outage_intervals(t, spans)
 
 
 def _record(step_s, gap_s, before_rpm, after_rpm):
@@ -22,9 +28,9 @@ def _record(step_s, gap_s, before_rpm, after_rpm):
 
 def test_an_outage_is_a_long_interval_with_an_input_change_across_it():
     t, inputs = _record(120.0, 7200.0, 0, 9000)
-    found = outage_intervals(t, inputs)
+    spans, found = _found(t, inputs)
     assert found.sum() == 1 and t[np.flatnonzero(found)[0]] == pytest.approx(3480.0)
-    assert describe(t, inputs, found) == [(3480.0, 10680.0, "spindle_rpm 0 → 9000")]
+    assert describe(t, inputs, spans) == [(3480.0, 10680.0, "spindle_rpm 0 → 9000")]
 
 
 @pytest.mark.parametrize("step_s, gap_s, before, after", [
@@ -35,7 +41,7 @@ def test_an_outage_is_a_long_interval_with_an_input_change_across_it():
 def test_no_outage_without_a_change_or_when_short(step_s, gap_s, before, after):
     assert gap_s < OUTAGE_MIN_S or before == after
     t, inputs = _record(step_s, gap_s, before, after)
-    assert not outage_intervals(t, inputs).any()
+    assert not _found(t, inputs)[1].any()
 
 
 def test_unknown_rows_run_from_the_first_to_the_last_row_over_scale_after_the_start():
@@ -60,8 +66,8 @@ def test_too_few_rows_left_is_refused_with_the_outage_and_a_holdout_that_works()
 def test_an_input_not_read_on_one_side_is_not_named_as_changed():
     t, inputs = _record(120.0, 7200.0, 0, 9000)
     inputs["feed_x_mm_min"] = np.where(t < 3600.0, np.nan, 500.0)
-    found = outage_intervals(t, inputs)
-    assert describe(t, inputs, found) == [(3480.0, 10680.0, "spindle_rpm 0 → 9000")]
+    spans, _ = _found(t, inputs)
+    assert describe(t, inputs, spans) == [(3480.0, 10680.0, "spindle_rpm 0 → 9000")]
 
 
 def test_an_input_not_read_on_logged_rows_is_an_outage_from_its_last_reading_to_its_next():
@@ -69,20 +75,42 @@ def test_an_input_not_read_on_logged_rows_is_an_outage_from_its_last_reading_to_
     t = np.arange(0.0, 4 * 3600.0 + 1, 120.0)
     rpm = np.where(t < 3600.0, 0.0, 9000.0)
     rpm[(t >= 3600.0) & (t < 3 * 3600.0)] = np.nan
-    found = outage_intervals(t, {"spindle_rpm": rpm})
+    spans, found = _found(t, {"spindle_rpm": rpm})
     assert np.flatnonzero(found).tolist() == list(range(29, 90))     # from the row at 0.97 h to the one at 3 h
-    assert describe(t, {"spindle_rpm": rpm}, found) == [(3480.0, 10800.0, "spindle_rpm 0 → 9000")]
+    assert describe(t, {"spindle_rpm": rpm}, spans) == [(3480.0, 10800.0, "spindle_rpm 0 → 9000")]
     short = np.where(t < 3600.0, 0.0, 9000.0)
     short[(t >= 3600.0) & (t < 3600.0 + 480.0)] = np.nan            # four readings lost: a sampling irregularity
-    assert not outage_intervals(t, {"spindle_rpm": short}).any()
+    assert not _found(t, {"spindle_rpm": short})[1].any()
 
 
 def test_an_outage_change_is_moved_to_its_start_or_its_end():
     values = np.array([0.0, 0.0, 0.0, 5.0, 5.0, 5.0, 7.0])            # filled: the step at the unread run's middle
-    outage = np.array([False, True, True, True, True, False])          # rows 1 … 5 unknown between
-    assert held_across(values, outage, "start").tolist() == [0, 0, 5, 5, 5, 5, 7]
-    assert held_across(values, outage, "end").tolist() == [0, 0, 0, 0, 0, 5, 7]
-    assert held_across(values, np.zeros(6, bool), "start").tolist() == values.tolist()
+    assert held_across(values, [(1, 5)], "start").tolist() == [0, 0, 5, 5, 5, 5, 7]
+    assert held_across(values, [(1, 5)], "end").tolist() == [0, 0, 0, 0, 0, 5, 7]
+    assert held_across(values, [], "start").tolist() == values.tolist()
+
+
+def test_two_outages_that_share_a_row_keep_its_reading_apart():
+    """One row logged in the middle of a long outage: two outages, its reading (5000 rpm) known and kept."""
+    t = np.r_[np.arange(0.0, 3600.0, 60.0), 3 * 3600.0, 5 * 3600.0 + np.arange(0.0, 3600.0, 60.0)]
+    rpm = np.where(t == 3 * 3600.0, 5000.0, 0.0)
+    spans, _ = _found(t, {"spindle_rpm": rpm})
+    assert describe(t, {"spindle_rpm": rpm}, spans) == [(3540.0, 10800.0, "spindle_rpm 0 → 5000"),
+                                                        (10800.0, 18000.0, "spindle_rpm 5000 → 0")]
+    for side in ("start", "end"):
+        assert held_across(rpm, spans["spindle_rpm"], side)[60] == 5000.0
+
+
+def test_one_inputs_outage_does_not_move_another_inputs_read_changes():
+    """The spindle unread from 1 to 3 h; feed X read throughout, stepping 0 → 2000 mm/min at 1.5 h."""
+    t = np.arange(0.0, 4 * 3600.0 + 1, 120.0)
+    rpm = np.where(t < 3600.0, 0.0, 9000.0)
+    rpm[(t >= 3600.0) & (t < 3 * 3600.0)] = np.nan
+    feed = np.where(t < 1.5 * 3600.0, 0.0, 2000.0)
+    inputs = {"spindle_rpm": rpm, "feed_x_mm_min": feed}
+    spans, _ = _found(t, inputs)
+    assert spans["feed_x_mm_min"] == [] and describe(t, inputs, spans) == [(3480.0, 10800.0, "spindle_rpm 0 → 9000")]
+    assert held_across(feed, spans["feed_x_mm_min"], "start").tolist() == feed.tolist()
 
 
 def test_a_speed_not_read_is_filled_as_a_step_at_the_middle_not_a_ramp():

@@ -211,20 +211,32 @@ def test_a_time_without_samples_inside_a_session_is_bridged_as_a_resume_is(tmp_p
     np.testing.assert_allclose(band, resumed_band, rtol=1e-9, atol=1e-9)
 
 
-@pytest.mark.parametrize("last_step_s, interval_s, unread_s", [
+@pytest.mark.parametrize("last_interval_s, interval_s, unread_s", [
     (60.0, 299.0, 0.0),         # a few samples lost: the held inputs' timing error is a sample's
     (60.0, 540.0, 0.0),         # 9 intervals, but under 10 min
     (60.0, 700.0, 640.0),       # bridged up to the last ordinary interval
     (600.0, 1200.0, 0.0),       # a logger sampling every 10 min missed one
     (600.0, 3600.0, 3000.0)])
-def test_only_an_interval_far_beyond_the_sampling_is_taken_as_unread(observer_factory, last_step_s, interval_s,
-                                                                      unread_s):
+def test_only_an_interval_far_beyond_the_sampling_is_taken_as_unread(last_interval_s, interval_s, unread_s):
     from twin.live.observer import unread_time
 
-    observer = observer_factory().members[0]
-    assert unread_time(observer, 100.0) == 0.0                 # not started
-    observer.time_s, observer.last_step_s = 1000.0, last_step_s
-    assert unread_time(observer, 1000.0 + interval_s) == pytest.approx(unread_s)
+    assert unread_time(None, 1000.0, 5000.0) == unread_time(60.0, None, 5000.0) == 0.0     # nothing to compare
+    assert unread_time(last_interval_s, 1000.0, 1000.0 + interval_s) == pytest.approx(unread_s)
+
+
+def test_a_logger_that_samples_less_often_from_then_on_is_bridged_once(record, observer_factory, monkeypatch):
+    """60 s samples, then every 10 min: the first 10 min interval holds unread time, the next ones are the new
+    sampling (each compared with the whole interval before it, not with the 60 s prediction step)."""
+    from twin.live.multiple_model import MultipleModelObserver
+
+    _, dataset = record
+    bridged = []
+    original = MultipleModelObserver.bridge
+    monkeypatch.setattr(MultipleModelObserver, "bridge", lambda self, t: bridged.append(t) or original(self, t))
+    times, *rest = _arrays(dataset, end_s=3 * 3600.0)
+    keep = (times <= 3600.0) | (np.mod(times, 600.0) == 0.0)
+    _step_all(observer_factory(), (times[keep], *(r[keep] for r in rest)))
+    assert bridged == [3600.0 + 540.0]
 
 
 # ----------------------------------------------------------------------------- refusals (the file and its model)

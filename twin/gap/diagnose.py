@@ -56,6 +56,7 @@ from .outages import (
     describe,
     held_across,
     outage_intervals,
+    outage_spans,
     unknown_rows,
 )
 from .signals import noise_level, uniform_grid
@@ -339,8 +340,8 @@ def reconstruct_inputs(machine: Machine, structure: Structure, be: ReducedBacken
         When the rows left out leave too few fit or held-out rows.
     """
     evaluator.set_weights()
-    inputs = dict(record.read_inputs)
-    outage = outage_intervals(record.time_s, inputs)
+    spans = outage_spans(record.time_s, record.read_inputs)
+    outage = outage_intervals(record.time_s, spans)
 
     def twin(position, inputs_of=record):
         return GapModel(structure, be, measured_drive(machine, grid, inputs_of, sc, position), record.time_s,
@@ -351,9 +352,9 @@ def reconstruct_inputs(machine: Machine, structure: Structure, be: ReducedBacken
     best = min(POSITIONS, key=lambda p: residuals[p].sse_fit)
     half = 0.5 * (residuals[POSITIONS[-1]].R - residuals[POSITIONS[0]].R)[evaluator.hold_rows]
     floor = np.sqrt(np.nanmean(half ** 2, axis=0))
-    unknown = UnknownInputs(describe(record.time_s, inputs, outage), np.zeros(len(record.time_s), bool))
+    unknown = UnknownInputs(describe(record.time_s, record.read_inputs, spans), np.zeros(len(record.time_s), bool))
     if unknown.outages:
-        early, late = (evaluator.residual(twin(np.where(outage, end, best), _held(record, outage, side)).predict()).R
+        early, late = (evaluator.residual(twin(np.where(outage, end, best), _held(record, spans, side)).predict()).R
                        for side, end in (("start", 0.0), ("end", 1.0)))
         scale = np.fmax(floor, [evaluator.sigma[k] for k in evaluator.kinds])
         unknown.rows = unknown_rows(record.time_s, unknown.outages[0][0], late - early, scale)
@@ -362,11 +363,12 @@ def reconstruct_inputs(machine: Machine, structure: Structure, be: ReducedBacken
     return models[best], best, floor, unknown
 
 
-def _held(record, outage, side):
-    """The record with every outage's input change at the outage's ``side`` (:func:`twin.gap.outages.held_across`)."""
-    spindle = None if record.spindle is None else held_across(record.spindle, outage, side)
-    return dataclasses.replace(record, spindle=spindle,
-                               feeds={a: held_across(v, outage, side) for a, v in record.feeds.items()})
+def _held(record, spans, side):
+    """The record with every outage's input change at the outage's ``side`` (:func:`twin.gap.outages.held_across`;
+    ``spans``: :func:`twin.gap.outages.outage_spans`), each input over its own outages only."""
+    spindle = None if record.spindle is None else held_across(record.spindle, spans.get("spindle_rpm", []), side)
+    return dataclasses.replace(record, spindle=spindle, feeds={
+        a: held_across(v, spans.get(f"feed_{a}_mm_min", []), side) for a, v in record.feeds.items()})
 
 
 def _judge(model, ev, names, timing, nominal, ranking, timings, notes, backend="rom", engine_options=None):

@@ -11,7 +11,8 @@ sample is small) such a sensor read 6 σ off a twin with no gap.
 The floor is measured, not assumed: the nominal twin's residual is recomputed
 with the same drive on the machine meshed :data:`COARSENING` times coarser,
 by the twin's own backend and options (the reduced model of the same order, or
-the full FE with the same scheme), so the mesh is the only difference; the
+the full FE with the same scheme; the coarse reduced basis is built without the
+library's effect terms, so the floor holds that basis change too); the
 floor of a sensor is the held-out RMS of the change, after each model's own
 offsets and initial-state nuisance.  It estimates the twin's own error where
 the error shrinks with the mesh size, it does not bound it (a coarsening of 1.5

@@ -79,8 +79,8 @@ def _spans(outages):
     return "; ".join(f"{a / 3600:.2f}–{b / 3600:.2f} h ({what})" for a, b, what in outages)
 
 
-def outage_intervals(time_s: np.ndarray, inputs: dict[str, np.ndarray]) -> np.ndarray:
-    """Which sample intervals are outages (see the module docstring).
+def outage_spans(time_s: np.ndarray, inputs: dict[str, np.ndarray]) -> dict[str, list[tuple[int, int]]]:
+    """Each input's outages (see the module docstring): ``(a, b)``, two consecutive rows that read it.
 
     An input that is not read (NaN) on rows that were logged is as unknown there as across an interval without
     rows: its outage runs from the last row that read it to the next, over every interval between.
@@ -94,69 +94,74 @@ def outage_intervals(time_s: np.ndarray, inputs: dict[str, np.ndarray]) -> np.nd
 
     Returns
     -------
-    ndarray of bool, shape (n_times - 1,)
+    dict of str to list of (int, int)
+        Input name → its outages, rows a < b, with the input read at both and different.
     """
     t = np.asarray(time_s, float)
     typical = np.median(np.diff(t))
-    out = np.zeros(len(t) - 1, bool)
-    for values in inputs.values():
-        for a, b in _unknown_spans(t, values, typical):
-            out[a:b] = True
+    spans = {}
+    for name, values in inputs.items():
+        v = np.asarray(values, float)
+        read = np.flatnonzero(np.isfinite(v))
+        a, b = read[:-1], read[1:]
+        span = t[b] - t[a]
+        hit = ((span > OUTAGE_FACTOR * typical) & (span >= OUTAGE_MIN_S)
+               & ~np.isclose(v[b], v[a], rtol=1e-6, atol=1e-9))
+        spans[name] = list(zip(a[hit].tolist(), b[hit].tolist()))
+    return spans
+
+
+def outage_intervals(time_s: np.ndarray, spans: dict[str, list[tuple[int, int]]]) -> np.ndarray:
+    """Which sample intervals lie in some input's outage.
+
+    Parameters
+    ----------
+    time_s : ndarray, shape (n_times,)
+        Sample times, s.
+    spans : dict
+        :func:`outage_spans`.
+
+    Returns
+    -------
+    ndarray of bool, shape (n_times - 1,)
+    """
+    out = np.zeros(len(time_s) - 1, bool)
+    for a, b in (span for each in spans.values() for span in each):
+        out[a:b] = True
     return out
 
 
-def _unknown_spans(t, values, typical):
-    """``(a, b)``: consecutive rows that read the input, far enough apart for an outage, with different values."""
-    v = np.asarray(values, float)
-    read = np.flatnonzero(np.isfinite(v))
-    a, b = read[:-1], read[1:]
-    span = t[b] - t[a]
-    changed = ~np.isclose(v[b], v[a], rtol=1e-6, atol=1e-9)
-    hit = (span > OUTAGE_FACTOR * typical) & (span >= OUTAGE_MIN_S) & changed
-    return list(zip(a[hit].tolist(), b[hit].tolist()))
+def describe(time_s: np.ndarray, inputs: dict[str, np.ndarray], spans: dict[str, list[tuple[int, int]]]) -> list:
+    """(start s, end s, what changed) of each outage, in time order; the inputs whose outages span the same rows
+    are named together (``spindle_rpm 0 → 10000, feed_x_mm_min 0 → 5000``)."""
+    changes = {}
+    for name, each in spans.items():
+        v = np.asarray(inputs[name], float)
+        for a, b in each:
+            changes.setdefault((a, b), []).append(f"{name} {v[a]:g} → {v[b]:g}")
+    return [(float(time_s[a]), float(time_s[b]), ", ".join(what)) for (a, b), what in sorted(changes.items())]
 
 
-def _runs(intervals):
-    """``(a, b)`` of each run of consecutive outage intervals: from row a to row b."""
-    edges = np.diff(np.r_[0, np.asarray(intervals, int), 0])
-    return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist()))
-
-
-def describe(time_s: np.ndarray, inputs: dict[str, np.ndarray], intervals: np.ndarray) -> list:
-    """(start s, end s, what changed) of each run of outage intervals: the inputs read on both sides of it (the last
-    reading before, the first after) that differ."""
-    out = []
-    for a, b in _runs(intervals):
-        what = []
-        for name, values in inputs.items():
-            v = np.asarray(values, float)
-            before, after = v[:a + 1][np.isfinite(v[:a + 1])], v[b:][np.isfinite(v[b:])]
-            if before.size and after.size and not np.isclose(after[0], before[-1], rtol=1e-6, atol=1e-9):
-                what.append(f"{name} {before[-1]:g} → {after[0]:g}")
-        out.append((float(time_s[a]), float(time_s[b]), ", ".join(what)))
-    return out
-
-
-def held_across(values: np.ndarray, intervals: np.ndarray, side: str) -> np.ndarray:
-    """An input with each outage's change moved to the outage's ``side``: its rows inside a run of outage
-    intervals hold the value after the run (``"start"``: the change came first) or before it (``"end"``).
+def held_across(values: np.ndarray, spans: list[tuple[int, int]], side: str) -> np.ndarray:
+    """An input with each of its outages' changes moved to the outage's ``side``: its rows inside an outage hold
+    the value after it (``"start"``: the change came first) or before it (``"end"``).
 
     Parameters
     ----------
     values : ndarray, shape (n_times,)
         The input as filled in time (a step at each unread run's middle).
-    intervals : ndarray of bool, shape (n_times - 1,)
-        The outage intervals.
+    spans : list of (int, int)
+        The input's outages (:func:`outage_spans`).
     side : {"start", "end"}
         Where the change goes.
 
     Returns
     -------
     ndarray, shape (n_times,)
-        A copy; the change then lies in the run's first (``start``) or last (``end``) interval.
+        A copy; each change then lies in its outage's first (``start``) or last (``end``) interval.
     """
     out = np.array(values, float)
-    for a, b in _runs(intervals):
+    for a, b in spans:
         out[a + 1:b] = out[b] if side == "start" else out[a]
     return out
 

@@ -81,6 +81,8 @@ class MultipleModelObserver(RecordRunner):
         self.rom, self.thermometers, self.field_names = rom, first.thermometers, first.field_names
         self.weights = np.full(len(sizes), 1.0 / len(sizes))
         self._gate = InnovationGate(len(self.thermometers))
+        #: the whole interval between the last two samples, s (:func:`~twin.live.observer.unread_time`)
+        self.last_interval_s = None
 
     @property
     def time_s(self) -> float | None:
@@ -94,6 +96,7 @@ class MultipleModelObserver(RecordRunner):
             member.start(time_s, room_C)
         self.weights = np.full(len(self.members), 1.0 / len(self.members))
         self._gate = InnovationGate(len(self.thermometers))
+        self.last_interval_s = None
         return self
 
     def step(self, time_s: float, spindle_rpm: float, room_C: float, temperatures_C: ArrayLike) -> Estimate | None:
@@ -113,14 +116,17 @@ class MultipleModelObserver(RecordRunner):
         Estimate or None
             The mixture's estimate; None until a room air reading has started the observer.
         """
-        unread = unread_time(self.members[0], time_s)
+        previous = self.time_s
+        unread = unread_time(self.last_interval_s, previous, time_s)
         if unread:
-            self.bridge(self.time_s + unread)
+            self.bridge(previous + unread)
         before = self.time_s
         y = np.asarray(temperatures_C, float).reshape(len(self.thermometers))
         steps = [member.advance(time_s, spindle_rpm, room_C) for member in self.members]
         if not self.members[0].started:
             return None
+        if steps[0] is not None:
+            self.last_interval_s = float(time_s) - previous
         # one gate for every hypothesis (the likelihoods compare the same readings): a reading is rejected only
         # if even the hypothesis that predicts it best finds it impossible
         rejected = self._gate(np.min([member.innovation_scores(y) for member in self.members], axis=0))

@@ -124,27 +124,30 @@ class InnovationGate:
         return gated(scores, np.where(self.age <= 2 * (len(scores) + 2), self.scores, np.nan))
 
 
-def unread_time(observer: DriftObserver, time_s: float) -> float:
+def unread_time(last_interval_s: float | None, present_s: float | None, time_s: float) -> float:
     """The part of the interval to the sample at ``time_s`` (s) when nobody read the inputs, s, or 0.
 
     Parameters
     ----------
-    observer : DriftObserver
-        The observer (before the sample); an interval counts only once it has a sample interval to compare with.
+    last_interval_s : float or None
+        The whole interval between the last two samples, s (None before a second sample: nothing to compare with).
+    present_s : float or None
+        Machine time of the last sample, s.
     time_s : float
         Machine time of the sample, s.
 
     Returns
     -------
     float
-        The interval less the observer's last sample interval, when the interval is longer than
-        :data:`UNREAD_FACTOR` of those and :data:`UNREAD_MIN_S`; else 0.
+        The interval less ``last_interval_s``, when the interval is longer than :data:`UNREAD_FACTOR` of those
+        and :data:`UNREAD_MIN_S`; else 0.  A logger that samples less often from then on is bridged once: the
+        next interval is compared with this one.
     """
-    if observer.last_step_s is None or observer.time_s is None:
+    if last_interval_s is None or present_s is None:
         return 0.0
-    interval = float(time_s) - observer.time_s
-    if interval > UNREAD_FACTOR * observer.last_step_s and interval >= UNREAD_MIN_S:
-        return interval - observer.last_step_s
+    interval = float(time_s) - present_s
+    if interval > UNREAD_FACTOR * last_interval_s and interval >= UNREAD_MIN_S:
+        return interval - last_interval_s
     return 0.0
 
 
@@ -318,6 +321,8 @@ class DriftObserver(RecordRunner):
         self.time_s, self._rpm, self._rest = None, 0.0, None
         #: the last prediction step, s: the sample interval (None until a second sample came)
         self.last_step_s = None
+        #: the whole interval between the last two samples, s, a bridged time included (:func:`unread_time`)
+        self.last_interval_s = None
         #: the weight the first readings gave the at-rest start prior (NaN until they came; :meth:`start`)
         self.rest_weight = np.nan
         self._gate = InnovationGate(len(self.thermometers))
@@ -356,6 +361,7 @@ class DriftObserver(RecordRunner):
                                      model.couplings).reset(x0, P0)
         self.time_s, self._u = float(time_s), np.r_[model.plant_inputs(0.0, room_C)[0], 1.0]
         self._rpm, self._air, self._prepared, self.last_step_s = 0.0, float(room_C), None, None
+        self.last_interval_s = None
         self._nis, self.inflation = 1.0, 1.0
         self._gate = InnovationGate(len(self.thermometers))
         return self
@@ -390,12 +396,15 @@ class DriftObserver(RecordRunner):
             If the sample is not later than the previous one.
         """
         y = np.asarray(temperatures_C, float).reshape(len(self.thermometers))
-        unread = unread_time(self, time_s)
+        previous = self.time_s
+        unread = unread_time(self.last_interval_s, previous, time_s)
         if unread:
-            self.bridge(self.time_s + unread)
+            self.bridge(previous + unread)
         dt = self.advance(time_s, spindle_rpm, room_C)
         if not self.started:
             return None
+        if dt is not None:
+            self.last_interval_s = float(time_s) - previous
         return self.fuse(y, dt, self._gate(self.innovation_scores(y)))
 
     @property
@@ -552,7 +561,7 @@ class DriftObserver(RecordRunner):
         self._rest = None
         self._kf.x, self._kf.P = np.array(state.mean, float), np.array(state.covariance, float)
         self._rpm, self._nis, self.inflation = float(state.spindle_rpm), float(state.nis), float(state.inflation)
-        self.last_step_s = float(state.last_step_s)
+        self.last_step_s = self.last_interval_s = float(state.last_step_s)
         return self
 
     def bridge(self, time_s: float) -> DriftObserver:
@@ -588,6 +597,8 @@ class DriftObserver(RecordRunner):
         # the held load's response out (the ordinary prediction's), the forgotten load's in
         self._kf.x[:n] += mean - self.model.matrices(dt)[2][:n] @ (self._u - idle)
         self._kf.P[:n, :n] += covariance
+        if self._rest is not None:      # the at-rest start prior, not yet weighed, did not see that time either
+            self._rest[:n, :n] += covariance
         self.time_s = float(time_s)
         return self
 

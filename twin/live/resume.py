@@ -361,7 +361,7 @@ def resume(observer: DriftObserver | MultipleModelObserver, saved: SavedState, t
     for member, state in zip(_members(observer), saved.filters):
         member.restore(state)
     if isinstance(observer, MultipleModelObserver):
-        observer.weights = saved.weights.copy()
+        observer.weights, observer.last_interval_s = saved.weights.copy(), saved.sample_interval_s
     unread = away - saved.sample_interval_s
     if unread > 0:
         observer.bridge(saved.time_s + unread)
