@@ -382,21 +382,11 @@ def main(argv=None):
 
     names = list(DEFAULT_THERMOMETERS)
     rom = cached_rom(build_machine("vmc_ram"), 80)
-    if args.calibrate:
-        calibrate(rom, names)
-        return
-    if args.calibrate_xy:
-        calibrate_xy(rom, names)
-        return
-    if args.visibility:
-        visibility(rom, names)
-        return
-    if args.warm_start:
-        warm_start(rom, names)
-        return
-    if args.resume:
-        resume_start(rom, names)
-        return
+    for flag, study in (("calibrate", calibrate), ("calibrate_xy", calibrate_xy), ("visibility", visibility),
+                        ("warm_start", warm_start), ("resume", resume_start)):
+        if getattr(args, flag):
+            study(rom, names)
+            return
     if not args.opcua_only:
         for name in ("held-out", "seen (second held-out)", "seen (first held-out)", "seen"):
             cases, seeds = protocol.sets()[name]
