@@ -32,6 +32,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from fea.linsolve import blas_threads
+
 from ..core.interrupt import raise_if_interrupted
 from ..errors import TwinInputError
 from .nodemap import AXES, NodeMap
@@ -265,7 +267,10 @@ class LiveClient:
             return checks.reading(key, value, status, t)
 
         y = np.array([reading(name) for name in thermometers])
-        e = self.observer.step(t, reading("spindle_speed"), reading("room_air"), y)
+        # the observer's matrices are a reduced model's size (tens to a few hundred): BLAS threads only cost there,
+        # and on a loaded machine a step (a resume's bridge) took 5 s with two OpenBLAS threads
+        with blas_threads(1):
+            e = self.observer.step(t, reading("spindle_speed"), reading("room_air"), y)
         checks.check_stale(t)
         if e is None:
             return None

@@ -128,8 +128,8 @@ def snapshot(observer: DriftObserver | MultipleModelObserver) -> tuple[list, np.
     return [m.state() for m in _members(observer)], np.array(getattr(observer, "weights", np.ones(1)), float)
 
 
-def state_text(observer: DriftObserver | MultipleModelObserver, kept: tuple[list, np.ndarray] | None = None
-               ) -> str | None:
+def state_text(observer: DriftObserver | MultipleModelObserver, kept: tuple[list, np.ndarray] | None = None,
+               identity: dict | None = None) -> str | None:
     """The state file's content for ``observer`` now, or for its :func:`snapshot` ``kept`` (see the module docstring).
 
     Parameters
@@ -138,6 +138,9 @@ def state_text(observer: DriftObserver | MultipleModelObserver, kept: tuple[list
         The observer.
     kept : tuple, optional
         A :func:`snapshot` of it, taken between two samples; default one taken now.
+    identity : dict, optional
+        Its :func:`model_identity`, constant for a session (a writer that saves often computes it once); default
+        computed now.
 
     Returns
     -------
@@ -152,14 +155,15 @@ def state_text(observer: DriftObserver | MultipleModelObserver, kept: tuple[list
     t = states[0].time_s
     return json.dumps({
         "format": FORMAT, "version": VERSION, "saved_utc": timestamp(t).isoformat(), "time_s": t,
-        "sample_interval_s": states[0].last_step_s, "model": model_identity(observer),
+        "sample_interval_s": states[0].last_step_s,
+        "model": model_identity(observer) if identity is None else identity,
         "weights": np.asarray(weights, float).tolist(),
         "filters": [{"spindle_rpm": s.spindle_rpm, "room_C": s.room_C, "nis": s.nis, "inflation": s.inflation,
                      "mean": s.mean.tolist(), "covariance": s.covariance.tolist()} for s in states]})
 
 
 def write_state(path: str | Path, observer: DriftObserver | MultipleModelObserver,
-                kept: tuple[list, np.ndarray] | None = None) -> bool:
+                kept: tuple[list, np.ndarray] | None = None, identity: dict | None = None) -> bool:
     """Write ``observer``'s state (or its :func:`snapshot` ``kept``) to ``path`` atomically (:func:`state_text`,
     :func:`write_atomic`).
 
@@ -171,13 +175,15 @@ def write_state(path: str | Path, observer: DriftObserver | MultipleModelObserve
         The observer.
     kept : tuple, optional
         A :func:`snapshot` of it; default one taken now.
+    identity : dict, optional
+        Its :func:`model_identity`; default computed now.
 
     Returns
     -------
     bool
         Whether it was written (False: nothing to keep yet, or not finite; the file is left as it was).
     """
-    text = state_text(observer, kept)
+    text = state_text(observer, kept, identity)
     if text is not None:
         write_atomic(path, text)
     return text is not None
@@ -266,8 +272,12 @@ def _filter(fields, time_s, step_s, size):
     # a covariance edited by hand: a filter would go on from it and give bands of no meaning
     if np.abs(covariance - covariance.T).max() > 1e-9 * np.abs(covariance).max() or np.any(np.diag(covariance) < 0):
         raise fields.problem("covariance", "not a symmetric matrix with a non-negative diagonal")
+    inflation = fields.number("inflation")
+    # the adaptive widening's factor on the process noise only widens it (Adaptation: max(1, NIS average)^power)
+    if not inflation >= 1.0:
+        raise fields.problem("inflation", "not a factor ≥ 1 (the adaptive widening only widens the process noise)")
     return FilterState(time_s, step_s, fields.number("spindle_rpm"), fields.number("room_C"),
-                       fields.array("mean", (size,)), covariance, fields.number("nis"), fields.number("inflation"))
+                       fields.array("mean", (size,)), covariance, fields.number("nis"), inflation)
 
 
 def read_state(path: str | Path, observer: DriftObserver | MultipleModelObserver) -> SavedState:
@@ -289,8 +299,8 @@ def read_state(path: str | Path, observer: DriftObserver | MultipleModelObserver
     ------
     TwinInputError
         A file that is not JSON (cut short, another file), not a state file, of another version or model
-        (:func:`model_identity`), or with a field of the wrong kind or size; the message names the file, the
-        field and its value.
+        (:func:`model_identity`), or with a field of the wrong kind, size or range (an adaptive factor below 1);
+        the message names the file, the field and its value.
     """
     path = Path(path)
     try:
@@ -399,6 +409,8 @@ class KeptObserver(RecordRunner):
         self.start_note = None
         self._next_save = -np.inf
         self._kept = None               # the state after the last sample fused (snapshot)
+        # what the state belongs to, written at every save: the model does not change during a session
+        self._identity = model_identity(observer)
         self._read_rpm = np.nan         # a speed read before the first room air
 
     @property
@@ -448,7 +460,7 @@ class KeptObserver(RecordRunner):
         """Write the state after the last sample fused (:func:`write_state`; never one caught inside a sample by an
         error or a Ctrl-C); returns whether it was written (the next save is due :attr:`every_s` after one that
         was)."""
-        written = self._kept is not None and write_state(self.path, self.observer, self._kept)
+        written = self._kept is not None and write_state(self.path, self.observer, self._kept, self._identity)
         if written:
             self._next_save = time.monotonic() + self.every_s
         return written
