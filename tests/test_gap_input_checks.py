@@ -70,6 +70,13 @@ def unbuilt(monkeypatch):
     ({"effects": "belt_drive, belt_drive"}, "effects (--effects) names effect 'belt_drive' more than once"),
     ({"holdout_fraction": 1.5}, "holdout_fraction must lie in [0.05, 0.8], got 1.5"),
     ({"step_s": 0.0}, "step_s (--step) must be a positive number of seconds, got 0"),
+    # not numbers: None had ended in a TypeError from float(), a string or a bool had been read as a number
+    *[({name: value}, f"{name}{flag} must {rule}, got {shown}")
+      for name, flag, rule in (("holdout_fraction", "", "lie in [0.05, 0.8]"),
+                               ("step_s", " (--step)", "be a positive number of seconds"))
+      for value, shown in ((None, "None"), ("60", "'60'"), (float("nan"), "nan"), (True, "True"))],
+    ({"n_pairs": True}, NO_PAIRS + "True"),
+    ({"n_pairs": "3"}, NO_PAIRS + "'3'"),
 ])
 def test_the_python_api_refuses_what_the_command_line_refuses(arguments, said, tmp_path, unbuilt):
     """``diagnose(n_pairs=-1)`` had fitted no pairs and ``effects=[]`` the whole library, silently: the checks

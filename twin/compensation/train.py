@@ -151,6 +151,19 @@ def load_dataset(spec: Dataset | Path | str, column_map: dict[str, str] | None =
     return with_rest_start(ds, channels, reference_samples) if rest_start else ds
 
 
+def _machine_once(specs, machine):
+    """``machine`` as :func:`load_dataset` takes it, read once (a name or TOML path) and, when some of ``specs``
+    are scenarios to run on it, built once for them all (:func:`_simulated` builds a definition per scenario: a
+    mesh, thermal system and output operator per dataset)."""
+    if isinstance(machine, (str, Path)):
+        machine = load_machine(machine)
+    names = available_scenarios()
+    if isinstance(machine, MachineDefinition) and any(
+            not isinstance(s, Dataset) and not Path(str(s)).exists() and str(s) in names for s in specs):
+        return build_machine(definition=machine)
+    return machine
+
+
 def _simulated(scenario, machine, noise):
     """The dataset of a shipped ``scenario`` run on ``machine`` (a definition is built; None: the scenario's own),
     with its sensor noise if ``noise``; a name that is not a scenario is refused with the list."""
@@ -327,6 +340,7 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
         check_output_file(out, overwrite, inputs=_input_files(datasets))
     observe = split_names(observe)
     channels = [*split_names(inputs), *observe, target]
+    machine = _machine_once(datasets, machine)
     records = on_one_clock([load_dataset(d, column_map, nan_policy, machine, channels=channels,
                                          reference_samples=reference_samples) for d in datasets])
     # in the canonical order (first time stamp, then content), never the order given: the fit depends on the order
@@ -523,8 +537,10 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
     # a model file written before rest starts keeps the first row as its reference, as it was trained
     rest = {"rest_start": cm.preprocessing.get("rest_start", False),
             "reference_samples": cm.preprocessing.get("reference_samples", 1)}
+    specs = [*datasets, *([] if history is None else [history])]
+    machine = _machine_once(specs, machine)
     loaded = on_one_clock([load_dataset(d, column_map, nan_policy, machine, channels=channels, **rest)
-                           for d in [*datasets, *([] if history is None else [history])]])
+                           for d in specs])
     past = None if history is None else loaded.pop()
     for ds in loaded + ([past] if past is not None else []):
         _check_evaluated(cm, ds)

@@ -23,6 +23,8 @@ import numpy as np
 
 from meshes.tomlspec import DefinitionError, Table, plain_value, read_toml, resolve_definition
 
+from .dataset import SECONDS_PER, time_unit_in_name
+
 if TYPE_CHECKING:   # for annotations only: a scenario is read without its machine
     from .machine_definition import MachineDefinition
 
@@ -633,6 +635,7 @@ def _ambient_csv(a: Table, base_dir: Path, swing: float, duration_s: float):
     path = Path(a.string("file"))
     path = path if path.is_absolute() else base_dir / path
     time_col = a.string("time_column", "time_s")
+    _refuse_other_time_unit(a, time_col)
     value_col = a.string("value_column", "ambient_degC")
     if not path.exists():
         raise a.error("file", "names a file that does not exist", str(path))
@@ -660,6 +663,17 @@ def _ambient_csv(a: Table, base_dir: Path, swing: float, duration_s: float):
     _check_with_ripple(v, swing, f"{a.where('file')} {path}", lambda i: f": column {value_col!r}, row {i + 2}")
     _check_covers(f"{a.where('file')} {path}", time_col, t, duration_s)
     return {"times_s": t, "values_C": v}
+
+
+def _refuse_other_time_unit(a: Table, column: str) -> None:
+    """Refuse a ``time_column`` whose header names another unit than s (:func:`~twin.core.dataset.time_unit_in_name`,
+    as a measured CSV's is): the twin reads it in s and converts nothing, and :func:`_check_covers` catches a file
+    in hours or minutes only when its span falls short of the scenario."""
+    unit = time_unit_in_name(column)
+    if unit is not None:
+        raise a.error("time_column", f"names a time in {unit}, and the twin reads this column in s and does not "
+                      f"convert it: write the times in s (× {SECONDS_PER[unit]:g}) under a header in s (time_s)",
+                      column)
 
 
 def _check_covers(where: str, column: str, t: np.ndarray, duration_s: float) -> None:

@@ -19,7 +19,7 @@ import dataclasses
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from numbers import Integral
+from numbers import Integral, Real
 from pathlib import Path
 
 import numpy as np
@@ -452,11 +452,10 @@ def split_half_sd(model: GapModel, ev: Evaluator, result: FitResult, effects: Se
 def _read_inputs(measured, machine, scenario, column_map, holdout_fraction, initial, step_s):
     """``(machine, scenario or None, matched record, (split, fit rows, held-out rows), initial)`` of a diagnosis,
     each checked (clear errors for a bad hold-out fraction, time step, record or scenario)."""
-    if not 0.05 <= float(holdout_fraction) <= MAX_HOLDOUT:
-        raise TwinInputError(f"holdout_fraction must lie in [0.05, {MAX_HOLDOUT}], got {holdout_fraction}")
-    step_s = float(step_s)
-    if not 0.0 < step_s < np.inf:
-        raise TwinInputError(f"step_s (--step) must be a positive number of seconds, got {step_s:g}")
+    _checked_number("holdout_fraction", holdout_fraction, f"lie in [0.05, {MAX_HOLDOUT}]",
+                    lambda f: 0.05 <= f <= MAX_HOLDOUT)
+    step_s = float(_checked_number("step_s (--step)", step_s, "be a positive number of seconds",
+                                   lambda s: 0.0 < s < np.inf))
     machine = _machine(machine)
     sc = None
     if scenario is not None:
@@ -566,14 +565,23 @@ def _better_start(d, after_winner, after_nominal):
     return after_winner
 
 
+def _checked_number(name: str, value, rule: str, within: Callable[[Real], bool], kind: type = Real):
+    """``value`` once it is a number of ``kind`` (a bool is not; NaN is not ``within``) for which ``within`` holds,
+    else a TwinInputError "``name`` must ``rule``, got ``value``": ``float()`` had raised a TypeError on None and
+    read a string ("60") or a bool as a number."""
+    number = isinstance(value, kind) and not isinstance(value, bool)
+    if not (number and within(value)):
+        raise TwinInputError(f"{name} must {rule}, got {f'{value:g}' if number else repr(value)}")
+    return value
+
+
 def _checked_choices(effects, n_pairs):
     """The effect names of ``effects`` (a sequence or a comma list; None: the whole library), after refusing an
     empty or repeated list and an ``n_pairs`` that is not a whole number ≥ 0 — the rules of ``--effects`` and
     ``--pairs`` too, which hand their values on unchecked (an empty list had meant the whole library, a negative
     count no pairs)."""
-    if isinstance(n_pairs, bool) or not isinstance(n_pairs, Integral) or n_pairs < 0:
-        raise TwinInputError(f"n_pairs (--pairs) must be a whole number of top effects to pair, 0 (no pairs) or "
-                             f"more, got {n_pairs!r}")
+    _checked_number("n_pairs (--pairs)", n_pairs, "be a whole number of top effects to pair, 0 (no pairs) or more",
+                    lambda n: n >= 0, Integral)
     if effects is None:
         return None
     names = split_names(effects)

@@ -109,6 +109,33 @@ def _fill_steps(t, v):
     return v[nearer]
 
 
+def _held_at_ends(t: np.ndarray, v: np.ndarray, column: str) -> list[str]:
+    """Notes on an operating input not read from the record's start or up to its end: :func:`_fill_steps` holds
+    its first or last reading there, and no outage is judged (:func:`twin.gap.outages.outage_spans` needs a reading
+    on both sides), so nothing else would tell the user.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n_times,)
+        Sample times, s.
+    v : ndarray, shape (n_times,)
+        The input as read (rpm or mm/min), NaN where not; read at least once.
+    column : str
+        Its CSV column, for the note.
+
+    Returns
+    -------
+    list of str
+        One note per unread end (none, one or two), naming the column and the span in s and h.
+    """
+    read = np.flatnonzero(np.isfinite(v))
+    ends = ((0, read[0], "from the record's start to its first reading", v[read[0]]),
+            (read[-1], len(t) - 1, "from its last reading to the record's end", v[read[-1]]))
+    return [f"column {column!r} is not read from {t[a]:g} s to {t[b]:g} s ({t[a] / 3600:.2f}–{t[b] / 3600:.2f} h, "
+            f"{side}): the twin holds that reading ({held:g}) there, and judges no outage without a reading on "
+            "both sides" for a, b, side, held in ends if a != b]
+
+
 def _nan_runs(t, v):
     """Longest run of NaNs (s) in a column."""
     bad = ~np.isfinite(v)
@@ -290,6 +317,7 @@ class _Channels:
             if warning:
                 self.warnings.append(warning)
                 self.unit_suspects.append(ch.column)
+            self.warnings += _held_at_ends(self.t, v, ch.column)
         if ch.name == "spindle":
             lowest = np.nanmin(v)
             if lowest < 0.0:
