@@ -35,7 +35,7 @@ from test_models_greybox_intervals import (
 )
 
 from models.greybox import GreyBoxRegressor, _log_time_constant_jacobian
-from models.robust_covariance import _bartlett_long_run
+from models.robust_covariance import bartlett_long_run
 
 #: normal quantile of a two-sided 90 % interval, as the two rules without a t quantile take it
 _Z90 = 1.6449
@@ -65,9 +65,9 @@ NOISES = {
 class _Recorded(GreyBoxRegressor):
     """The grey-box model, keeping what its intervals are made of for the rules it does not use."""
 
-    def _intervals(self, best, segments, n_fitted, log_bounds):
+    def _intervals(self, best, segments, read, n_fitted, log_bounds):
         self.recorded = best, segments, n_fitted, log_bounds
-        return super()._intervals(best, segments, n_fitted, log_bounds)
+        return super()._intervals(best, segments, read, n_fitted, log_bounds)
 
 
 def other_rule(rule):
@@ -77,7 +77,7 @@ def other_rule(rule):
         J, r = best.jac, best.fun
         bread = np.linalg.inv(J.T @ J)
         covariance = (bread * (r @ r) / (len(r) - n_fitted) if rule == "gauss-newton" else
-                      bread @ _bartlett_long_run(J * r[:, None], segments) @ bread)
+                      bread @ bartlett_long_run(J * r[:, None], segments) @ bread)
         to_log = np.eye(3)
         to_log[:2, :2] = _log_time_constant_jacobian(best.x[:2], *log_bounds)
         covariance = to_log @ covariance @ to_log.T

@@ -64,7 +64,7 @@ from ._threads import one_blas_thread
 from ._validation import check_n_features, check_positive_int, require_parameters
 from .kalman import KalmanFilter, discretize
 from .registry import register_model
-from .robust_covariance import half_widths, sandwich_covariance
+from .robust_covariance import consecutive_runs, half_widths, sandwich_covariance
 from .speed import STANDSTILL_FRACTION, STANDSTILL_RPM, running
 
 #: relative tolerance under which the steps count as uniform (then a fast recursive filter is used)
@@ -603,7 +603,8 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         self.exponent_ = float(exponent)
         self.exponent_fitted_ = fit_exponent
         self.time_constants_interval_, self.exponent_interval_ = self._intervals(
-            best, self._fitted_segments(used, records), n_outputs * n_linear + len(best.x), log_bounds)
+            best, self._fitted_segments(used, records), (weights > 0)[used], n_outputs * n_linear + len(best.x),
+            log_bounds)
         self.offset_ = coef[0].copy()
         self.gains_ = coef[1: 1 + n_poles * m].T.reshape(n_outputs, n_poles, m).copy()
         self.feedthrough_ = coef[1 + n_poles * m:].T.copy()
@@ -620,13 +621,13 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
     def _fitted_segments(used, records):
         """``[start, stop)``, counted in the fitted rows (``used``), of each run of consecutive rows inside one
         record: the stretches along which a residual follows the one before it in time."""
-        rows = np.flatnonzero(used)
-        breaks = (np.diff(rows) > 1) | np.isin(rows[1:], [start for start, _ in records])
-        return list(pairwise([0, *(np.flatnonzero(breaks) + 1).tolist(), len(rows)]))
+        return consecutive_runs(used, records)
 
-    def _intervals(self, best, segments, n_fitted, log_bounds):
+    def _intervals(self, best, segments, read, n_fitted, log_bounds):
         """``(time_constants_interval_ s, exponent_interval_ or None)`` of the fit ``best`` (a
-        :func:`scipy.optimize.least_squares` result in stick fractions, then b).
+        :func:`scipy.optimize.least_squares` result in stick fractions, then b); ``read`` (fitted rows, outputs)
+        marks the entries that weigh in the fit; the others (an observed thermometer's NaN, or every reading of one
+        with ``observed_weight`` 0) are left out of the covariance, not counted as residuals of 0.
 
         The covariance is the prewhitened sandwich of :func:`models.robust_covariance.sandwich_covariance` on the
         Jacobian of the profiled residual (the gains solved for every step, so it already holds their
@@ -636,7 +637,7 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         """
         n_poles, n_rows, k = len(self.time_constants_), segments[-1][1], len(best.x)
         covariance, dof = sandwich_covariance(best.jac.reshape(n_rows, -1, k), best.fun.reshape(n_rows, -1), segments,
-                                              n_fitted)
+                                              n_fitted, read)
         to_log = np.eye(k)   # (fractions, b) → (log τ, b); singular where a pole leaves the next no room
         to_log[:n_poles, :n_poles] = _log_time_constant_jacobian(best.x[:n_poles], *log_bounds)
         half = (half_widths(to_log @ covariance @ to_log.T, dof, INTERVAL_LEVEL) if np.all(np.isfinite(covariance))

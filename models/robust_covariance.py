@@ -9,7 +9,8 @@ assumes white residuals; an output error that lasts hours makes it several times
    ``W = Φ⁻ᵀJ``, so that ``Jᵀr = Wᵀv`` exactly (Andrews & Monahan's prewhitening, applied to the residual
    rather than to the scores: here the Jacobian is a function of time, not a stationary series);
 2. whatever correlation the whitened scores ``W_t v_t`` keep is taken up by a Bartlett (Newey–West) estimator
-   with Andrews' AR(1) plug-in bandwidth;
+   with Andrews' AR(1) plug-in bandwidth (:func:`bartlett_long_run`, which the gap diagnosis uses on its own
+   scores, not prewhitened);
 3. the fit absorbs the slowest part of the noise into its parameters, which leaves the residual less
    persistent than the noise: the scores are scaled up by ``n_eff / (n_eff − k)`` (the variance by its square,
    twice the usual small-sample correction: a heuristic, chosen on the coverage bench below, not derived), with
@@ -18,26 +19,32 @@ assumes white residuals; an output error that lasts hours makes it several times
 
 On a grey-box fit of a known 2-node network with AR(1) noise of 30 min correlation (48 h at 60 s), the Bartlett
 estimator alone covered the time constants and the exponent 69–73 % of the time at a nominal 90 %, this one
-86–89 %; over seven kinds of noise (``bench/greybox_intervals.py``), 50–91 % against 78–92 %. Rows come in
+86–89 %; over seven kinds of noise (``bench/greybox_intervals.py``), 49–90 % against 78–93 %. Rows come in
 segments (records, or runs of fitted rows between rows left out) whose noise is taken as independent of each
-other's.
+other's; an output not read on a row (``read``) is left out there, not taken as a residual of 0 (which would
+read as a stretch the model fitted exactly).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from itertools import pairwise
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import lfilter
 from scipy.special import stdtrit
 
-#: Andrews' cap on an AR(1) coefficient in the plug-in bandwidth: nearer 1 the bandwidth formula blows up
-_MAX_PLUG_IN_RHO = 0.97
+#: cap on an AR(1) coefficient in Andrews' plug-in bandwidth: nearer 1 the formula blows up. 0.99 rather than
+#: Andrews & Monahan's 0.97: the gap diagnosis (:func:`twin.gap.fit.parameter_sd`) feeds scores that are not
+#: prewhitened, whose lag-1 correlation is often above 0.97, and its coverage was checked with 0.99; the prewhitened
+#: scores here seldom come near either cap
+MAX_PLUG_IN_RHO = 0.99
 
 
 def sandwich_covariance(jacobian: NDArray[np.float64], residuals: NDArray[np.float64],
-                        segments: Sequence[tuple[int, int]], n_fitted: int) -> tuple[NDArray[np.float64], float]:
+                        segments: Sequence[tuple[int, int]], n_fitted: int,
+                        read: NDArray[np.bool_] | None = None) -> tuple[NDArray[np.float64], float]:
     """Covariance of the parameters of a least-squares fit with autocorrelated residuals, and its degrees of
     freedom.
 
@@ -52,6 +59,10 @@ def sandwich_covariance(jacobian: NDArray[np.float64], residuals: NDArray[np.flo
     n_fitted : int
         Parameters of the whole fit, these and any profiled out (e.g. linear ones solved for every step): they
         absorb part of the noise.
+    read : ndarray of bool, shape (n_rows, n_outputs), optional
+        Whether each output was read at each row (default: all). An unread entry is left out, not taken as a
+        residual of 0: its output's autoregression runs on the entries read, broken where they are, and a row
+        that no output read splits its segment.
 
     Returns
     -------
@@ -61,9 +72,15 @@ def sandwich_covariance(jacobian: NDArray[np.float64], residuals: NDArray[np.flo
     dof : float
         Degrees of freedom of a Student t interval built from it (> 0).
     """
+    if read is not None:   # keep the rows some output read: a row nobody read is a break in time
+        any_read = read.any(axis=1)
+        jacobian, residuals, read = jacobian[any_read], residuals[any_read], read[any_read]
+        jacobian = np.where(read[:, :, None], jacobian, 0.0)   # an unread entry weighs nothing in JᵀJ either
+        segments = consecutive_runs(any_read, segments)
     n_parameters = jacobian.shape[2]
-    whitened = [_prewhitened(residuals[:, o], jacobian[:, o, :], segments) for o in range(residuals.shape[1])]
-    n_eff = sum(n for _, _, n in whitened)
+    whitened = [_prewhitened_output(residuals[:, o], jacobian[:, o, :], segments,
+                                    None if read is None else read[:, o]) for o in range(residuals.shape[1])]
+    n_eff = sum(n for _, n in whitened)
     J = jacobian.reshape(-1, n_parameters)
     try:
         bread = np.linalg.inv(J.T @ J)
@@ -71,8 +88,28 @@ def sandwich_covariance(jacobian: NDArray[np.float64], residuals: NDArray[np.flo
         bread = None
     if bread is None or not n_eff > n_fitted:   # as many parameters as independent rows: the noise fits exactly
         return np.full((n_parameters, n_parameters), np.inf), 1.0
-    scores = sum(filtered * v[:, None] for v, filtered, _ in whitened) * (n_eff / (n_eff - n_fitted))
-    return bread @ _bartlett_long_run(scores, segments) @ bread, n_eff - n_fitted
+    scores = sum(score for score, _ in whitened) * (n_eff / (n_eff - n_fitted))
+    return bread @ bartlett_long_run(scores, segments) @ bread, n_eff - n_fitted
+
+
+def consecutive_runs(kept: NDArray[np.bool_], segments: Sequence[tuple[int, int]]) -> list[tuple[int, int]]:
+    """``[start, stop)``, counted in the kept rows, of each run of consecutive kept rows inside one segment.
+
+    Parameters
+    ----------
+    kept : ndarray of bool, shape (n_rows,)
+        The rows kept.
+    segments : sequence of (int, int)
+        ``[start, stop)`` of each stretch of rows, counted in all rows.
+
+    Returns
+    -------
+    list of (int, int)
+        The stretches of the kept rows, in time order, none empty.
+    """
+    rows = np.flatnonzero(kept)
+    breaks = (np.diff(rows) > 1) | np.isin(rows[1:], [start for start, _ in segments])
+    return list(pairwise([0, *(np.flatnonzero(breaks) + 1).tolist(), len(rows)])) if rows.size else []
 
 
 def half_widths(covariance: NDArray[np.float64], dof: float, level: float) -> NDArray[np.float64]:
@@ -93,6 +130,20 @@ def half_widths(covariance: NDArray[np.float64], dof: float, level: float) -> ND
     """
     variance = np.maximum(np.diag(covariance), 0.0)   # an exact fit's variance of 0 may round to −1e-16
     return float(stdtrit(dof, 0.5 + level / 2.0)) * np.sqrt(variance)
+
+
+def _prewhitened_output(residual, jacobian, segments, read):
+    """``(scores, n_eff)`` of one output: its whitened scores ``W_t v_t`` on every row (0 where it was not read:
+    such a row adds nothing to ``Jᵀr``) and its effective number of independent rows, from the rows read only."""
+    if read is None or read.all():
+        v, filtered, n_eff = _prewhitened(residual, jacobian, segments)
+        return filtered * v[:, None], n_eff
+    scores = np.zeros_like(jacobian)
+    if read.any():
+        v, filtered, n_eff = _prewhitened(residual[read], jacobian[read], consecutive_runs(read, segments))
+        scores[read] = filtered * v[:, None]
+        return scores, n_eff
+    return scores, 0.0
 
 
 def _prewhitened(residual, jacobian, segments):
@@ -137,11 +188,26 @@ def _autoregression(gamma, n_rows):
     return np.r_[1.0, -best[1]], best[2]
 
 
-def _bartlett_long_run(scores, segments):
-    """Σ over segments of the Bartlett (Newey–West) long-run covariance ``Σ_|l|≤L (1 − |l|/(L+1)) Γ_l`` of the
-    scores, as ``Σ_t B_t B_tᵀ / (L+1)`` with ``B_t`` the sums over windows of L+1 rows that overhang the segment's
-    ends (each product ``s_j s_kᵀ`` is counted in L+1−|j−k| windows); L from :func:`_andrews_bandwidth`."""
-    lags = _andrews_bandwidth(scores, segments)
+def bartlett_long_run(scores: NDArray[np.float64], segments: Sequence[tuple[int, int]]) -> NDArray[np.float64]:
+    """Bartlett (Newey–West) long-run covariance ``Σ_|l|≤L (1 − |l|/(L+1)) Γ_l`` of score series, summed over
+    segments whose scores are independent of each other's; L from :func:`andrews_bandwidth`.
+
+    Computed as ``Σ_t B_t B_tᵀ / (L+1)`` with ``B_t`` the sums over windows of L+1 rows that overhang the segment's
+    ends (each product ``s_j s_kᵀ`` is counted in L+1−|j−k| windows); a window is no longer than its segment.
+
+    Parameters
+    ----------
+    scores : ndarray, shape (n_rows, k)
+        Score of each row (for least squares, the residual times its Jacobian row), rows in time order.
+    segments : sequence of (int, int)
+        ``[start, stop)`` rows of each stretch of consecutive rows.
+
+    Returns
+    -------
+    ndarray, shape (k, k)
+        In the scores' units squared.
+    """
+    lags = andrews_bandwidth(scores, segments)
     long_run = np.zeros((scores.shape[1], scores.shape[1]))
     for start, stop in segments:
         span = min(lags, stop - start - 1)
@@ -153,19 +219,33 @@ def _bartlett_long_run(scores, segments):
     return long_run
 
 
-def _andrews_bandwidth(scores, segments):
-    """Bartlett bandwidth in rows, Andrews' (1991) AR(1) plug-in ``1.1447 (α(1) n)^(1/3)`` over the score
-    components."""
-    numerator = denominator = 0.0
-    for component in scores.T:
-        lagged = sum(component[start: stop - 1] @ component[start + 1: stop] for start, stop in segments)
-        power = component @ component
-        if not power > 0:
-            continue
-        rho = float(np.clip(lagged / power, -_MAX_PLUG_IN_RHO, _MAX_PLUG_IN_RHO))
-        innovation = power / len(component) * (1.0 - rho ** 2)
-        numerator += 4.0 * rho ** 2 * innovation ** 2 / ((1.0 - rho) ** 6 * (1.0 + rho) ** 2)
-        denominator += innovation ** 2 / (1.0 - rho) ** 4
-    if not denominator > 0:
-        return 0
-    return int(np.ceil(1.1447 * (numerator / denominator * len(scores)) ** (1.0 / 3.0)))
+def andrews_bandwidth(scores: NDArray[np.float64], segments: Sequence[tuple[int, int]]) -> int:
+    """Bartlett bandwidth, Andrews' (1991) AR(1) plug-in ``1.1447 (α(1) n)^(1/3)`` over the score components.
+
+    Each component's lag-1 correlation ρ is fitted to the demeaned scores within the segments (at a bound of a
+    fit the scores keep a mean, which is no correlation) and clipped to ±:data:`MAX_PLUG_IN_RHO`; the components
+    weigh equally, ``α(1) = Σ 4ρ² / ((1−ρ)⁶(1+ρ)²) / Σ 1/(1−ρ)⁴`` (Andrews' weights 1/σ⁴: the components are in
+    different parameters' units, and the bandwidth must not depend on them). A component that does not vary
+    is left out.
+
+    Parameters
+    ----------
+    scores : ndarray, shape (n_rows, k)
+        Score series, rows in time order.
+    segments : sequence of (int, int)
+        ``[start, stop)`` rows of each stretch of consecutive rows.
+
+    Returns
+    -------
+    int
+        Lags, in rows: from 1 to ``max(n_rows // 2, 1)``.
+    """
+    centred = scores - scores.mean(axis=0)
+    lagged = sum(np.sum(centred[start: stop - 1] * centred[start + 1: stop], axis=0) for start, stop in segments)
+    power = np.sum(centred ** 2, axis=0)
+    informative = power > 0
+    if not informative.any():
+        return 1
+    rho = np.clip(lagged[informative] / power[informative], -MAX_PLUG_IN_RHO, MAX_PLUG_IN_RHO)
+    alpha = np.sum(4.0 * rho ** 2 / ((1.0 - rho) ** 6 * (1.0 + rho) ** 2)) / np.sum(1.0 / (1.0 - rho) ** 4)
+    return int(np.clip(np.ceil(1.1447 * (alpha * len(scores)) ** (1.0 / 3.0)), 1, max(len(scores) // 2, 1)))

@@ -48,6 +48,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares, lsq_linear
 
+from models.robust_covariance import bartlett_long_run
+
 from ..core.machine import Machine
 from .effects import Effect
 from .model import GapModel, Prediction
@@ -647,28 +649,6 @@ def _jacobian(fun, values, co, rel=1e-3):
     return -np.column_stack(cols)
 
 
-def hac_bandwidth(scores: np.ndarray) -> int:
-    """Bartlett bandwidth (lags) of Andrews (1991) from an AR(1) fit to each score series (n, k), capped at n/2.
-
-    Parameters
-    ----------
-    scores : ndarray, shape (n_rows, k)
-        Score series, one column per parameter (equal weights).
-
-    Returns
-    -------
-    int
-        Bandwidth, lags (time rows), from 1 to max(n_rows // 2, 1).
-    """
-    n = len(scores)
-    x = scores - scores.mean(axis=0)
-    num = np.sum(x[1:] * x[:-1], axis=0)
-    den = np.maximum(np.sum(x * x, axis=0), 1e-300)        # equal weights: the scores have different units
-    rho = np.clip(num / den, -0.99, 0.99)
-    alpha = np.sum(4 * rho ** 2 / ((1 - rho) ** 6 * (1 + rho) ** 2)) / np.sum(1 / (1 - rho) ** 4)
-    return int(np.clip(np.ceil(1.1447 * (alpha * n) ** (1 / 3)), 1, max(n // 2, 1)))
-
-
 def held_out_inflation(residual: Residual, evaluator: Evaluator) -> float:
     """Mean square of the weighted residual on the held-out entries over that on the fit entries, at least 1: a
     model that misses held-out data more than the fit data carries discrepancy its Jacobian does not see.
@@ -696,8 +676,9 @@ def parameter_sd(J: np.ndarray, r: np.ndarray, rows: np.ndarray, inflation: floa
 
     ``J`` (e, k) is the Jacobian of the weighted residual entries ``r`` (e,) that were sampled at time rows
     ``rows`` (e,).  Residuals of a thermal twin are strongly autocorrelated in time and correlated across
-    channels, so the scores are summed per time row and their autocovariance kept up to the bandwidth of
-    :func:`hac_bandwidth`: cov = H⁻¹ Ω H⁻¹ · ``inflation`` with H = JᵀJ.
+    channels, so the scores are summed per time row and Ω is their Bartlett long-run covariance with Andrews'
+    bandwidth over the fit rows as one stretch (:func:`models.robust_covariance.bartlett_long_run`, the grey-box
+    model's estimator): cov = H⁻¹ Ω H⁻¹ · ``inflation`` with H = JᵀJ.
 
     With ``tolerance``, the covariance also carries the twin's own discretisation error: a systematic residual
     as large as a group's model tolerance (:data:`GROUP_FLOOR`) throughout the record, lined up with a
@@ -730,11 +711,7 @@ def parameter_sd(J: np.ndarray, r: np.ndarray, rows: np.ndarray, inflation: floa
     _, t = np.unique(rows, return_inverse=True)
     scores = np.zeros((t.max() + 1, k))
     np.add.at(scores, t, J * r[:, None])
-    L = hac_bandwidth(scores)
-    omega = scores.T @ scores
-    for lag in range(1, L + 1):
-        G = scores[lag:].T @ scores[:-lag]
-        omega += (1.0 - lag / (L + 1.0)) * (G + G.T)
+    omega = bartlett_long_run(scores, [(0, len(scores))])
     try:
         H = np.linalg.pinv(J.T @ J)
     except np.linalg.LinAlgError:

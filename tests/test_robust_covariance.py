@@ -1,0 +1,107 @@
+"""The prewhitened sandwich of ``models.robust_covariance``: unread entries are left out, not taken as residuals of 0,
+and the gap diagnosis uses the same Bartlett estimator."""
+
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+from test_models_greybox import record
+
+import models.greybox
+from models.greybox import GreyBoxRegressor
+from models.robust_covariance import (
+    andrews_bandwidth,
+    bartlett_long_run,
+    consecutive_runs,
+    sandwich_covariance,
+)
+from twin.gap.fit import parameter_sd
+
+N_ROWS, BLOCK = 600, slice(250, 330)
+
+
+def _fit_arrays(seed=0, n_outputs=2, k=3):
+    """``(J (n, o, k), r (n, o))``: a smooth Jacobian and AR(1) residuals of 10-row correlation."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0.0, 1.0, N_ROWS)
+    J = np.stack([np.column_stack([np.ones_like(t), t, np.sin(3.0 * t + o)]) for o in range(n_outputs)], axis=1)
+    r = lfilter([1.0], [1.0, -0.9], rng.normal(size=(N_ROWS, n_outputs)), axis=0)
+    return J[:, :, :k], r
+
+
+def test_a_block_no_output_read_gives_the_covariance_of_the_record_cut_there_into_two_segments():
+    J, r = _fit_arrays()
+    read = np.ones(r.shape, bool)
+    read[BLOCK] = False
+    J[BLOCK], r[BLOCK] = 0.0, 0.0            # the fit weighs those entries 0
+    left_out = sandwich_covariance(J, r, [(0, N_ROWS)], 3, read)
+    keep = np.all(read, axis=1)
+    cut = sandwich_covariance(J[keep], r[keep], [(0, BLOCK.start), (BLOCK.start, int(keep.sum()))], 3)
+    np.testing.assert_allclose(left_out[0], cut[0], rtol=1e-12)
+    assert left_out[1] == pytest.approx(cut[1], rel=1e-12)
+    # as residuals of 0 the block reads as a stretch the model fitted exactly, and counts 16 % more rows as
+    # independent
+    assert sandwich_covariance(J, r, [(0, N_ROWS)], 3)[1] > 1.1 * cut[1]
+
+
+def test_an_output_unread_on_a_block_counts_the_independent_rows_of_its_readings_only():
+    J, r = _fit_arrays(seed=1)
+    read = np.ones(r.shape, bool)
+    read[BLOCK, 1] = False
+    J[BLOCK, 1], r[BLOCK, 1] = 0.0, np.nan   # what an unread entry holds does not matter
+    _, dof = sandwich_covariance(J, r, [(0, N_ROWS)], 3, read)
+    n_eff_first = sandwich_covariance(J[:, [0]], r[:, [0]], [(0, N_ROWS)], 0)[1]
+    n_eff_second = sandwich_covariance(J[read[:, 1]][:, [1]], r[read[:, 1]][:, [1]],
+                                       consecutive_runs(read[:, 1], [(0, N_ROWS)]), 0)[1]
+    assert dof == pytest.approx(n_eff_first + n_eff_second - 3, rel=1e-12)
+
+
+def test_consecutive_runs_break_at_rows_left_out_and_at_segment_starts():
+    kept = np.ones(12, bool)
+    kept[[3, 4]] = False
+    assert consecutive_runs(kept, [(0, 8), (8, 12)]) == [(0, 3), (3, 6), (6, 10)]
+    assert consecutive_runs(np.zeros(4, bool), [(0, 4)]) == []
+
+
+def test_a_grey_box_fit_leaves_an_observed_thermometers_missing_readings_out_of_its_intervals(monkeypatch):
+    """An observed thermometer out for 200 min: the residuals' autoregression and effective row count are those of
+    its readings, the block cut out, not of readings of 0 there."""
+    calls = []
+
+    def recorded(*args):
+        calls.append((args, sandwich_covariance(*args)))
+        return calls[-1][1]
+
+    monkeypatch.setattr(models.greybox, "sandwich_covariance", recorded)
+    X, drift = record(np.arange(0.0, 30 * 3600.0, 60.0), [1500.0, 3000.0, 4500.0])
+    X[300:500, 3] = np.nan
+    noise = lfilter([1.0], [1.0, -0.95], np.random.default_rng(2).normal(0.0, 0.3, len(drift)))
+    GreyBoxRegressor(n_poles=2, temperature_inputs=(2,), observed=(3,)).fit(X, drift + noise)
+    (J, r, segments, n_fitted, _), (_, dof) = calls[0]
+    measured = np.isfinite(X[:, 3])   # used: every row has weight 1
+    n_eff_drift = sandwich_covariance(J[:, [0]], r[:, [0]], segments, 0)[1]
+    n_eff_thermometer = sandwich_covariance(J[measured][:, [1]], r[measured][:, [1]],
+                                            consecutive_runs(measured, segments), 0)[1]
+    assert dof == pytest.approx(n_eff_drift + n_eff_thermometer - n_fitted, rel=1e-9)
+
+
+def test_the_gap_diagnosis_takes_the_grey_box_models_bartlett_estimator():
+    """``parameter_sd`` without the tolerance term is the sandwich around ``bartlett_long_run`` of the scores
+    summed per time row; its bandwidth is Andrews' of those scores, between 1 and half the rows."""
+    J, r = _fit_arrays(seed=3, n_outputs=1)
+    J, r = np.repeat(J[:, 0], 2, axis=0), np.repeat(r[:, 0], 2)   # two channels per time row
+    rows = np.repeat(np.arange(N_ROWS), 2)
+    scores = (J * r[:, None]).reshape(N_ROWS, 2, -1).sum(axis=1)
+    bread = np.linalg.pinv(J.T @ J)
+    expected = np.sqrt(np.diag(bread @ bartlett_long_run(scores, [(0, N_ROWS)]) @ bread))
+    np.testing.assert_allclose(parameter_sd(J, r, rows, tolerance=False), expected, rtol=1e-10)
+    assert 1 <= andrews_bandwidth(scores, [(0, N_ROWS)]) <= N_ROWS // 2
+    assert andrews_bandwidth(np.ones((N_ROWS, 2)), [(0, N_ROWS)]) == 1   # no variation: no correlation
+
+
+def test_the_bandwidth_does_not_depend_on_the_parameters_units():
+    """τ in s or in h, the same lags: the score components weigh equally, whatever their size."""
+    J, r = _fit_arrays(seed=4, n_outputs=1)
+    scores = J[:, 0] * r
+    scores[:, 2] = lfilter([1.0], [1.0, -0.99], scores[:, 2])   # one persistent component
+    in_other_units = scores * np.array([1.0, 1.0, 1e-3])
+    assert andrews_bandwidth(in_other_units, [(0, N_ROWS)]) == andrews_bandwidth(scores, [(0, N_ROWS)])
