@@ -69,6 +69,12 @@ from .speed import STANDSTILL_FRACTION, STANDSTILL_RPM, running
 
 #: relative tolerance under which the steps count as uniform (then a fast recursive filter is used)
 _UNIFORM_STEP = 1e-9
+#: a step longer than this many times its record's median step is a logging gap, across which the intervals take
+#: the noise as independent (as between records): their autoregression and Bartlett windows count in rows. Below it
+#: are jitter and irregular loggers (steps of 20–180 s are at most 1.8× their median) and a few readings missed;
+#: an hour's gap at 60 s is 60×. The gap diagnosis's outages (twin.gap.outages.OUTAGE_FACTOR) take the same 5×. The
+#: simulation steps over a gap exactly whatever its length.
+_GAP_STEPS = 5.0
 #: smallest ratio of successive time constants: coinciding poles make the gains ill-posed (two huge,
 #: cancelling gains imitate a derivative that extrapolates wildly)
 _MIN_RATIO = 2.0
@@ -164,6 +170,16 @@ def _pair(value, name):
     return low, high
 
 
+def _check_finite_nonnegative(value, name):
+    """Raise a ValueError naming the setting ``name`` unless ``value`` is a finite number >= 0."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        number = np.nan
+    if not 0 <= number < np.inf:
+        raise ValueError(f"GreyBoxRegressor: {name} must be finite and >= 0, got {value!r}.")
+
+
 def _column_numbers(value, name):
     """Column indices of a setting (a list of whole numbers), or a ValueError that shows the form wanted."""
     try:
@@ -254,7 +270,7 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         Columns of ``X`` (≥ 2) that drive the model; None = every column from 2 not in ``observed``.
     observed : tuple of int
         Columns of ``X`` (≥ 2) modelled as outputs and fused by the observer.
-    observed_weight : float
+    observed_weight : float, finite, >= 0
         Weight of the observed thermometers in the fit, relative to ``y``
         (every output's residual is divided by its training standard deviation).
     process_noise : float
@@ -473,8 +489,8 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         b_low, b_high = _pair(self.exponent_bounds, "exponent_bounds")
         if not b_low < b_high:
             raise ValueError(f"GreyBoxRegressor: exponent_bounds must be low < high, got {self.exponent_bounds!r}.")
-        if not 0 <= float(self.process_noise) < np.inf:
-            raise ValueError(f"GreyBoxRegressor: process_noise must be finite and >= 0, got {self.process_noise!r}.")
+        for name in ("process_noise", "observed_weight"):
+            _check_finite_nonnegative(getattr(self, name), name)
         return n_poles, (lo, hi)
 
     @staticmethod
@@ -603,7 +619,7 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         self.exponent_ = float(exponent)
         self.exponent_fitted_ = fit_exponent
         self.time_constants_interval_, self.exponent_interval_ = self._intervals(
-            best, self._fitted_segments(used, records), (weights > 0)[used], n_outputs * n_linear + len(best.x),
+            best, self._fitted_segments(used, records, time), (weights > 0)[used], n_outputs * n_linear + len(best.x),
             log_bounds)
         self.offset_ = coef[0].copy()
         self.gains_ = coef[1: 1 + n_poles * m].T.reshape(n_outputs, n_poles, m).copy()
@@ -618,10 +634,16 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         return self
 
     @staticmethod
-    def _fitted_segments(used, records):
+    def _fitted_segments(used, records, time):
         """``[start, stop)``, counted in the fitted rows (``used``), of each run of consecutive rows inside one
-        record: the stretches along which a residual follows the one before it in time."""
-        return consecutive_runs(used, records)
+        record and between its logging gaps (a step of ``time``, s, over :data:`_GAP_STEPS` times the record's
+        median step): the stretches along which a residual follows the one before it in time."""
+        stretches = []
+        for start, stop in records:
+            steps = np.diff(time[start:stop])
+            gaps = start + 1 + np.flatnonzero(steps > _GAP_STEPS * np.median(steps))
+            stretches += pairwise([start, *gaps.tolist(), stop])
+        return consecutive_runs(used, stretches)
 
     def _intervals(self, best, segments, read, n_fitted, log_bounds):
         """``(time_constants_interval_ s, exponent_interval_ or None)`` of the fit ``best`` (a

@@ -3,11 +3,12 @@
 A tachometer at rest reads a few rpm: such a record never runs (`models.speed.running` has an absolute floor,
 `STANDSTILL_RPM`), and a grey-box fit on it, whose spindle heat cannot be identified, is refused, in `twin` with
 one line naming the record. A negative speed and a record of one row are refused by `twin` with one line
-naming the file, where the model once let a 0-based row or a scikit-learn message through.
+naming the file, where the model once let a 0-based row or a scikit-learn message through. A weight of the
+observed thermometers that is negative or not finite is refused by name.
 """
 import numpy as np
 import pytest
-from test_models_greybox import ambient, duty, simulate
+from test_models_greybox import ambient, duty, record, simulate
 
 from models.greybox import GreyBoxRegressor
 from models.selection_cv import regime_blocks
@@ -108,3 +109,14 @@ def test_evaluate_refuses_a_record_of_one_row_in_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "sample(s)" not in err
     assert f"{one}: 1 row; a model is scored on the change of a record since its first row" in err
+
+
+@pytest.mark.parametrize("weight, shown", [(-1.0, "-1.0"), (np.nan, "nan"), (np.inf, "inf"), ("heavy", "'heavy'")])
+def test_an_observed_weight_that_is_negative_or_not_finite_is_refused_by_name(weight, shown):
+    """It multiplies the thermometers' residuals: a negative one would be squared away, and NaN or inf would make
+    every residual NaN (was: accepted)."""
+    X, y = record(np.arange(0.0, 12 * 3600.0, 120.0), [1500.0, 3000.0])
+    model = GreyBoxRegressor(n_poles=1, temperature_inputs=(2,), observed=(3,), observed_weight=weight)
+    with pytest.raises(ValueError, match=rf"^GreyBoxRegressor: observed_weight must be finite and >= 0, got {shown}\.$"):
+        model.fit(X, y)
+    GreyBoxRegressor(n_poles=1, temperature_inputs=(2,), observed=(3,), observed_weight=0.0).fit(X, y)

@@ -46,16 +46,21 @@ def fitted_intervals(model):
             np.vstack([model.time_constants_interval_, model.exponent_interval_]))
 
 
-def coverage_draws(X, drift, noise, draws, seed=0, model=None, rules=(fitted_intervals,)):
+def coverage_draws(X, drift, noise, draws, seed=0, model=None, rules=(fitted_intervals,), thermometer_noise=None):
     """``[(covered, relative half-widths)]``, each (draws, 3) over τ₁, τ₂ and b, one pair per rule of ``rules``
     (``rule(fitted) → (estimates, intervals (3, 2))``), of fits of ``drift`` plus ``noise(rng, n_rows)`` drawn
-    ``draws`` times from ``seed``."""
+    ``draws`` times from ``seed``; with ``thermometer_noise(rng, n_rows)`` (K), drawn after it, added to the node-1
+    thermometer (column 3 of ``X``), for a model that observes it."""
     model = GreyBoxRegressor(n_poles=2, temperature_inputs=(2,)) if model is None else model
     truth = np.r_[true_time_constants(), EXPONENT]
     rng = np.random.default_rng(seed)
     covered, widths = np.empty((2, len(rules), draws, 3))
     for draw in range(draws):
-        fitted = clone(model).fit(X, drift + noise(rng, len(drift)))
+        target = drift + noise(rng, len(drift))
+        read = X.copy()
+        if thermometer_noise is not None:
+            read[:, 3] += thermometer_noise(rng, len(drift))
+        fitted = clone(model).fit(read, target)
         for k, rule in enumerate(rules):
             estimates, interval = rule(fitted)
             covered[k, draw] = (interval[:, 0] <= truth) & (truth <= interval[:, 1])
@@ -157,10 +162,40 @@ def test_a_hand_edited_interval_is_refused_by_name(network, name, value, message
         model.check_fitted()
 
 
-def test_fitted_segments_break_at_records_and_at_rows_left_out():
+def test_fitted_segments_break_at_records_at_rows_left_out_and_at_logging_gaps():
     used = np.ones(12, bool)
     used[[3, 4]] = False   # a held-out block
-    assert GreyBoxRegressor._fitted_segments(used, [(0, 8), (8, 12)]) == [(0, 3), (3, 6), (6, 10)]
+    time = np.arange(12) * 60.0
+    assert GreyBoxRegressor._fitted_segments(used, [(0, 8), (8, 12)], time) == [(0, 3), (3, 6), (6, 10)]
+    # a step of 2 h at 60 s is a gap; one of 4 min (three readings missed) is not
+    time[10:] += 7200.0
+    time[6:8] += 180.0
+    assert GreyBoxRegressor._fitted_segments(used, [(0, 8), (8, 12)], time) == [(0, 3), (3, 6), (6, 8), (8, 10)]
+    # irregular sampling (steps of 20 … 180 s) is one stretch
+    uneven = np.cumsum(np.random.default_rng(0).uniform(20.0, 180.0, 500))
+    assert GreyBoxRegressor._fitted_segments(np.ones(500, bool), [(0, 500)], uneven) == [(0, 500)]
+
+
+def test_a_logging_gap_counts_in_the_intervals_as_a_break_between_two_records(monkeypatch):
+    """A record whose logger stopped for 2 h: the rows either side of the gap are not neighbours in the residual's
+    autoregression or its Bartlett windows, as if the record were given as two records (was: one stretch)."""
+    times = np.r_[np.arange(0.0, 24 * 3600.0, STEP_S), np.arange(26 * 3600.0, 50 * 3600.0, STEP_S)]
+    X, drift = record(times, [1500.0, 3000.0, 4500.0])
+    y = drift + coloured(np.random.default_rng(4), len(drift))
+    seen = []
+
+    def recording(*args):
+        seen.append((args, sandwich_covariance(*args)))
+        return seen[-1][1]
+
+    monkeypatch.setattr("models.greybox.sandwich_covariance", recording)
+    gap = int(np.argmax(np.diff(times) > STEP_S)) + 1
+    GreyBoxRegressor(n_poles=2, temperature_inputs=(2,)).fit(X[:, :3], y)
+    GreyBoxRegressor(n_poles=2, temperature_inputs=(2,)).fit(X[:, :3], y, record_starts=[gap])
+    (gapped, (_, dof)), ((_, _, as_two_records, *_), _) = seen
+    jacobian, residuals, segments, n_fitted, read = gapped
+    assert segments == as_two_records == [(0, gap), (gap, len(times))]
+    assert dof == sandwich_covariance(jacobian, residuals, as_two_records, n_fitted, read)[1]
 
 
 def test_the_sandwich_covers_a_trend_under_ar1_noise_where_gauss_newton_does_not():
