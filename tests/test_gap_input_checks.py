@@ -1,6 +1,8 @@
 """Inputs of ``twin gap diagnose`` that were taken silently: an empty ``--effects`` list, a negative ``--pairs``, a
 record without feed columns (feeds taken as 0 mm/min, said nowhere but a note), and a whole record in °F with no
 air sensor to give it away."""
+from decimal import Decimal
+from fractions import Fraction
 from types import SimpleNamespace
 
 import numpy as np
@@ -62,21 +64,26 @@ def unbuilt(monkeypatch):
 
 @pytest.mark.parametrize("arguments, said", [
     ({"n_pairs": -1}, NO_PAIRS + "-1"),
-    ({"n_pairs": 1.5}, NO_PAIRS + "1.5"),
-    ({"n_pairs": None}, NO_PAIRS + "None"),
+    ({"n_pairs": 1.5}, NO_PAIRS + "1.5 (not a whole number)"),
+    ({"n_pairs": None}, NO_PAIRS + "None (not a whole number)"),
     ({"effects": []}, f"effects (--effects) [] {NO_EFFECT}"),
     ({"effects": ""}, f"effects (--effects) '' {NO_EFFECT}"),
     ({"effects": ["belt_drive", "belt_drive"]}, "effects (--effects) names effect 'belt_drive' more than once"),
     ({"effects": "belt_drive, belt_drive"}, "effects (--effects) names effect 'belt_drive' more than once"),
-    ({"holdout_fraction": 1.5}, "holdout_fraction must lie in [0.05, 0.8], got 1.5"),
+    ({"holdout_fraction": 1.5}, "holdout_fraction (--holdout) must lie in [0.05, 0.8], got 1.5"),
     ({"step_s": 0.0}, "step_s (--step) must be a positive number of seconds, got 0"),
     # not numbers: None had ended in a TypeError from float(), a string or a bool had been read as a number
-    *[({name: value}, f"{name}{flag} must {rule}, got {shown}")
-      for name, flag, rule in (("holdout_fraction", "", "lie in [0.05, 0.8]"),
-                               ("step_s", " (--step)", "be a positive number of seconds"))
-      for value, shown in ((None, "None"), ("60", "'60'"), (float("nan"), "nan"), (True, "True"))],
-    ({"n_pairs": True}, NO_PAIRS + "True"),
-    ({"n_pairs": "3"}, NO_PAIRS + "'3'"),
+    *[({name: value}, f"{name} ({flag}) must {rule}, got {shown}")
+      for name, flag, rule in (("holdout_fraction", "--holdout", "lie in [0.05, 0.8]"),
+                               ("step_s", "--step", "be a positive number of seconds"))
+      for value, shown in ((None, "None (not a number)"), ("60", "'60' (not a number)"), (float("nan"), "nan"),
+                           (True, "True (not a number)"), (0.3 + 0.1j, "(0.3+0.1j) (not a number)"))],
+    # other real numbers, out of range, shown as the float they are: a Fraction had raised a TypeError in the message
+    ({"holdout_fraction": Fraction(9, 10)}, "holdout_fraction (--holdout) must lie in [0.05, 0.8], got 0.9"),
+    ({"holdout_fraction": Decimal("0.9")}, "holdout_fraction (--holdout) must lie in [0.05, 0.8], got 0.9"),
+    ({"step_s": np.array(-60.0)}, "step_s (--step) must be a positive number of seconds, got -60"),
+    ({"n_pairs": True}, NO_PAIRS + "True (not a whole number)"),
+    ({"n_pairs": "3"}, NO_PAIRS + "'3' (not a whole number)"),
 ])
 def test_the_python_api_refuses_what_the_command_line_refuses(arguments, said, tmp_path, unbuilt):
     """``diagnose(n_pairs=-1)`` had fitted no pairs and ``effects=[]`` the whole library, silently: the checks
@@ -86,6 +93,18 @@ def test_the_python_api_refuses_what_the_command_line_refuses(arguments, said, t
     with pytest.raises(TwinInputError) as err:
         diagnose(tmp_path / "none.csv", **arguments)
     assert str(err.value) == said
+
+
+@pytest.mark.parametrize("arguments", [{"holdout_fraction": Fraction(3, 10)}, {"holdout_fraction": Decimal("0.3")},
+                                       {"holdout_fraction": np.array(0.3)}, {"step_s": Fraction(60)},
+                                       {"step_s": np.float32(60.0)}, {"n_pairs": np.int64(2)}])
+def test_real_numbers_of_other_types_within_the_rules_are_taken(arguments, tmp_path, unbuilt):
+    """``Decimal('0.3')`` and ``np.array(0.3)`` had been refused with "must lie in [0.05, 0.8], got
+    Decimal('0.3')": they pass the checks now, up to the machine's build."""
+    from twin.gap.diagnose import diagnose
+
+    with pytest.raises(AssertionError, match="the machine was built"):
+        diagnose(tmp_path / "none.csv", **arguments)
 
 
 def test_effects_may_be_a_comma_list_as_on_the_command_line(tmp_path, unbuilt):

@@ -1,5 +1,6 @@
-"""twin live: the at-rest start prior across a bridge, a saved adaptive factor below 1, one BLAS thread per observer
-step, and the state's model identity computed once per session (2026-11-28, s36)."""
+"""twin live: the at-rest start prior across a bridge, a saved adaptive factor below 1 or NIS average below 0, an
+``Adaptation`` that would narrow the process noise, one BLAS thread per observer step, and the state's model identity
+computed once per session (2026-11-28, s36)."""
 from __future__ import annotations
 
 import asyncio
@@ -86,6 +87,42 @@ def test_a_state_whose_adaptive_factor_would_narrow_the_process_noise_is_refused
     assert message.startswith(f"{path}: field filters[0].inflation = {inflation!r}: {reason}"), message
 
 
+@pytest.mark.parametrize("nis", [-1e6, -1e-9])
+def test_a_state_whose_nis_average_is_negative_is_refused(tmp_path, rom, saved, nis):
+    """The NIS average starts at 1 and averages values ≥ 0: a negative one (edited or corrupted) would hold the
+    adaptive factor max(1, ā)^power at 1 until it wore away, hours of bands too narrow.  Refused naming the file,
+    the field and the value; 0 (readings that fit exactly) is read."""
+    from twin.live.observer import DriftObserver
+    from twin.live.resume import read_state
+
+    data = json.loads(saved.read_text())
+    path = tmp_path / "state.json"
+    data["filters"][0]["nis"] = 0.0
+    path.write_text(json.dumps(data))
+    assert read_state(path, DriftObserver(rom, THERMOMETERS)).filters[0].nis == 0.0
+    data["filters"][0]["nis"] = nis
+    path.write_text(json.dumps(data))
+    with pytest.raises(TwinInputError) as refused:
+        read_state(path, DriftObserver(rom, THERMOMETERS))
+    message = str(refused.value)
+    assert message.startswith(f"{path}: field filters[0].nis = {nis!r}: not an average NIS ≥ 0"), message
+
+
+@pytest.mark.parametrize("field, value, rule", [
+    ("limit", 0.5, "a factor ≥ 1"), ("limit", float("inf"), "a factor ≥ 1"), ("power", -1.0, "an exponent ≥ 0"),
+    ("window_s", -60.0, "a time ≥ 0 s"), ("window_s", float("nan"), "a time ≥ 0 s"), ("power", None, "an exponent ≥ 0"),
+    ("limit", True, "a factor ≥ 1"), ("window_s", "3600", "a time ≥ 0 s")])
+def test_an_adaptation_that_would_narrow_the_process_noise_is_refused(field, value, rule):
+    """An observer with ``Adaptation(limit=0.5)`` or ``power=-1`` had run with a factor below 1 on the process
+    noise (bands too narrow) and written states the next session refuses as corrupted."""
+    from twin.live.observer import ADAPTATION, Adaptation
+
+    with pytest.raises(TwinInputError) as refused:
+        dataclasses.replace(ADAPTATION, **{field: value})
+    assert str(refused.value) == f"Adaptation.{field} must be {rule}, finite, got {value!r}"
+    assert Adaptation(window_s=0.0, power=0.0, limit=1.0).limit == 1.0       # the bounds themselves: no widening
+
+
 def test_a_state_with_the_factor_at_1_or_above_is_read(tmp_path, rom, saved):
     from twin.live.observer import DriftObserver
     from twin.live.resume import read_state
@@ -98,16 +135,23 @@ def test_a_state_with_the_factor_at_1_or_above_is_read(tmp_path, rom, saved):
         assert read_state(path, DriftObserver(rom, THERMOMETERS)).filters[0].inflation == inflation
 
 
+@pytest.mark.parametrize("state_there", [False, True])
 def test_the_model_identity_is_computed_once_per_session_and_the_state_written_is_unchanged(tmp_path, rom,
-                                                                                            monkeypatch):
-    """A session that saves at every sample: what identifies the model is worked out once, and the file is what
+                                                                                            monkeypatch, saved,
+                                                                                            state_there):
+    """A session that saves at every sample: what identifies the model is worked out once, also when a state file
+    is there to be checked against it first (it had been worked out again to read the file), and the file is what
     :func:`~twin.live.resume.state_text` gives with the identity computed afresh."""
     from twin.live import resume
 
+    path = tmp_path / "state.json"
+    if state_there:
+        path.write_text(saved.read_text())
     computed = []
     original = resume.model_identity
     monkeypatch.setattr(resume, "model_identity", lambda observer: computed.append(1) or original(observer))
-    kept = _kept_session(rom, tmp_path / "state.json", samples=5)
+    kept = _kept_session(rom, path, samples=5)
+    assert (kept.saved is not None) == state_there
     assert len(computed) == 1
     assert kept.path.read_text() == resume.state_text(kept.observer)
     assert json.loads(kept.path.read_text())["model"] == original(kept.observer)
@@ -123,8 +167,8 @@ def _blas_threads():
 
 def test_the_live_loop_runs_each_observer_step_with_one_blas_thread(rom):
     """A short ``twin live`` session against a replay server, in a process whose BLAS pools have two threads: inside
-    every observer step each BLAS pool has one (a reduced model's matrices, where threads only cost: one step after
-    a resume took 5 s with two OpenBLAS threads on a loaded 2-core machine), and the pools have their two again
+    every observer step each BLAS pool has one (a reduced model's matrices, where threads only cost), and the pools
+    have their two again
     after the session (the cap is the observer's, not the process's)."""
     from threadpoolctl import threadpool_limits
 

@@ -131,45 +131,59 @@ def load_dataset(spec: Dataset | Path | str, column_map: dict[str, str] | None =
         return with_rest_start(spec, channels, reference_samples) if rest_start else spec
     if isinstance(machine, (str, Path)):
         machine = load_machine(machine)
-    path = Path(str(spec))
-    if path.exists():
-        if sidecar_path(path).exists() and column_map is None:
-            ds = Dataset.read(path)
-        else:
-            column_map = dict(column_map or {})
-            time_cols = [k for k, v in column_map.items() if v == "time_s"]
-            for k in time_cols:
-                del column_map[k]
-            ds = Dataset.from_measured_csv(path, column_map=column_map, nan_policy=nan_policy,
-                                           time_column=time_cols[0] if time_cols else "time_s",
-                                           nan_channels=channels)
-            note_unit_suspects(ds, machine)     # a spindle in krpm trains a model that misreads rpm
-    else:
+    if _is_scenario(spec):
         ds = _simulated(str(spec), machine, noise)
+    else:
+        ds = _read_file(Path(str(spec)), column_map, nan_policy, channels, machine)
     if label:
         ds.metadata["label"] = label
     return with_rest_start(ds, channels, reference_samples) if rest_start else ds
 
 
-def _machine_once(specs, machine):
-    """``machine`` as :func:`load_dataset` takes it, read once (a name or TOML path) and, when some of ``specs``
-    are scenarios to run on it, built once for them all (:func:`_simulated` builds a definition per scenario: a
+def _is_scenario(spec: Dataset | Path | str) -> bool:
+    """Whether :func:`load_dataset` runs ``spec`` as a shipped scenario: a name of one that is not a file (a file
+    of that name is read)."""
+    return not isinstance(spec, Dataset) and not Path(str(spec)).exists() and str(spec) in available_scenarios()
+
+
+def _read_file(path, column_map, nan_policy, channels, machine):
+    """The dataset of a CSV ``path`` (:func:`load_dataset`'s arguments), or a refusal of a name that is neither a
+    file nor a scenario."""
+    if not path.exists():
+        raise TwinInputError(f"{str(path)!r} is neither a dataset file nor a scenario; scenarios: "
+                             f"{available_scenarios()}")
+    if sidecar_path(path).exists() and column_map is None:
+        return Dataset.read(path)
+    column_map = dict(column_map or {})
+    time_cols = [k for k, v in column_map.items() if v == "time_s"]
+    for k in time_cols:
+        del column_map[k]
+    ds = Dataset.from_measured_csv(path, column_map=column_map, nan_policy=nan_policy,
+                                   time_column=time_cols[0] if time_cols else "time_s", nan_channels=channels)
+    note_unit_suspects(ds, machine)     # a spindle in krpm trains a model that misreads rpm
+    return ds
+
+
+def _load_all(specs, column_map, nan_policy, machine, **options):
+    """:func:`load_dataset` of each of ``specs``, in their order, with ``machine`` read once (a name or TOML path):
+    the files first, so that a malformed CSV is refused before a machine is built (minutes on a cold cache), then
+    the scenarios, on the machine built once for them all (:func:`_simulated` builds a definition per scenario: a
     mesh, thermal system and output operator per dataset)."""
     if isinstance(machine, (str, Path)):
         machine = load_machine(machine)
-    names = available_scenarios()
-    if isinstance(machine, MachineDefinition) and any(
-            not isinstance(s, Dataset) and not Path(str(s)).exists() and str(s) in names for s in specs):
-        return build_machine(definition=machine)
-    return machine
+    scenario = [_is_scenario(s) for s in specs]
+    loaded = {k: load_dataset(s, column_map, nan_policy, machine, **options)
+              for k, s in enumerate(specs) if not scenario[k]}
+    if any(scenario) and isinstance(machine, MachineDefinition):
+        machine = build_machine(definition=machine)
+    loaded.update({k: load_dataset(s, column_map, nan_policy, machine, **options)
+                   for k, s in enumerate(specs) if scenario[k]})
+    return [loaded[k] for k in range(len(specs))]
 
 
 def _simulated(scenario, machine, noise):
     """The dataset of a shipped ``scenario`` run on ``machine`` (a definition is built; None: the scenario's own),
-    with its sensor noise if ``noise``; a name that is not a scenario is refused with the list."""
-    names = available_scenarios()
-    if scenario not in names:
-        raise TwinInputError(f"{scenario!r} is neither a dataset file nor a scenario; scenarios: {names}")
+    with its sensor noise if ``noise``."""
     built = build_machine(definition=machine) if isinstance(machine, MachineDefinition) else machine
     return simulate(scenario, built, noise=noise).dataset
 
@@ -340,9 +354,8 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
         check_output_file(out, overwrite, inputs=_input_files(datasets))
     observe = split_names(observe)
     channels = [*split_names(inputs), *observe, target]
-    machine = _machine_once(datasets, machine)
-    records = on_one_clock([load_dataset(d, column_map, nan_policy, machine, channels=channels,
-                                         reference_samples=reference_samples) for d in datasets])
+    records = on_one_clock(_load_all(datasets, column_map, nan_policy, machine, channels=channels,
+                                     reference_samples=reference_samples))
     # in the canonical order (first time stamp, then content), never the order given: the fit depends on the order
     # of the rows it stacks, the model must not depend on that of the files (twin.compensation.record_order)
     loaded = joined_when_contiguous(records, channels)
@@ -537,10 +550,8 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
     # a model file written before rest starts keeps the first row as its reference, as it was trained
     rest = {"rest_start": cm.preprocessing.get("rest_start", False),
             "reference_samples": cm.preprocessing.get("reference_samples", 1)}
-    specs = [*datasets, *([] if history is None else [history])]
-    machine = _machine_once(specs, machine)
-    loaded = on_one_clock([load_dataset(d, column_map, nan_policy, machine, channels=channels, **rest)
-                           for d in specs])
+    loaded = on_one_clock(_load_all([*datasets, *([] if history is None else [history])], column_map, nan_policy,
+                                    machine, channels=channels, **rest))
     past = None if history is None else loaded.pop()
     for ds in loaded + ([past] if past is not None else []):
         _check_evaluated(cm, ds)

@@ -488,17 +488,36 @@ def time_unit_in_name(column: str) -> str | None:
     return OTHER_TIME_UNITS.get((match["unit"] or match["bare"]).lower())
 
 
-def _refuse_other_time_unit(path, column, mapped):
-    """Refuse a time column whose header names another unit than s: the twin counts time in s and converts
-    nothing on import (as a column map renames and does not convert a channel)."""
+def other_time_unit_text(column: str) -> str | None:
+    """Why a time column headed ``column`` is refused, when the header names another unit than s
+    (:func:`time_unit_in_name`): the twin counts time in s and converts nothing on import (as a column map renames
+    and does not convert a channel).  One wording for a measured CSV and a scenario's ambient CSV; each caller
+    raises its own error with it.
+
+    Parameters
+    ----------
+    column : str
+        The time column's header.
+
+    Returns
+    -------
+    str or None
+        ``"says hours (h); the twin reads time in s and does not convert it: write the column in s (× 3600) as
+        time_s"`` (what the header does, to follow "its header"); None for a header in s or one that names no unit.
+    """
     unit = time_unit_in_name(column)
     if unit is None:
-        return
-    factor = SECONDS_PER[unit]
-    as_time = "is the time column (mapped to time_s)" if mapped else "looks like the time column"
-    raise TwinInputError(f"{path}: column {column!r} {as_time}, and its header says {_UNIT_WORD[unit]} ({unit}); "
-                         f"the twin reads time in s and does not convert it: write the column in s (× {factor:g}) "
-                         "as time_s")
+        return None
+    return (f"says {_UNIT_WORD[unit]} ({unit}); the twin reads time in s and does not convert it: write the column "
+            f"in s (× {SECONDS_PER[unit]:g}) as time_s")
+
+
+def _refuse_other_time_unit(path, column, mapped):
+    """Refuse a measured CSV's time column whose header names another unit than s (:func:`other_time_unit_text`)."""
+    text = other_time_unit_text(column)
+    if text is not None:
+        as_time = "is the time column (mapped to time_s)" if mapped else "looks like the time column"
+        raise TwinInputError(f"{path}: column {column!r} {as_time}, and its header {text}")
 
 
 def _time_from_map(path, column_map, time_column):

@@ -23,7 +23,7 @@ import numpy as np
 
 from meshes.tomlspec import DefinitionError, Table, plain_value, read_toml, resolve_definition
 
-from .dataset import SECONDS_PER, time_unit_in_name
+from .dataset import other_time_unit_text
 
 if TYPE_CHECKING:   # for annotations only: a scenario is read without its machine
     from .machine_definition import MachineDefinition
@@ -666,14 +666,12 @@ def _ambient_csv(a: Table, base_dir: Path, swing: float, duration_s: float):
 
 
 def _refuse_other_time_unit(a: Table, column: str) -> None:
-    """Refuse a ``time_column`` whose header names another unit than s (:func:`~twin.core.dataset.time_unit_in_name`,
-    as a measured CSV's is): the twin reads it in s and converts nothing, and :func:`_check_covers` catches a file
-    in hours or minutes only when its span falls short of the scenario."""
-    unit = time_unit_in_name(column)
-    if unit is not None:
-        raise a.error("time_column", f"names a time in {unit}, and the twin reads this column in s and does not "
-                      f"convert it: write the times in s (× {SECONDS_PER[unit]:g}) under a header in s (time_s)",
-                      column)
+    """Refuse a ``time_column`` whose header names another unit than s, as a measured CSV's is
+    (:func:`~twin.core.dataset.other_time_unit_text`): :func:`_check_covers` catches a file in hours or minutes only
+    when its span falls short of the scenario."""
+    text = other_time_unit_text(column)
+    if text is not None:
+        raise a.error("time_column", f"names a column whose header {text}", column)
 
 
 def _check_covers(where: str, column: str, t: np.ndarray, duration_s: float) -> None:

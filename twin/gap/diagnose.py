@@ -19,6 +19,7 @@ import dataclasses
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from decimal import Decimal
 from numbers import Integral, Real
 from pathlib import Path
 
@@ -452,10 +453,9 @@ def split_half_sd(model: GapModel, ev: Evaluator, result: FitResult, effects: Se
 def _read_inputs(measured, machine, scenario, column_map, holdout_fraction, initial, step_s):
     """``(machine, scenario or None, matched record, (split, fit rows, held-out rows), initial)`` of a diagnosis,
     each checked (clear errors for a bad hold-out fraction, time step, record or scenario)."""
-    _checked_number("holdout_fraction", holdout_fraction, f"lie in [0.05, {MAX_HOLDOUT}]",
-                    lambda f: 0.05 <= f <= MAX_HOLDOUT)
-    step_s = float(_checked_number("step_s (--step)", step_s, "be a positive number of seconds",
-                                   lambda s: 0.0 < s < np.inf))
+    holdout_fraction = _checked_number("holdout_fraction (--holdout)", holdout_fraction,
+                                       f"lie in [0.05, {MAX_HOLDOUT}]", lambda f: 0.05 <= f <= MAX_HOLDOUT)
+    step_s = _checked_number("step_s (--step)", step_s, "be a positive number of seconds", lambda s: 0.0 < s < np.inf)
     machine = _machine(machine)
     sc = None
     if scenario is not None:
@@ -565,14 +565,33 @@ def _better_start(d, after_winner, after_nominal):
     return after_winner
 
 
-def _checked_number(name: str, value, rule: str, within: Callable[[Real], bool], kind: type = Real):
-    """``value`` once it is a number of ``kind`` (a bool is not; NaN is not ``within``) for which ``within`` holds,
-    else a TwinInputError "``name`` must ``rule``, got ``value``": ``float()`` had raised a TypeError on None and
+#: What a value of each kind :func:`_checked_number` takes is, for its message.
+KIND_WORDS = {Real: "a number", Integral: "a whole number"}
+
+
+def _checked_number(name: str, value, rule: str, within: Callable[[float], bool], kind: type = Real) -> float:
+    """``value`` as a Python number (float; int for ``kind`` Integral) once it is a number of ``kind``
+    (:func:`_as_number`) for which ``within`` holds (NaN never does), else a TwinInputError "``name`` must ``rule``,
+    got ``value``" ("(not a number)" after a value of another type): ``float()`` had raised a TypeError on None and
     read a string ("60") or a bool as a number."""
-    number = isinstance(value, kind) and not isinstance(value, bool)
-    if not (number and within(value)):
-        raise TwinInputError(f"{name} must {rule}, got {f'{value:g}' if number else repr(value)}")
-    return value
+    number = _as_number(value, kind)
+    if number is None:
+        raise TwinInputError(f"{name} must {rule}, got {value!r} (not {KIND_WORDS[kind]})")
+    if not within(number):
+        raise TwinInputError(f"{name} must {rule}, got {number:g}")
+    return number
+
+
+def _as_number(value, kind):
+    """``value`` as a float (``kind`` Real: a :class:`numbers.Real` such as a Fraction, a Decimal, a 0-d numpy
+    array of one) or an int (``kind`` Integral), or None when it is not one (a bool, a string, None, a complex)."""
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        value = value[()]               # its numpy scalar
+    if isinstance(value, (bool, np.bool_)):
+        return None
+    if kind is Integral:
+        return int(value) if isinstance(value, Integral) else None
+    return float(value) if isinstance(value, (Real, Decimal)) else None
 
 
 def _checked_choices(effects, n_pairs):

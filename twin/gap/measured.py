@@ -27,6 +27,7 @@ from ..core.machine_definition import MachineDefinition
 from ..core.plausible import check_air_against_surfaces, check_plausible
 from ..core.unit_hints import machine_top, other_unit_hint
 from ..errors import TwinInputError
+from .outages import as_long_as_an_outage
 
 if TYPE_CHECKING:
     from ..core.scenario import Scenario
@@ -110,30 +111,35 @@ def _fill_steps(t, v):
 
 
 def _held_at_ends(t: np.ndarray, v: np.ndarray, column: str) -> list[str]:
-    """Notes on an operating input not read from the record's start or up to its end: :func:`_fill_steps` holds
-    its first or last reading there, and no outage is judged (:func:`twin.gap.outages.outage_spans` needs a reading
-    on both sides), so nothing else would tell the user.
+    """Notes on an operating input not read from the record's start or up to its end for as long as an outage
+    (:func:`~twin.gap.outages.as_long_as_an_outage`): :func:`_fill_steps` holds its first or last reading there,
+    and no outage is judged (:func:`twin.gap.outages.outage_spans` needs a reading on both sides), so nothing else
+    would tell the user.  A shorter unread end (a trailing empty cell) is a sampling irregularity, as between readings.
 
     Parameters
     ----------
     t : ndarray, shape (n_times,)
-        Sample times, s.
+        Sample times, s, increasing (clock or epoch times too: the note gives them from the record's start).
     v : ndarray, shape (n_times,)
-        The input as read (rpm or mm/min), NaN where not; read at least once.
+        The input as the twin takes it (rpm, the spindle's magnitude; mm/min), NaN where not read; read at least
+        once.
     column : str
         Its CSV column, for the note.
 
     Returns
     -------
     list of str
-        One note per unread end (none, one or two), naming the column and the span in s and h.
+        One note per unread end (none, one or two), naming the column, the span in s from the record's start and
+        in h, and the reading held.
     """
     read = np.flatnonzero(np.isfinite(v))
+    since = t - t[0]
     ends = ((0, read[0], "from the record's start to its first reading", v[read[0]]),
             (read[-1], len(t) - 1, "from its last reading to the record's end", v[read[-1]]))
-    return [f"column {column!r} is not read from {t[a]:g} s to {t[b]:g} s ({t[a] / 3600:.2f}–{t[b] / 3600:.2f} h, "
-            f"{side}): the twin holds that reading ({held:g}) there, and judges no outage without a reading on "
-            "both sides" for a, b, side, held in ends if a != b]
+    return [f"column {column!r} is not read from {since[a]:.0f} s to {since[b]:.0f} s into the record "
+            f"({since[a] / 3600:.2f}–{since[b] / 3600:.2f} h, {side}): the twin holds that reading ({held:g}) there, "
+            "and judges no outage without a reading on both sides"
+            for a, b, side, held in ends if as_long_as_an_outage(t[b] - t[a], np.median(np.diff(t)))]
 
 
 def _nan_runs(t, v):
@@ -312,24 +318,26 @@ class _Channels:
             self.empty.append(ch.name)
             self.empty_columns[ch.name] = ch.column
             return
-        if ch.name != "ambient_gradient":
-            warning = check_operating_range(self.dataset, ch, v, self.d)
-            if warning:
-                self.warnings.append(warning)
-                self.unit_suspects.append(ch.column)
-            self.warnings += _held_at_ends(self.t, v, ch.column)
+        if ch.name == "ambient_gradient":
+            self.gradient = _fill(self.t, v)
+            return
+        warning = check_operating_range(self.dataset, ch, v, self.d)
+        if warning:
+            self.warnings.append(warning)
+            self.unit_suspects.append(ch.column)
         if ch.name == "spindle":
             lowest = np.nanmin(v)
             if lowest < 0.0:
                 self.warnings.append(f"column {ch.column!r} reads down to {lowest:g} rpm: its magnitude is "
                                      "the spindle speed (reverse rotation, a tachometer's noise at rest)")
-            self.read_inputs["spindle_rpm"] = np.abs(v)
-            self.spindle = _fill_steps(self.t, np.abs(v))
-        elif ch.name == "ambient_gradient":
-            self.gradient = _fill(self.t, v)
+            v = np.abs(v)
+            self.read_inputs["spindle_rpm"] = v
+            self.spindle = _fill_steps(self.t, v)
         else:
             self.read_inputs[f"{ch.name}_mm_min"] = v
             self.feeds[ch.name[-1]] = _fill_steps(self.t, v)
+        # after the spindle's magnitude is taken: the note quotes the reading held
+        self.warnings += _held_at_ends(self.t, v, ch.column)
 
 
 def match_record(dataset: Dataset, machine: Machine, scenario: Scenario | str | None = None) -> Record:

@@ -79,6 +79,25 @@ def _spans(outages):
     return "; ".join(f"{a / 3600:.2f}–{b / 3600:.2f} h ({what})" for a, b, what in outages)
 
 
+def as_long_as_an_outage(span_s: np.ndarray | float, typical_s: float) -> np.ndarray | bool:
+    """Whether a time without readings of an input, ``span_s`` (s), is long enough to be an outage: more than
+    :data:`OUTAGE_FACTOR` typical (median) sample intervals ``typical_s`` (s) and at least :data:`OUTAGE_MIN_S`.
+
+    Parameters
+    ----------
+    span_s : float or ndarray
+        Times without a reading, s.
+    typical_s : float
+        The record's median sample interval, s.
+
+    Returns
+    -------
+    bool or ndarray of bool
+        Elementwise.
+    """
+    return (np.asarray(span_s) > OUTAGE_FACTOR * typical_s) & (np.asarray(span_s) >= OUTAGE_MIN_S)
+
+
 def outage_spans(time_s: np.ndarray, inputs: dict[str, np.ndarray]) -> dict[str, list[tuple[int, int]]]:
     """Each input's outages (see the module docstring): ``(a, b)``, two consecutive rows that read it.
 
@@ -105,8 +124,7 @@ def outage_spans(time_s: np.ndarray, inputs: dict[str, np.ndarray]) -> dict[str,
         read = np.flatnonzero(np.isfinite(v))
         a, b = read[:-1], read[1:]
         span = t[b] - t[a]
-        hit = ((span > OUTAGE_FACTOR * typical) & (span >= OUTAGE_MIN_S)
-               & ~np.isclose(v[b], v[a], rtol=1e-6, atol=1e-9))
+        hit = as_long_as_an_outage(span, typical) & ~np.isclose(v[b], v[a], rtol=1e-6, atol=1e-9)
         spans[name] = list(zip(a[hit].tolist(), b[hit].tolist()))
     return spans
 

@@ -267,8 +267,7 @@ class LiveClient:
             return checks.reading(key, value, status, t)
 
         y = np.array([reading(name) for name in thermometers])
-        # the observer's matrices are a reduced model's size (tens to a few hundred): BLAS threads only cost there,
-        # and on a loaded machine a step (a resume's bridge) took 5 s with two OpenBLAS threads
+        # the observer's matrices are a reduced model's size (tens to a few hundred): BLAS threads only cost there
         with blas_threads(1):
             e = self.observer.step(t, reading("spindle_speed"), reading("room_air"), y)
         checks.check_stale(t)

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from numbers import Real
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -177,16 +178,28 @@ class Adaptation:
     Attributes
     ----------
     window_s : float
-        Time constant of the exponential average of NIS per reading, s of machine time (0: no adaptation).
+        Time constant of the exponential average of NIS per reading, s of machine time (0: no adaptation), ≥ 0.
     power : float
-        Exponent of the inflation ā^power applied to the disturbances' process noise, 1.
+        Exponent of the inflation ā^power applied to the disturbances' process noise, 1, ≥ 0.
     limit : float
-        Largest inflation factor, 1.
+        Largest inflation factor, 1, ≥ 1.
+
+    Each is a finite number; another value raises a TwinInputError naming the field.
     """
 
     window_s: float = 0.0
     power: float = 1.0
     limit: float = 1e4
+
+    def __post_init__(self) -> None:
+        # the factor min(limit, max(1, ā)^power) only widens the process noise: a limit below 1 or a negative power
+        # would narrow it (and a state file saved with such a factor is refused as corrupted)
+        for name, rule, holds in (("window_s", "a time ≥ 0 s", lambda w: 0.0 <= w < np.inf),
+                                  ("power", "an exponent ≥ 0", lambda p: 0.0 <= p < np.inf),
+                                  ("limit", "a factor ≥ 1", lambda f: 1.0 <= f < np.inf)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, Real) or not holds(value):
+                raise TwinInputError(f"Adaptation.{name} must be {rule}, finite, got {value!r}")
 
 
 @dataclass

@@ -258,10 +258,11 @@ def _short(value):
     return text if len(text) <= 80 else text[:77] + "…"
 
 
-def _check_identity(fields, observer):
-    """Refuse a state of another machine, ROM, thermometer set or state space, naming the first field that differs."""
+def _check_identity(fields, identity):
+    """Refuse a state of another machine, ROM, thermometer set or state space (``identity``: the observer's
+    :func:`model_identity`), naming the first field that differs."""
     saved = _Fields(fields.path, fields.get("model"), "model.")
-    for key, value in model_identity(observer).items():
+    for key, value in identity.items():
         if saved.get(key) != value:
             raise saved.problem(key, f"this observer's is {_short(value)}: the state belongs to another machine, "
                                      "model or set of thermometers")
@@ -276,11 +277,17 @@ def _filter(fields, time_s, step_s, size):
     # the adaptive widening's factor on the process noise only widens it (Adaptation: max(1, NIS average)^power)
     if not inflation >= 1.0:
         raise fields.problem("inflation", "not a factor ≥ 1 (the adaptive widening only widens the process noise)")
+    nis = fields.number("nis")
+    # an average of NIS values, each ≥ 0: a negative one would hold the factor at 1 (no widening) for hours
+    if nis < 0.0:
+        raise fields.problem("nis", "not an average NIS ≥ 0 (a negative one would turn the adaptive widening off "
+                                    "until it wore away)")
     return FilterState(time_s, step_s, fields.number("spindle_rpm"), fields.number("room_C"),
-                       fields.array("mean", (size,)), covariance, fields.number("nis"), inflation)
+                       fields.array("mean", (size,)), covariance, nis, inflation)
 
 
-def read_state(path: str | Path, observer: DriftObserver | MultipleModelObserver) -> SavedState:
+def read_state(path: str | Path, observer: DriftObserver | MultipleModelObserver,
+               identity: dict | None = None) -> SavedState:
     """Read a state file and check that it belongs to ``observer``'s model.
 
     Parameters
@@ -289,6 +296,8 @@ def read_state(path: str | Path, observer: DriftObserver | MultipleModelObserver
         The state file.
     observer : DriftObserver or MultipleModelObserver
         The observer that is to go on from it.
+    identity : dict, optional
+        Its :func:`model_identity` (a session works it out once); default computed now.
 
     Returns
     -------
@@ -299,8 +308,8 @@ def read_state(path: str | Path, observer: DriftObserver | MultipleModelObserver
     ------
     TwinInputError
         A file that is not JSON (cut short, another file), not a state file, of another version or model
-        (:func:`model_identity`), or with a field of the wrong kind, size or range (an adaptive factor below 1);
-        the message names the file, the field and its value.
+        (:func:`model_identity`), or with a field of the wrong kind, size or range (an adaptive factor below 1, a
+        negative NIS average); the message names the file, the field and its value.
     """
     path = Path(path)
     try:
@@ -312,7 +321,7 @@ def read_state(path: str | Path, observer: DriftObserver | MultipleModelObserver
     for key, expected in (("format", FORMAT), ("version", VERSION)):
         if fields.get(key) != expected:
             raise fields.problem(key, f"not a {FORMAT} file of version {VERSION}")
-    _check_identity(fields, observer)
+    _check_identity(fields, model_identity(observer) if identity is None else identity)
     members = _members(observer)
     filters = fields.get("filters")
     if not isinstance(filters, list) or len(filters) != len(members):
@@ -404,13 +413,14 @@ class KeptObserver(RecordRunner):
                  every_s: float = SAVE_EVERY_S) -> None:
         self.observer, self.path, self.every_s = observer, Path(path), float(every_s)
         self.thermometers, self.field_names = observer.thermometers, observer.field_names
-        self.saved = read_state(self.path, observer) if self.path.exists() else None
+        # what the state belongs to, checked in the file read and written at every save: the model does not change
+        # during a session
+        self._identity = model_identity(observer)
+        self.saved = read_state(self.path, observer, self._identity) if self.path.exists() else None
         #: which start the observer took, once the first sample with a room air came (None before)
         self.start_note = None
         self._next_save = -np.inf
         self._kept = None               # the state after the last sample fused (snapshot)
-        # what the state belongs to, written at every save: the model does not change during a session
-        self._identity = model_identity(observer)
         self._read_rpm = np.nan         # a speed read before the first room air
 
     @property
