@@ -14,10 +14,11 @@ prewhitened sandwich of :mod:`models.robust_covariance`), Gauss–Newton's ``(J�
 (Newey–West) sandwich with Andrews' bandwidth but no prewhitening, both with the normal quantile. Printed: the share
 of fits whose interval holds τ₁, τ₂ and b (nominal 90 %) and the median half-width relative to the estimate.
 
-``--observer`` fits the model in its observer form instead: the thermometer on node 1 (the node the spindle heats,
-column 3 of the record: a temperature of the same network, so a sum of the same lags as the drift, which is what
-the model's observed output is) is an observed output, read with a noise of its own (:data:`OBSERVER_NOISES`,
-independent of the drift's), and only the model's own rule is judged (the other two take one output).
+``--observer`` fits the model in its observer form instead: a thermometer on node 1 (the node the spindle heats,
+column 3 of the record) or on node 2 (a temperature of the same network, so a sum of the same lags as the drift,
+which is what the model's observed output is) is an observed output, read with a noise of its own
+(:data:`OBSERVER_NOISES`, independent of the drift's), and only the model's own rule is judged (the other two take
+one output).
 """
 from __future__ import annotations
 
@@ -32,7 +33,7 @@ from scipy.signal import lfilter
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from test_models_greybox import record
+from test_models_greybox import record, simulate
 from test_models_greybox_intervals import (
     STEP_S,
     ar1_noise,
@@ -67,19 +68,25 @@ NOISES = {
     "white 0.5 µm": lambda rng, n: ar1_noise(rng, n, 0.5, 0.0),
 }
 
-#: name → (noise on the drift in µm, noise on the node-1 thermometer in K), each (rng, n_rows) → (n_rows,); the
-#: thermometer's change spans 18 K
+#: name → (noise on the drift in µm, noise on the thermometer in K, each (rng, n_rows) → (n_rows,); the network's
+#: node the thermometer is on, 1 or 2); the node-1 thermometer's change spans 18 K
 OBSERVER_NOISES = {
     "drift AR(1) 1 µm, 30 min; thermometer white 0.05 K": (NOISES["AR(1) 1 µm, 30 min (the test's)"],
-                                                           lambda rng, n: ar1_noise(rng, n, 0.05, 0.0)),
+                                                           lambda rng, n: ar1_noise(rng, n, 0.05, 0.0), 1),
     "drift AR(1) 1 µm, 30 min; thermometer white 0.1 K": (NOISES["AR(1) 1 µm, 30 min (the test's)"],
-                                                          lambda rng, n: ar1_noise(rng, n, 0.1, 0.0)),
+                                                          lambda rng, n: ar1_noise(rng, n, 0.1, 0.0), 1),
     "drift AR(1) 1 µm, 30 min; thermometer AR(1) 0.1 K, 30 min": (NOISES["AR(1) 1 µm, 30 min (the test's)"],
-                                                                  lambda rng, n: ar1_noise(rng, n, 0.1, 1800.0)),
+                                                                  lambda rng, n: ar1_noise(rng, n, 0.1, 1800.0), 1),
     "drift AR(1) 1 µm, 30 min; thermometer white 0.3 K (coarse)": (NOISES["AR(1) 1 µm, 30 min (the test's)"],
-                                                                   lambda rng, n: ar1_noise(rng, n, 0.3, 0.0)),
+                                                                   lambda rng, n: ar1_noise(rng, n, 0.3, 0.0), 1),
     "drift white 0.5 µm; thermometer white 0.05 K": (NOISES["white 0.5 µm"],
-                                                     lambda rng, n: ar1_noise(rng, n, 0.05, 0.0)),
+                                                     lambda rng, n: ar1_noise(rng, n, 0.05, 0.0), 1),
+    # the two rows below were added, and their settings fixed, before the per-output estimator was first run on any
+    # observer row: the independent check of it
+    "drift AR(1) 1 µm, 30 min; node-2 thermometer white 0.2 K": (NOISES["AR(1) 1 µm, 30 min (the test's)"],
+                                                                 lambda rng, n: ar1_noise(rng, n, 0.2, 0.0), 2),
+    "drift AR(1) 1 µm, 30 min; thermometer AR(1) 0.3 K, 2 h": (NOISES["AR(1) 1 µm, 30 min (the test's)"],
+                                                              lambda rng, n: ar1_noise(rng, n, 0.3, 7200.0), 1),
 }
 
 
@@ -132,14 +139,22 @@ def drift_only(X, drift, draws):
 
 
 def observer_form(X, drift, draws):
-    """The model's rule on a model that observes the node-1 thermometer, one row per kind of
-    :data:`OBSERVER_NOISES`."""
+    """The model's rule on a model that observes a thermometer, one row per kind of :data:`OBSERVER_NOISES`."""
     model = GreyBoxRegressor(n_poles=2, temperature_inputs=(2,), observed=(3,))
-    for name, (noise, thermometer_noise) in OBSERVER_NOISES.items():
+    for name, (noise, thermometer_noise, node) in OBSERVER_NOISES.items():
         start = time.perf_counter()
-        results = coverage_draws(X, drift, noise, draws, model=model, thermometer_noise=thermometer_noise)
+        results = coverage_draws(thermometer_on(X, node), drift, noise, draws, model=model,
+                                 thermometer_noise=thermometer_noise)
         print_rows(name, results, ["the model's, observer form"])
         print(f"({name}: {time.perf_counter() - start:.0f} s)", file=sys.stderr)
+
+
+def thermometer_on(X, node):
+    """``X`` (time s, rpm, ambient °C, node-1 °C) with its thermometer column on ``node`` (1 or 2) of the network."""
+    if node == 1:
+        return X
+    nodes, _ = simulate(X[:, 0], X[:, 1])
+    return np.column_stack([X[:, :3], nodes[:, node - 1]])
 
 
 def main():

@@ -658,11 +658,11 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         86–89 % (``bench/greybox_intervals.py``). ``n_fitted`` counts every parameter of the fit, gains included.
         """
         n_poles, n_rows, k = len(self.time_constants_), segments[-1][1], len(best.x)
-        covariance, dof = sandwich_covariance(best.jac.reshape(n_rows, -1, k), best.fun.reshape(n_rows, -1), segments,
-                                              n_fitted, read)
         to_log = np.eye(k)   # (fractions, b) → (log τ, b); singular where a pole leaves the next no room
         to_log[:n_poles, :n_poles] = _log_time_constant_jacobian(best.x[:n_poles], *log_bounds)
-        half = (half_widths(to_log @ covariance @ to_log.T, dof, INTERVAL_LEVEL) if np.all(np.isfinite(covariance))
+        covariance, dof = sandwich_covariance(best.jac.reshape(n_rows, -1, k), best.fun.reshape(n_rows, -1), segments,
+                                              n_fitted, read, transform=to_log)
+        half = (half_widths(covariance, dof, INTERVAL_LEVEL) if np.all(np.isfinite(covariance))
                 else np.full(k, np.inf))
         tau = self.time_constants_
         # symmetric in log τ; a half-width past the bounds' whole span reaches them anyway (and e^inf overflows)

@@ -34,9 +34,16 @@ def ar1_noise(rng, n_rows, std, correlation_s, step_s=STEP_S):
 
 
 @pytest.fixture(scope="module")
-def network():
-    """48 h at 60 s from rest: time, spindle rpm, ambient °C, and the noise-free drift in µm."""
-    X, drift = record(np.arange(0.0, 48 * 3600.0, STEP_S), [1500.0, 3000.0, 4500.0])
+def thermometer_network():
+    """48 h at 60 s from rest: time, spindle rpm, ambient °C, the node-1 temperature °C, and the noise-free drift
+    in µm."""
+    return record(np.arange(0.0, 48 * 3600.0, STEP_S), [1500.0, 3000.0, 4500.0])
+
+
+@pytest.fixture(scope="module")
+def network(thermometer_network):
+    """The same without the thermometer."""
+    X, drift = thermometer_network
     return X[:, :3], drift
 
 
@@ -84,6 +91,22 @@ def test_coloured_noise_gives_wider_intervals_than_white_noise_of_the_same_size(
     [(_, white)] = coverage_draws(*network, lambda rng, n: ar1_noise(rng, n, NOISE_UM, 0.0), draws=6)
     [(_, coloured_widths)] = coverage_draws(*network, coloured, draws=6)
     assert np.all(np.median(coloured_widths, axis=0) > 3.0 * np.median(white, axis=0))
+
+
+def test_a_thermometer_noisier_than_its_signal_leaves_the_intervals_of_the_drift_alone(thermometer_network):
+    """About 5 s: 8 draws, drift noise of the coverage check, the node-1 thermometer (18 K of change) read with
+    white noise of 20 K, which tells next to nothing of τ and b. Its thousands of independent rows must not narrow
+    the intervals: each output's noise is scaled by its own n_eff against its own share of the fit, and the degrees
+    of freedom are Welch–Satterthwaite's over the outputs. Measured: median width ratios to the drift alone's
+    1.06 / 1.01 / 0.99 (τ₁ / τ₂ / b); 0.92 / 0.93 / 0.85 with n_eff pooled over the outputs. (A thermometer of
+    0.3–10 K does narrow them, rightly: at 0.3 K they cover 88–89 %, ``bench/greybox_intervals.py --observer``.)"""
+    X, drift = thermometer_network
+    [(_, alone)] = coverage_draws(X[:, :3], drift, coloured, draws=8)
+    [(_, observed)] = coverage_draws(X, drift, coloured, draws=8,
+                                     model=GreyBoxRegressor(n_poles=2, temperature_inputs=(2,), observed=(3,)),
+                                     thermometer_noise=lambda rng, n: ar1_noise(rng, n, 20.0, 0.0))
+    ratio = np.median(observed / alone, axis=0)
+    assert np.all(ratio > 0.95), ratio
 
 
 def test_an_exponent_on_its_bound_gets_an_interval_that_stops_there_and_says_so(network):
@@ -184,18 +207,19 @@ def test_a_logging_gap_counts_in_the_intervals_as_a_break_between_two_records(mo
     y = drift + coloured(np.random.default_rng(4), len(drift))
     seen = []
 
-    def recording(*args):
-        seen.append((args, sandwich_covariance(*args)))
-        return seen[-1][1]
+    def recording(*args, **kwargs):
+        seen.append((args, kwargs, sandwich_covariance(*args, **kwargs)))
+        return seen[-1][2]
 
     monkeypatch.setattr("models.greybox.sandwich_covariance", recording)
     gap = int(np.argmax(np.diff(times) > STEP_S)) + 1
     GreyBoxRegressor(n_poles=2, temperature_inputs=(2,)).fit(X[:, :3], y)
     GreyBoxRegressor(n_poles=2, temperature_inputs=(2,)).fit(X[:, :3], y, record_starts=[gap])
-    (gapped, (_, dof)), ((_, _, as_two_records, *_), _) = seen
+    (gapped, to_log, (_, dof)), ((_, _, as_two_records, *_), _, _) = seen
     jacobian, residuals, segments, n_fitted, read = gapped
     assert segments == as_two_records == [(0, gap), (gap, len(times))]
-    assert dof == sandwich_covariance(jacobian, residuals, as_two_records, n_fitted, read)[1]
+    as_given = sandwich_covariance(jacobian, residuals, as_two_records, n_fitted, read, **to_log)
+    np.testing.assert_array_equal(dof, as_given[1])
 
 
 def test_the_sandwich_covers_a_trend_under_ar1_noise_where_gauss_newton_does_not():

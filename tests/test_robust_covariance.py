@@ -40,19 +40,29 @@ def test_a_block_no_output_read_gives_the_covariance_of_the_record_cut_there_int
     assert left_out[1] == pytest.approx(cut[1], rel=1e-12)
     # as residuals of 0 the block reads as a stretch the model fitted exactly, and counts 16 % more rows as
     # independent
-    assert sandwich_covariance(J, r, [(0, N_ROWS)], 3)[1] > 1.1 * cut[1]
+    assert np.all(sandwich_covariance(J, r, [(0, N_ROWS)], 3)[1] > 1.1 * cut[1])
 
 
-def test_an_output_unread_on_a_block_counts_the_independent_rows_of_its_readings_only():
+def test_each_output_counts_the_independent_rows_of_its_readings_against_the_parameters_it_sets():
+    """Output 0 sets parameters 0 and 1, output 1 parameter 2, and output 1 is unread on a block: each parameter's
+    degrees of freedom are those of the output that sets it, n_eff of its readings less its share of the parameters
+    (was: one count pooled over the outputs, n_eff_0 + n_eff_1 − 3, for every parameter)."""
     J, r = _fit_arrays(seed=1)
+    J[:, 0, 2] = J[:, 1, :2] = 0.0
     read = np.ones(r.shape, bool)
     read[BLOCK, 1] = False
     J[BLOCK, 1], r[BLOCK, 1] = 0.0, np.nan   # what an unread entry holds does not matter
     _, dof = sandwich_covariance(J, r, [(0, N_ROWS)], 3, read)
-    n_eff_first = sandwich_covariance(J[:, [0]], r[:, [0]], [(0, N_ROWS)], 0)[1]
-    n_eff_second = sandwich_covariance(J[read[:, 1]][:, [1]], r[read[:, 1]][:, [1]],
-                                       consecutive_runs(read[:, 1], [(0, N_ROWS)]), 0)[1]
-    assert dof == pytest.approx(n_eff_first + n_eff_second - 3, rel=1e-12)
+    n_eff_first = sandwich_covariance(J[:, [0]][:, :, :2], r[:, [0]], [(0, N_ROWS)], 0)[1][0]
+    n_eff_second = sandwich_covariance(J[read[:, 1]][:, [1]][:, :, [2]], r[read[:, 1]][:, [1]],
+                                       consecutive_runs(read[:, 1], [(0, N_ROWS)]), 0)[1][0]
+    np.testing.assert_allclose(dof, [n_eff_first - 2, n_eff_first - 2, n_eff_second - 1], rtol=1e-12)
+
+
+def test_one_output_takes_n_eff_less_the_parameters_fitted_for_every_parameter():
+    J, r = _fit_arrays(seed=5, n_outputs=1)
+    n_eff = sandwich_covariance(J, r, [(0, N_ROWS)], 0)[1]
+    np.testing.assert_allclose(sandwich_covariance(J, r, [(0, N_ROWS)], 7)[1], n_eff - 7, rtol=1e-12)
 
 
 def test_consecutive_runs_break_at_rows_left_out_and_at_segment_starts():
@@ -67,8 +77,8 @@ def test_a_grey_box_fit_leaves_an_observed_thermometers_missing_readings_out_of_
     its readings, the block cut out, not of readings of 0 there."""
     calls = []
 
-    def recorded(*args):
-        calls.append((args, sandwich_covariance(*args)))
+    def recorded(*args, **kwargs):
+        calls.append((args, sandwich_covariance(*args, **kwargs)))
         return calls[-1][1]
 
     monkeypatch.setattr(models.greybox, "sandwich_covariance", recorded)
@@ -76,12 +86,15 @@ def test_a_grey_box_fit_leaves_an_observed_thermometers_missing_readings_out_of_
     X[300:500, 3] = np.nan
     noise = lfilter([1.0], [1.0, -0.95], np.random.default_rng(2).normal(0.0, 0.3, len(drift)))
     GreyBoxRegressor(n_poles=2, temperature_inputs=(2,), observed=(3,)).fit(X, drift + noise)
-    (J, r, segments, n_fitted, _), (_, dof) = calls[0]
+    (J, r, segments, n_fitted, read), (_, dof) = calls[0]
     measured = np.isfinite(X[:, 3])   # used: every row has weight 1
-    n_eff_drift = sandwich_covariance(J[:, [0]], r[:, [0]], segments, 0)[1]
+    np.testing.assert_array_equal(read, np.column_stack([np.ones_like(measured), measured]))
+    n_eff_drift = sandwich_covariance(J[:, [0]], r[:, [0]], segments, 0)[1][0]
     n_eff_thermometer = sandwich_covariance(J[measured][:, [1]], r[measured][:, [1]],
-                                            consecutive_runs(measured, segments), 0)[1]
-    assert dof == pytest.approx(n_eff_drift + n_eff_thermometer - n_fitted, rel=1e-9)
+                                            consecutive_runs(measured, segments), 0)[1][0]
+    # each parameter's degrees of freedom lie between the two outputs' own (n_eff_o less its share of the fit)
+    assert np.all((min(n_eff_drift, n_eff_thermometer) - n_fitted <= dof)
+                  & (dof < n_eff_drift + n_eff_thermometer - n_fitted))
 
 
 def test_the_gap_diagnosis_takes_the_grey_box_models_bartlett_estimator():
