@@ -152,7 +152,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "grey-box orders 1-3 included, and print why; overrides --model")
     t.add_argument("--allow-unstable", action="store_true",
                    help="save an unstable grey fit (a < 0 or diverging on its training data), or a grey-box fit "
-                        "whose slowest time constant its records do not determine, instead of refusing it")
+                        "whose slowest time constant is longer than its longest training record or on its upper "
+                        "bound, instead of refusing it")
     t.add_argument("--param", action="append", metavar="NAME=VALUE", help="model hyperparameter (repeatable)")
     t.add_argument("--out", required=True, help="model file to write (.json)")
     add_overwrite(t, "file")
