@@ -10,7 +10,7 @@ from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
 from ..errors import TwinInputError
-from ..infra.cli_common import add_overwrite, split_names
+from ..infra.cli_common import add_overwrite, check_distinct, split_names
 from ..rom.cli import DEFAULT_ORDER
 
 if TYPE_CHECKING:
@@ -102,7 +102,7 @@ def _channels_of(dataset, kinds):
 
 
 def check_replay_channels(dataset: Dataset, path: str, channels: dict[str, list[str]]) -> None:
-    """Check that the dataset has the channels the replay options name.
+    """Check that the dataset has the channels the replay options name, of the kinds they take, each named once.
 
     Parameters
     ----------
@@ -116,21 +116,46 @@ def check_replay_channels(dataset: Dataset, path: str, channels: dict[str, list[
     Raises
     ------
     TwinInputError
-        Naming the option, the channel and the file, and listing the channels of the kinds the option takes.
+        A channel missing or of another kind (a thermometer as ``--spindle``: its kind and unit are known from
+        the sidecar or the column's unit), naming the option, the channel and the file, and listing the channels
+        of the kinds the option takes; a channel two options name, or one names twice.
     """
     for option, names in channels.items():
+        *others, last = kinds = OPTION_KINDS[option]
         for name in names:
-            if name not in dataset:
-                *others, last = kinds = OPTION_KINDS[option]
-                raise TwinInputError(f"{option} {name!r}: no such channel in {path}; its "
+            if name not in dataset or dataset.info(name).kind not in kinds:
+                raise TwinInputError(f"{option} {name!r}: {_what_channel(dataset, name)} in {path}; its "
                                      f"{', '.join(others)}{' or ' if others else ''}{last} channels: "
                                      f"{_channels_of(dataset, kinds)}")
+    _check_own_channels(channels)
+
+
+def _what_channel(dataset, name):
+    """What ``name`` is in ``dataset``, for an error: "no such channel" or "a temperature channel (degC)"."""
+    if name not in dataset:
+        return "no such channel"
+    channel = dataset.info(name)
+    return f"a {channel.kind} channel ({channel.unit})"
+
+
+def _check_own_channels(channels):
+    """Refuse a channel two replay options name (or one names twice): the replay server has one node per channel,
+    and one reading would be taken for two sensors (option → channels, as :func:`check_replay_channels`)."""
+    owner = {}
+    for option, names in channels.items():
+        for name in names:
+            if name in owner:
+                whose = "named twice" if owner[name] == option else f"the channel of {owner[name]} too"
+                raise TwinInputError(f"{option} {name!r}: {whose}; the spindle speed, the room air and every "
+                                     "thermometer need a channel of their own")
+            owner[name] = option
 
 
 async def replay_session(dataset: Dataset, thermometers: list[str], observer: RecordRunner, speed: float,
                          room_air: str = "T15", spindle: str = "spindle", port: int | None = None,
                          log_path: str | None = None, host: str = "127.0.0.1",
-                         source: str = "dataset", late_after_s: float = 1.0) -> tuple[LiveStats, float]:
+                         source: str = "dataset", late_after_s: float = 1.0,
+                         duration_s: float | None = None) -> tuple[LiveStats, float]:
     """Serve ``dataset`` on a local replay server and run the live client against it.
 
     Parameters
@@ -155,13 +180,19 @@ async def replay_session(dataset: Dataset, thermometers: list[str], observer: Re
         The dataset's file, named in errors.
     late_after_s : float
         Wall seconds the client waits for a sample's missing readings before fusing it.
+    duration_s : float, optional
+        Wall seconds after which the client stops (``--duration``), the replay's end not reached; default: the
+        replay's end.
 
     Returns
     -------
     tuple
-        The client's :class:`~twin.live.client.LiveStats` and the wall seconds the replay took.
+        The client's :class:`~twin.live.client.LiveStats` and the wall seconds the replay ran (until the client
+        stopped, if it stopped first).
     """
     import asyncio
+
+    import numpy as np
 
     from .client import LiveClient
     from .replay import ReplayServer, default_node_map
@@ -174,7 +205,9 @@ async def replay_session(dataset: Dataset, thermometers: list[str], observer: Re
         node_map = default_node_map(thermometers, room_air, spindle, server.index)
         client = LiveClient(server.endpoint, node_map, observer, log_path, late_after_s)
         until = float(dataset.time_s[-1])
-        task = asyncio.create_task(client.run(until_time_s=until, max_wall_s=30.0 + until / speed * 5))
+        # a replay that has not ended in 5× its time (+ 30 s to connect) never will: its client is stuck
+        max_wall_s = min(30.0 + until / speed * 5, duration_s or np.inf)
+        task = asyncio.create_task(client.run(until_time_s=until, max_wall_s=max_wall_s))
         try:
             return await _replay_to(client, task, server, dataset.time_s, values, speed)
         finally:
@@ -186,23 +219,24 @@ async def replay_session(dataset: Dataset, thermometers: list[str], observer: Re
 async def _replay_to(client, task, server, times, values, speed):
     """Replay once ``client`` has subscribed; ``(its stats, the replay's wall s)``."""
     import asyncio
+    import time
 
     while not client._subscribed and not task.done():
         await asyncio.sleep(0.01)
     if task.done():
         return task.result(), 0.0
+    start = time.perf_counter()
     replay = asyncio.create_task(server.replay(times, values, speed))
     await asyncio.wait([replay, task], return_when=asyncio.FIRST_COMPLETED)
-    if not replay.done():         # the client stopped first (interrupted, failed): nobody is listening
+    if not replay.done():         # the client stopped first (--duration, interrupted, failed): nobody is listening
         replay.cancel()
-        return await task, 0.0
+        return await task, time.perf_counter() - start
     return await task, replay.result()
 
 
 def _run_replay(args):
     """Serve ``--replay`` on a local server and observe it: ``(stats, thermometers, dataset)``."""
     import asyncio
-    from pathlib import Path
 
     import numpy as np
 
@@ -219,9 +253,25 @@ def _run_replay(args):
     with _kept(args, observer) as observer:
         stats, wall = asyncio.run(replay_session(dataset, thermometers, observer, args.speed, args.room_air,
                                                  args.spindle, args.port, args.log, source=args.replay,
-                                                 late_after_s=args.late_after))
-    print(f"replayed {len(dataset)} samples of {Path(args.replay).name} at {args.speed:g}× in {wall:.1f} s")
+                                                 late_after_s=args.late_after, duration_s=args.duration))
+    print(_replayed(args, dataset, stats, wall))
     return stats, thermometers, dataset
+
+
+def _replayed(args, dataset, stats, wall):
+    """The summary's replay line: the samples replayed, and how far (machine s) a replay stopped early got."""
+    from pathlib import Path
+
+    import numpy as np
+
+    name, end = Path(args.replay).name, float(dataset.time_s[-1])
+    reached = stats.last.time_s if stats.last is not None else None
+    if reached is not None and reached >= end:
+        return f"replayed {len(dataset)} samples of {name} at {args.speed:g}× in {wall:.1f} s"
+    why = f" (--duration {args.duration:g} s)" if args.duration else ""
+    where = "" if reached is None else (f", at machine time {reached:g} s of {end:g} s "
+                                        f"({np.sum(dataset.time_s <= reached)} of {len(dataset)} samples)")
+    return f"replay of {name} at {args.speed:g}× stopped after {wall:.1f} s{why}{where}"
 
 
 def _check_endpoint(url):
@@ -358,6 +408,18 @@ def _observe(args):
         raise TwinInputError(f"{exc}{_partial_log(args.log, before)}") from None
 
 
+def _check_options(args):
+    """Refuse, before anything is built or served, option values no session could honour."""
+    if not 0.0 <= args.late_after < float("inf"):
+        raise TwinInputError(f"--late-after must be a finite number of seconds ≥ 0, got {args.late_after:g}")
+    if args.duration is not None and not 0.0 < args.duration < float("inf"):
+        # 0 and NaN would run for ever (``or inf``), a negative one end at once as if the server were gone
+        raise TwinInputError(f"--duration must be a finite number of seconds > 0, got {args.duration:g}")
+    if args.thermometers is not None:
+        # one thermometer twice would be one reading fused as two (and a replay server's node made twice)
+        check_distinct("--thermometers", split_names(args.thermometers), "thermometer")
+
+
 class _Ended(Exception):
     """The session ended early, already explained on stderr, with the exit code ``code``."""
 
@@ -381,11 +443,7 @@ def cmd_live(args: argparse.Namespace) -> int:
         observer's estimate was not finite; :data:`EXIT_INTERRUPTED` after Ctrl-C (each with the reason on
         stderr, naming the partial log the session left, if any).
     """
-    if not 0.0 <= args.late_after < float("inf"):
-        raise TwinInputError(f"--late-after must be a finite number of seconds ≥ 0, got {args.late_after:g}")
-    if args.duration is not None and not 0.0 < args.duration < float("inf"):
-        # 0 and NaN would run for ever (``or inf``), a negative one end at once as if the server were gone
-        raise TwinInputError(f"--duration must be a finite number of seconds > 0, got {args.duration:g}")
+    _check_options(args)
     from pathlib import Path
 
     if args.state:
@@ -449,7 +507,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--order", type=int, default=DEFAULT_ORDER, help=f"ROM order (default {DEFAULT_ORDER})")
     p.add_argument("--log", help="CSV log of the estimates (µm), written as FILE.part and renamed to FILE when the "
                                  "session ends as asked (an interrupted or failed one leaves FILE.part)")
-    p.add_argument("--duration", type=float, help="stop after this many wall seconds (default: run until stopped)")
+    p.add_argument("--duration", type=float, help="stop after this many wall seconds from the client's start, a replay "
+                                                  "before its end if need be (default: run until stopped, a replay "
+                                                  "until its end)")
     p.add_argument("--late-after", type=float, default=1.0,
                    help="wall seconds to wait for a sample's missing readings before fusing it (default 1)")
     p.add_argument("--at-rest", action="store_true",

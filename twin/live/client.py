@@ -142,6 +142,8 @@ class CsvLog:
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         self.part = partial_path(self.path)
+        # a log in a folder not made yet, as every twin output (``twin live`` checked that it can be made)
+        self.part.parent.mkdir(parents=True, exist_ok=True)
         self.file = open(self.part, "w", encoding="utf-8")
         self.rows = 0
         cols = ["time_s"] + [f"{a}_{k}_um" for a in AXES for k in ("estimate", "band95", "compensation")]
