@@ -53,6 +53,10 @@ MESHING_FIXED_S = 45.0
 MESHING_S_PER_TET = 0.014
 #: Smallest target edge length accepted, m (0.1 mm: below it a machine's mesh is astronomically large).
 MIN_MESH_SIZE_M = 1e-4
+#: Largest target edge length accepted, m: half a metre is coarser than any part of a machine tool is thick (the
+#: shipped machines' walls, spindles and slides are 0.02-0.3 m), so no useful mesh is coarser, while a size
+#: typed in mm (35 for 35 mm) is above it and would start meshing a 2.5 m machine with 35 m tetrahedra.
+MAX_MESH_SIZE_M = 0.5
 #: Most tetrahedra a mesh may be expected to have before meshing starts: 20 million is about 400 times the
 #: shipped 45 mm mesh, days of meshing and more memory than the FE's direct solver has on a workstation.
 MAX_TETRAHEDRA = 2e7
@@ -124,13 +128,32 @@ def check_mesh_size(size_m: float) -> float:
     Raises
     ------
     DefinitionError
-        If it is not a finite length of at least :data:`MIN_MESH_SIZE_M`.
+        If it is not a finite length from :data:`MIN_MESH_SIZE_M` to :data:`MAX_MESH_SIZE_M`.
     """
     size = float(size_m)
-    if not (np.isfinite(size) and size >= MIN_MESH_SIZE_M):
-        raise DefinitionError(f"mesh size must be a finite length ≥ {MIN_MESH_SIZE_M:g} m "
-                              f"({MIN_MESH_SIZE_M * 1e3:g} mm), got {size_m!r} m")
+    if not (np.isfinite(size) and MIN_MESH_SIZE_M <= size <= MAX_MESH_SIZE_M):
+        raise DefinitionError(f"mesh size must be a finite length from {MIN_MESH_SIZE_M:g} m "
+                              f"({MIN_MESH_SIZE_M * 1e3:g} mm) to {MAX_MESH_SIZE_M:g} m, got {size_m!r} m"
+                              f"{mm_hint(size)}")
     return size
+
+
+def mm_hint(size_m: float) -> str:
+    """A hint that a mesh size over :data:`MAX_MESH_SIZE_M` was typed in mm, when it is a plausible size in mm.
+
+    Parameters
+    ----------
+    size_m : float
+        The mesh size as given, read in m.
+
+    Returns
+    -------
+    str
+        ``"; is it in mm? …"``, or ``""``.
+    """
+    if size_m > MAX_MESH_SIZE_M and MIN_MESH_SIZE_M <= size_m * 1e-3 <= MAX_MESH_SIZE_M:
+        return f"; is it in mm? {size_m:g} mm is a mesh size of {size_m * 1e-3:g} m"
+    return ""
 
 
 def _check_feasible(geometry, size_m, tets, seconds):

@@ -79,6 +79,13 @@ FAST_DRIFT_UM_PER_S = 0.5        # 1.8 mm/h
 #: "days" in steps of 16.7 "h".
 SLOW_RECORD_STEP_S = 3600.0
 SLOW_RECORD_SPAN_S = 30 * 86400.0
+#: Longest stretch, s, that ``nan_policy="interpolate"`` fills without a warning (the straight line's length, from
+#: the reading before a run of NaNs to the one after it).  The fastest thermal time constants of a machine tool
+#: (spindle housing, ball screw nut) are 10 to 30 min: a straight line over 10 min misses a small part of their
+#: drift, one over longer can hide a spindle start or stop.  In time, not rows, since loggers sample every second
+#: to every few minutes.  Its first reading held back over longer than this is refused: the first row is the
+#: reference of a record's changes.
+QUIET_FILL_S = 600.0
 
 
 def project_version() -> str:
@@ -410,7 +417,9 @@ class Dataset:
             (see :mod:`twin.core.clock`).
         nan_policy : str
             ``error`` (default), ``interpolate`` (linear in time, per channel;
-            leading/trailing NaNs are held), ``drop`` (rows with any NaN) or
+            leading/trailing NaNs are held; a filled stretch longer than :data:`QUIET_FILL_S` is warned of, and
+            so is a filled first row, refused when held back over longer; counts in the import report's
+            ``filled``), ``drop`` (rows with any NaN) or
             ``keep`` (leave them; the caller masks them, as the gap diagnosis does).
         channel_kinds : dict of str to str, optional
             Channel name → kind, overriding the unit-based default.
@@ -428,7 +437,8 @@ class Dataset:
         ------
         TwinInputError
             One line naming the file, the column and the row of the first bad value; a sensor value outside
-            :data:`~twin.core.plausible.PLAUSIBLE` (kelvin under ``_degC``, nm under ``_um``) is one.
+            :data:`~twin.core.plausible.PLAUSIBLE` (kelvin under ``_degC``, nm under ``_um``) is one, and so is a
+            data row with more or fewer fields than the header (a file cut short).
         """
         path = Path(path)
         if nan_policy not in NAN_POLICIES:
@@ -630,13 +640,51 @@ def _apply_nan_policy(path, time_s, values, channels, nan_policy, report, about)
         report["dropped_rows"] = int((~keep).sum())
         return time_s[keep], values[keep]
     if nan_policy == "interpolate":
-        for k in about:
-            bad = np.isnan(values[:, k])
-            if bad.all():
-                raise TwinInputError(f"{path}: column {channels[k].column!r} holds no value at all")
-            if bad.any():
-                values[bad, k] = np.interp(time_s[bad], time_s[~bad], values[~bad, k])
+        report["filled"] = {channels[k].name: _interpolated(path, time_s, values[:, k], channels[k].column)
+                            for k in about if counts[channels[k].name]}
     return time_s, values
+
+
+def _interpolated(path, time_s, column, name):
+    """Fill the NaNs of ``column`` (one channel's values, changed in place) linearly in time, holding its first
+    and last readings beyond them; warn of a run longer than :data:`QUIET_FILL_S` and of a first row filled.
+
+    Returns ``{"values": filled, "longest_run_rows": rows, "longest_run_s": s}`` for the import report."""
+    bad = np.isnan(column)
+    if bad.all():
+        raise TwinInputError(f"{path}: column {name!r} holds no value at all")
+    runs = _nan_runs(time_s, bad)
+    if runs[0][0] == 0:
+        _check_reference_fill(path, time_s, name, runs[0])
+    column[bad] = np.interp(time_s[bad], time_s[~bad], column[~bad])
+    start, stop, span_s = max(runs, key=lambda run: run[2])
+    if span_s > QUIET_FILL_S:
+        log.warning("%s: column %r: nan_policy='interpolate' filled %d rows in a row with a straight line over "
+                    "%.2g h (t = %g … %g s; %d values filled in all): the drift in a gap that long is a guess",
+                    path, name, stop - start, span_s / 3600.0, time_s[start], time_s[stop - 1], bad.sum())
+    return {"values": int(bad.sum()), "longest_run_rows": stop - start, "longest_run_s": span_s}
+
+
+def _nan_runs(time_s, bad):
+    """``[(first row, row after the last, s bridged), …]`` of the runs of True in ``bad``: s from the reading
+    before the run to the one after it (from the first row, or to the last, at the record's ends)."""
+    edges = np.diff(np.concatenate(([0], bad.astype(np.int8), [0])))
+    last = len(time_s) - 1
+    return [(int(a), int(b), float(time_s[min(b, last)] - time_s[max(a - 1, 0)]))
+            for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]
+
+
+def _check_reference_fill(path, time_s, name, run):
+    """Filling a channel's first rows holds its first reading back to the record's first row, the reference its
+    changes are taken from (an extrapolation): warned of up to :data:`QUIET_FILL_S`, refused beyond."""
+    _, first, span_s = run
+    where = f"{path}: column {name!r} has no reading before t = {time_s[first]:g} s ({first} rows, {span_s:g} s)"
+    if span_s > QUIET_FILL_S:
+        raise TwinInputError(f"{where}: nan_policy='interpolate' would hold that reading back to the first row, "
+                             "the reference of the record's changes; cut the record to start at its first reading "
+                             "or choose nan_policy='drop'")
+    log.warning("%s: nan_policy='interpolate' holds that reading back to the first row, the reference of the "
+                "record's changes", where)
 
 
 def hours_hint(dataset: Dataset, names: Sequence[str], column: str = "time_s") -> str | None:
@@ -765,19 +813,54 @@ def _read_utf8(path):
                              "save the CSV as UTF-8") from None
 
 
+def other_separator_text(header: Sequence[str]) -> str | None:
+    """What is wrong with a CSV header read as one column holding semicolons or tabs (a spreadsheet's export in
+    another separator), or None.
+
+    Parameters
+    ----------
+    header : sequence of str
+        The column names as a comma-separated reader found them.
+
+    Returns
+    -------
+    str or None
+        ``"the header '…' is separated by ';'; the twin reads comma-separated files …"``.
+    """
+    other = next((sep for sep in (";", "\t") if len(header) == 1 and sep in header[0]), None)
+    if other is None:
+        return None
+    return (f"the header {header[0]!r} is separated by {other!r}; the twin reads comma-separated files with '.' as "
+            "the decimal mark: export the file so")
+
+
 def _check_header_once(path, text):
     """Refuse a header that names a column twice (pandas would rename the second ``X.1`` and read both), or that
     is one column holding semicolons or tabs (a spreadsheet's export in another separator)."""
     named = [h.strip() for h in next(csv.reader(io.StringIO(text)), [])]
-    other = next((sep for sep in (";", "\t") if len(named) == 1 and sep in named[0]), None)
+    other = other_separator_text(named)
     if other is not None:
-        raise TwinInputError(f"{path}: the header {named[0]!r} is separated by {other!r}; the twin reads comma-separated "
-                             "files with '.' as the decimal mark: export the file so")
+        raise TwinInputError(f"{path}: {other}")
     twice = next((h for i, h in enumerate(named) if h in named[:i]), None)
     if twice is not None:
         where = [i + 1 for i, h in enumerate(named) if h == twice]
         raise TwinInputError(f"{path}: column {twice!r} appears {len(where)} times (columns "
                              f"{', '.join(map(str, where))}); give each channel once")
+
+
+def _check_row_lengths(path, text):
+    """Refuse a data row with fewer or more fields than the header: pandas fills a row cut short (the last one of a
+    file copied while the logger wrote it) with NaNs, read as missing or, cut mid-number, as a wrong value."""
+    reader = csv.reader(io.StringIO(text))
+    fields = [(reader.line_num, len(row)) for row in reader if row]   # blank lines are skipped, as pandas does
+    if not fields:
+        return
+    expected = fields[0][1]
+    row = next((i for i, (_, n) in enumerate(fields) if n != expected), None)
+    if row is not None:
+        line, n = fields[row]
+        cut = " (cut short? it is the file's last row)" if row == len(fields) - 1 and n < expected else ""
+        raise TwinInputError(f"{path}: data row {row} (line {line}) has {n} fields, the header {expected}{cut}")
 
 
 def _parse_csv(path, text, time_column=None):
@@ -791,6 +874,7 @@ def _parse_csv(path, text, time_column=None):
     # pandas ≥ 3 parses floats exactly by default; older versions need round_trip.
     exact = {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"}
     _check_header_once(path, text)
+    _check_row_lengths(path, text)
     try:
         frame = pd.read_csv(io.StringIO(text), skipinitialspace=True, **exact)
     except pd.errors.EmptyDataError:

@@ -23,7 +23,7 @@ import numpy as np
 
 from meshes.tomlspec import DefinitionError, Table, plain_value, read_toml, resolve_definition
 
-from .dataset import other_time_unit_text
+from .dataset import other_separator_text, other_time_unit_text
 
 if TYPE_CHECKING:   # for annotations only: a scenario is read without its machine
     from .machine_definition import MachineDefinition
@@ -43,6 +43,13 @@ BYTES_PER_STEP = 8 * 16 * 6
 #: would cover the scenario up to this many times over; a file in s that is short, but not 8× short, is just
 #: short (a file 0 … 72000 s under a 24 h scenario is not a 50-day record in minutes).
 UNIT_GUESS_MAX_COVER = 8.0
+#: An ambient CSV of more than COARSE_LOG_READINGS readings, fewer than 2 of which fall within the scenario's
+#: 0 … duration, while its times divided by 1000 would put 2 or more inside and still reach the end, is refused as
+#: a log in ms under a header in s (72 h of 10-min readings in ms: steps of 600000 "s", 1 reading in a 6 h ETVE,
+#: which the twin would replay as a straight line). A longer log in s has many readings inside (a week of 1-min
+#: readings: 361 in 6 h); a short hand-written profile, or a log really coarser than the scenario (daily readings
+#: for a 6 h run), is taken as written: between readings the twin interpolates, as it says.
+COARSE_LOG_READINGS = 10
 TOP_KEYS = {"scenario", "initial", "ambient", "segments", "events", "noise", "outputs", "iso230_3"}
 
 
@@ -645,7 +652,8 @@ def _ambient_csv(a: Table, base_dir: Path, swing: float, duration_s: float):
         raise a.error("file", f"could not be read as CSV ({exc})", str(path)) from None
     for col in (time_col, value_col):
         if col not in frame.columns:
-            raise DefinitionError(f"{a.where('file')} {path}: no column {col!r}; columns: {list(frame.columns)}")
+            raise DefinitionError(f"{a.where('file')} {path}: no column {col!r}; "
+                                  f"{other_separator_text(list(frame.columns)) or f'columns: {list(frame.columns)}'}")
     t = pd.to_numeric(frame[time_col], errors="coerce").to_numpy(float)
     v = pd.to_numeric(frame[value_col], errors="coerce").to_numpy(float)
     if len(t) == 0:
@@ -662,6 +670,7 @@ def _ambient_csv(a: Table, base_dir: Path, swing: float, duration_s: float):
                               f"row {k + 3} has {t[k + 1]:g} after {t[k]:g}")
     _check_with_ripple(v, swing, f"{a.where('file')} {path}", lambda i: f": column {value_col!r}, row {i + 2}")
     _check_covers(f"{a.where('file')} {path}", time_col, t, duration_s)
+    _check_readings_inside(f"{a.where('file')} {path}", time_col, t, duration_s)
     return {"times_s": t, "values_C": v}
 
 
@@ -694,6 +703,23 @@ def _check_covers(where: str, column: str, t: np.ndarray, duration_s: float) -> 
         raise DefinitionError(f"{where}: column {column!r} starts at {t[0]:g} s, after the scenario's start (0 s), "
                               "and before it the twin would hold the first reading: the times count from the "
                               f"scenario's start; subtract {t[0]:g} s (clock times?) or add a reading at 0 s")
+
+
+def _check_readings_inside(where: str, column: str, t: np.ndarray, duration_s: float) -> None:
+    """Refuse an ambient log of many readings (over :data:`COARSE_LOG_READINGS`) that, covering the scenario
+    (:func:`_check_covers`), has fewer than 2 of its times ``t`` (s, increasing) within 0 … ``duration_s`` s, when
+    the same times in ms would put 2 or more inside and reach the scenario's end: the scenario would see a straight
+    line between two readings of a log in ms."""
+    def inside(times):
+        return int(np.count_nonzero((times >= 0.0) & (times <= duration_s)))
+
+    in_ms = t * 1e-3
+    if inside(t) >= 2 or len(t) <= COARSE_LOG_READINGS or in_ms[-1] < duration_s or inside(in_ms) < 2:
+        return
+    raise DefinitionError(f"{where}: column {column!r} has {inside(t)} of its {len(t)} readings within the "
+                          f"scenario's 0 … {duration_s:g} s ({duration_s / HOUR:g} h), readings {np.median(np.diff(t)):g} "
+                          "s apart, and the twin would replay a straight line between two of them: the times look "
+                          "like ms: write them in s (× 1e-3)")
 
 
 def _memory_limit_bytes():

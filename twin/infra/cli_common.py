@@ -80,18 +80,26 @@ def mesh_size(text: str) -> float:
     Returns
     -------
     float
-        The length, m, at least :data:`meshes.builder.MIN_MESH_SIZE_M`.
+        The length, m, from :data:`meshes.builder.MIN_MESH_SIZE_M` to :data:`meshes.builder.MAX_MESH_SIZE_M`; a
+        larger one is refused before any meshing, with a hint when it reads as mm.
     """
     from meshes.builder import (  # heavy (pyvista): only when the option is given
+        MAX_MESH_SIZE_M,
         MIN_MESH_SIZE_M,
         check_mesh_size,
+        mm_hint,
     )
 
     try:
-        return check_mesh_size(float(text))
+        size = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a mesh size: give a finite length in m, at least "
-                                         f"{MIN_MESH_SIZE_M:g} m ({MIN_MESH_SIZE_M * 1e3:g} mm)") from None
+        size = float("nan")   # refused below with the bounds, as a NaN is
+    try:
+        return check_mesh_size(size)
+    except ValueError:   # meshes' DefinitionError
+        raise argparse.ArgumentTypeError(f"{text!r} is not a mesh size: give a finite length in m, from "
+                                         f"{MIN_MESH_SIZE_M:g} m ({MIN_MESH_SIZE_M * 1e3:g} mm) to "
+                                         f"{MAX_MESH_SIZE_M:g} m{mm_hint(size)}") from None
 
 
 def check_out_file(args: argparse.Namespace, inputs: tuple = (), suffix: str | None = None) -> None:
