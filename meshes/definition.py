@@ -11,7 +11,7 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .builder import BUILDER_VERSION, MIN_MESH_SIZE_M
+from .builder import BUILDER_VERSION, MAX_MESH_SIZE_M, MIN_MESH_SIZE_M
 from .shapes import Box, Cylinder, HollowBox, StlPart
 from .tomlspec import DefinitionError, Table, duplicates, read_toml, resolve_definition
 
@@ -231,7 +231,7 @@ def read_geometry(root: Table, path: Path) -> MachineGeometry:
     return MachineGeometry(
         name=name,
         parts=parts,
-        mesh_size_m=mesh.number("size_m", DEFAULT_MESH_SIZE_M, minimum=MIN_MESH_SIZE_M),
+        mesh_size_m=mesh.number("size_m", DEFAULT_MESH_SIZE_M, minimum=MIN_MESH_SIZE_M, maximum=MAX_MESH_SIZE_M),
         envelope_epsilon=mesh.number("envelope_epsilon", 1e-4, minimum=1e-6, maximum=1e-2),
         stop_energy=mesh.number("stop_energy", 10.0, minimum=3.0),
         source=str(path),

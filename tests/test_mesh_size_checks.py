@@ -42,3 +42,14 @@ def test_a_mesh_too_fine_to_build_is_refused_before_meshing(monkeypatch, tmp_pat
         build_mesh(geometry, size)
     smallest = float(str(exc.value).rsplit("at least ", 1)[1].split()[0]) * 1e-3
     assert meshing_estimate(geometry, smallest)[0] <= MAX_TETRAHEDRA < meshing_estimate(geometry, 0.99 * smallest)[0]
+
+
+def test_a_machine_file_mesh_size_in_mm_is_refused_naming_the_field(tmp_path):
+    """``size_m = 35`` (35 mm typed as a number of mm) had started meshing the machine with 35 m tetrahedra."""
+    text = MINI.read_text().replace("size_m = 0.06", "size_m = 35")
+    for stl in MINI.parent.glob("*.stl"):          # the machine's parts are read relative to its file
+        (tmp_path / stl.name).write_bytes(stl.read_bytes())
+    path = tmp_path / "mini_machine.toml"
+    path.write_text(text)
+    with pytest.raises(DefinitionError, match=r"mesh\.size_m.*35"):
+        load_geometry(path)
