@@ -69,12 +69,18 @@ from .speed import STANDSTILL_FRACTION, STANDSTILL_RPM, running
 
 #: relative tolerance under which the steps count as uniform (then a fast recursive filter is used)
 _UNIFORM_STEP = 1e-9
-#: a step longer than this many times its record's median step is a logging gap, across which the intervals take
-#: the noise as independent (as between records): their autoregression and Bartlett windows count in rows. Below it
-#: are jitter and irregular loggers (steps of 20–180 s are at most 1.8× their median) and a few readings missed;
-#: an hour's gap at 60 s is 60×. The gap diagnosis's outages (twin.gap.outages.OUTAGE_FACTOR) take the same 5×. The
-#: simulation steps over a gap exactly whatever its length.
+#: a step longer than this many times its record's median step, and than :data:`_GAP_MIN_S`, is a logging gap, across
+#: which the intervals take the noise as independent (as between records): their autoregression and Bartlett windows
+#: count in rows. Below it are jitter and irregular loggers (steps of 20–180 s are at most 1.8× their median) and a
+#: few readings missed; an hour's gap at 60 s is 60×. The same two conditions as the gap diagnosis's outages
+#: (twin.gap.outages.as_long_as_an_outage: OUTAGE_FACTOR and OUTAGE_MIN_S; models do not import twin). The simulation
+#: steps over a gap exactly whatever its length.
 _GAP_STEPS = 5.0
+#: the shortest logging gap, s (the gap diagnosis's OUTAGE_MIN_S): a logger that switches between two rates (10 s
+#: and 60 s) has steps 6× its median that are no gap; cut there, its record fell into runs of a few rows in which
+#: no autoregression sees a correlation of 30 min, and the intervals came out ~6× too narrow. Shorter than the
+#: structure's time constants (tens of minutes and more), such a step leaves neighbouring residuals correlated.
+_GAP_MIN_S = 600.0
 #: smallest ratio of successive time constants: coinciding poles make the gains ill-posed (two huge,
 #: cancelling gains imitate a derivative that extrapolates wildly)
 _MIN_RATIO = 2.0
@@ -637,11 +643,12 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
     def _fitted_segments(used, records, time):
         """``[start, stop)``, counted in the fitted rows (``used``), of each run of consecutive rows inside one
         record and between its logging gaps (a step of ``time``, s, over :data:`_GAP_STEPS` times the record's
-        median step): the stretches along which a residual follows the one before it in time."""
+        median step and at least :data:`_GAP_MIN_S`): the stretches along which a residual follows the one before it
+        in time."""
         stretches = []
         for start, stop in records:
             steps = np.diff(time[start:stop])
-            gaps = start + 1 + np.flatnonzero(steps > _GAP_STEPS * np.median(steps))
+            gaps = start + 1 + np.flatnonzero((steps > _GAP_STEPS * np.median(steps)) & (steps >= _GAP_MIN_S))
             stretches += pairwise([start, *gaps.tolist(), stop])
         return consecutive_runs(used, stretches)
 
@@ -662,8 +669,7 @@ class GreyBoxRegressor(RegressorMixin, BaseEstimator):
         to_log[:n_poles, :n_poles] = _log_time_constant_jacobian(best.x[:n_poles], *log_bounds)
         covariance, dof = sandwich_covariance(best.jac.reshape(n_rows, -1, k), best.fun.reshape(n_rows, -1), segments,
                                               n_fitted, read, transform=to_log)
-        half = (half_widths(covariance, dof, INTERVAL_LEVEL) if np.all(np.isfinite(covariance))
-                else np.full(k, np.inf))
+        half = half_widths(covariance, dof, INTERVAL_LEVEL)   # infinite for a quantity the data do not determine
         tau = self.time_constants_
         # symmetric in log τ; a half-width past the bounds' whole span reaches them anyway (and e^inf overflows)
         factor = np.exp(np.minimum(half[:n_poles], np.ptp(log_bounds)))

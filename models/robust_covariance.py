@@ -17,10 +17,12 @@ assumes white residuals; an output error that lasts hours makes it several times
    derived), with ``n_eff`` its effective number of independent rows (``n γ₀ / long-run variance``) and ``k``
    its share of the parameters fitted (its leverage ``trace(J_o (JᵀJ)⁻¹ J_oᵀ)``, plus an equal share of the
    profiled ones); an interval takes Student's t with Welch–Satterthwaite's degrees of freedom over the
-   outputs' parts of its variance, ``n_eff − k`` with one output. Pooling ``n_eff`` over the outputs instead let
-   a noisy white thermometer that hardly sets τ add thousands of independent rows, which undid both corrections
-   for the drift that does: the observer form's intervals covered 79–81 % with a thermometer of 0.3 K, 88–89 %
-   now.
+   outputs' parts of its variance, ``n_eff − k`` with one output. An output with ``n_eff ≤ k`` has no scale that
+   can be estimated: its part stays in the variance unscaled and out of that count, and makes undetermined only a
+   quantity whose variance it makes more than :data:`MAX_UNSCALED_SHARE` of. Pooling ``n_eff`` over the outputs
+   instead let a noisy white thermometer that hardly sets τ add thousands of independent rows, which undid both
+   corrections for the drift that does: the observer form's intervals covered 79–81 % with a thermometer of 0.3 K,
+   88–89 % now.
 
 On a grey-box fit of a known 2-node network with AR(1) noise of 30 min correlation (48 h at 60 s), the Bartlett
 estimator alone covered the time constants and the exponent 69–73 % of the time at a nominal 90 %, this one
@@ -45,6 +47,16 @@ from scipy.special import stdtrit
 #: prewhitened, whose lag-1 correlation is often above 0.97, and its coverage was checked with 0.99; the prewhitened
 #: scores here seldom come near either cap
 MAX_PLUG_IN_RHO = 0.99
+#: largest relative error of the leverage traces' sum, which is the number of parameters for an exact ``(JᵀJ)⁻¹``:
+#: rounding leaves ~1e-12 for a well-posed fit; a JᵀJ of condition ~1e16 gives errors of order 1
+LEVERAGE_TOLERANCE = 1e-6
+#: largest fraction of a quantity's variance that outputs whose scale cannot be estimated (no more independent rows
+#: than their share of the parameters) may make, unscaled, before the quantity is called undetermined. Below it,
+#: that part (whose scale factor, unknown, is > 1) would have to be underestimated three-fold for the standard error
+#: to be 1.095× too small (√(0.9 + 3 × 0.1)), which leaves a nominal 90 % interval covering 86.6 % (a normal
+#: quantity): within the 78–93 % the estimator covers on the bench. Kept unscaled in the covariance: leaving it out
+#: would narrow the interval further
+MAX_UNSCALED_SHARE = 0.1
 
 
 def sandwich_covariance(jacobian: NDArray[np.float64], residuals: NDArray[np.float64],
@@ -77,10 +89,12 @@ def sandwich_covariance(jacobian: NDArray[np.float64], residuals: NDArray[np.flo
     Returns
     -------
     covariance : ndarray, shape (m, m)
-        Of the transformed parameters, in their units squared; infinite where an output's data hold no more
-        independent rows than its share of the parameters, or the Jacobian is singular.
+        Of the transformed parameters, in their units squared. Infinite (rows and columns) for a quantity more than
+        :data:`MAX_UNSCALED_SHARE` of whose variance comes from outputs whose data hold no more independent rows than
+        their share of the parameters; for all if every output is such, or the Jacobian is (nearly) singular.
     dof : ndarray, shape (m,)
-        Degrees of freedom of a Student t interval on each (> 0): with one output ``n_eff − n_fitted``.
+        Degrees of freedom of a Student t interval on each (> 0): with one output ``n_eff − n_fitted``; 1 where
+        the variance is infinite.
     """
     if read is not None:   # keep the rows some output read: a row nobody read is a break in time
         any_read = read.any(axis=1)
@@ -96,27 +110,39 @@ def sandwich_covariance(jacobian: NDArray[np.float64], residuals: NDArray[np.flo
         bread = np.linalg.inv(J.T @ J)
     except np.linalg.LinAlgError:
         return _undetermined(len(transform))
-    # an output read nowhere adds no scores; one with as many parameters as independent rows has its noise fitted
-    # exactly, and the variance it adds cannot be told
-    shares = _fitted_shares(jacobian, bread, n_fitted)
-    informed = [(score, n_eff, share) for (score, n_eff), share in zip(whitened, shares) if n_eff > 0]
-    if not informed or not all(n_eff > share for _, n_eff, share in informed):
-        return _undetermined(len(transform))
-    scores = [score * (n_eff / (n_eff - share)) for score, n_eff, share in informed]
-    sandwich = transform @ bread
-    covariance = sandwich @ bartlett_long_run(sum(scores), segments) @ sandwich.T
-    return covariance, _welch_satterthwaite(sandwich, scores, [n_eff - share for _, n_eff, share in informed],
-                                            segments)
-
-
-def _fitted_shares(jacobian, bread, n_fitted):
-    """Each output's share of the parameters fitted: its leverage ``trace(J_o (JᵀJ)⁻¹ J_oᵀ)`` on its rows (in the
-    fit's units; the shares of the Jacobian's parameters sum to their number) plus an equal share of the profiled
-    ones. The fit absorbs an output's noise into the parameters it sets, not into those another output sets."""
-    n_parameters = jacobian.shape[2]
+    # each output's share of the parameters fitted: its leverage trace(J_o (JᵀJ)⁻¹ J_oᵀ) on its rows plus an equal
+    # share of the profiled ones (the fit absorbs an output's noise into the parameters it sets, not another's)
     leverage = np.einsum("tok,kj,toj->o", jacobian, bread, jacobian)
-    # the traces sum to n_parameters up to rounding: made exact, one output's share is n_fitted, as it always was
-    return n_parameters * (leverage / leverage.sum()) + (n_fitted - n_parameters) / jacobian.shape[1]
+    # the traces sum to n_parameters for an exact inverse; a near-singular JᵀJ (condition ~1e16) inverts without an
+    # error but not to its inverse, and normalising the shares would hide it behind variances of ~1e14
+    if not abs(leverage.sum() - n_parameters) <= LEVERAGE_TOLERANCE * n_parameters:
+        return _undetermined(len(transform))
+    shares = n_parameters * (leverage / leverage.sum()) + (n_fitted - n_parameters) / len(leverage)
+    # an output with no more independent rows than its share of the parameters has its noise fitted (nearly)
+    # exactly: the variance its scores make cannot be scaled up, nor its degrees of freedom counted
+    estimable = np.array([n_eff > share for (_, n_eff), share in zip(whitened, shares)])
+    if not estimable.any():
+        return _undetermined(len(transform))
+    scaled = [score * (n_eff / (n_eff - share)) if ok else score
+              for (score, n_eff), share, ok in zip(whitened, shares, estimable)]
+    sandwich = transform @ bread
+    covariance = sandwich @ bartlett_long_run(sum(scaled), segments) @ sandwich.T
+    parts = np.array([np.diag(sandwich @ bartlett_long_run(score, segments) @ sandwich.T) for score in scaled])
+    dof = _welch_satterthwaite(parts[estimable], [n_eff - share for (_, n_eff), share, ok
+                                                  in zip(whitened, shares, estimable) if ok])
+    return _without_unscalable(covariance, dof, parts[~estimable].sum(axis=0))
+
+
+def _without_unscalable(covariance, dof, unscalable):
+    """``(covariance, dof)`` with each quantity undetermined (infinite variance, 1 degree of freedom) whose
+    variance the outputs that cannot be scaled (their parts ``unscalable``, unscaled) make more than
+    :data:`MAX_UNSCALED_SHARE` of. A smaller part stays in the covariance unscaled (leaving it out would narrow the
+    interval further) and out of the degrees of freedom."""
+    undetermined = unscalable > MAX_UNSCALED_SHARE * np.diag(covariance)
+    covariance, dof = covariance.copy(), dof.copy()
+    covariance[undetermined, :] = covariance[:, undetermined] = np.inf
+    dof[undetermined] = 1.0
+    return covariance, dof
 
 
 def _undetermined(n_parameters):
@@ -124,12 +150,11 @@ def _undetermined(n_parameters):
     return np.full((n_parameters, n_parameters), np.inf), np.ones(n_parameters)
 
 
-def _welch_satterthwaite(sandwich, scores, dofs, segments):
-    """Degrees of freedom of each transformed parameter's variance, a sum of the outputs' parts ``V_o`` (the
-    sandwich of output o's scores alone), each with ``n_eff_o − share_o`` of its own: ``(Σ V_o)² / Σ V_o² / dof_o``.
-    The cross-output terms are left out of this count (their expectation is 0 for independent noises), not of the
-    covariance."""
-    parts = np.array([np.diag(sandwich @ bartlett_long_run(score, segments) @ sandwich.T) for score in scores])
+def _welch_satterthwaite(parts, dofs):
+    """Degrees of freedom of each transformed parameter's variance, a sum of the outputs' parts ``V_o`` (rows of
+    ``parts``: the sandwich of output o's scores alone), each with ``n_eff_o − share_o`` of its own (``dofs``):
+    ``(Σ V_o)² / Σ V_o² / dof_o``. The cross-output terms are left out of this count (their expectation is 0 for
+    independent noises), not of the covariance."""
     dofs = np.asarray(dofs)[:, None]
     spread = np.sum(parts ** 2 / dofs, axis=0)
     # a quantity no output varies has a variance of 0, whatever its degrees of freedom

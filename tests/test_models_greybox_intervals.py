@@ -98,7 +98,7 @@ def test_a_thermometer_noisier_than_its_signal_leaves_the_intervals_of_the_drift
     white noise of 20 K, which tells next to nothing of τ and b. Its thousands of independent rows must not narrow
     the intervals: each output's noise is scaled by its own n_eff against its own share of the fit, and the degrees
     of freedom are Welch–Satterthwaite's over the outputs. Measured: median width ratios to the drift alone's
-    1.06 / 1.01 / 0.99 (τ₁ / τ₂ / b); 0.92 / 0.93 / 0.85 with n_eff pooled over the outputs. (A thermometer of
+    1.06 / 1.01 / 0.99 (τ₁ / τ₂ / b); narrower with n_eff pooled over the outputs. (A thermometer of
     0.3–10 K does narrow them, rightly: at 0.3 K they cover 88–89 %, ``bench/greybox_intervals.py --observer``.)"""
     X, drift = thermometer_network
     [(_, alone)] = coverage_draws(X[:, :3], drift, coloured, draws=8)
@@ -238,3 +238,75 @@ def test_the_sandwich_covers_a_trend_under_ar1_noise_where_gauss_newton_does_not
         white = residual @ residual / (len(t) - 2) * np.linalg.inv(design.T @ design)
         gauss_newton.append(abs(coef[1] - 2.0) <= 1.645 * np.sqrt(white[1, 1]))
     assert 0.8 <= np.mean(sandwich) <= 0.97 and np.mean(gauss_newton) < 0.4
+
+
+def log_half_widths(model):
+    """Half-widths of the intervals on log τ₁, log τ₂ and on b (b's relative to b)."""
+    tau = model.time_constants_interval_
+    return np.r_[np.log(tau[:, 1] / tau[:, 0]) / 2.0, np.ptp(model.exponent_interval_) / 2.0 / model.exponent_]
+
+
+@pytest.fixture(scope="module")
+def drift_alone(network):
+    """The coverage check's noise on the drift (seed 3), and the drift-alone fit's half-widths."""
+    X, drift = network
+    y = drift + coloured(np.random.default_rng(3), len(drift))
+    return y, log_half_widths(GreyBoxRegressor(n_poles=2, temperature_inputs=(2,)).fit(X, y))
+
+
+def test_a_thermometer_whose_bias_wanders_for_a_day_leaves_the_drifts_intervals(thermometer_network, drift_alone):
+    """The thermometer's error wanders over 24 h (AR(1), 0.05 K) and it weighs 0.01: its residual holds ~4 independent
+    rows against its 6 parameters, so its variance cannot be scaled; it makes a sliver of the variance of τ and b,
+    which keep the drift's intervals (was: all the whole range, not determined)."""
+    X, drift = thermometer_network
+    y, alone = drift_alone
+    read = X.copy()
+    read[:, 3] += ar1_noise(np.random.default_rng(4), len(drift), 0.05, 24 * 3600.0)
+    model = GreyBoxRegressor(n_poles=2, temperature_inputs=(2,), observed=(3,), observed_weight=0.01).fit(read, y)
+    np.testing.assert_allclose(log_half_widths(model), alone, rtol=0.05)
+
+
+def test_a_thermometer_read_on_six_rows_leaves_the_drifts_intervals(thermometer_network, drift_alone):
+    X, _ = thermometer_network
+    y, alone = drift_alone
+    read = X.copy()
+    read[np.arange(len(X)) % (len(X) // 6) != 0, 3] = np.nan
+    assert np.isfinite(read[:, 3]).sum() == 6
+    model = GreyBoxRegressor(n_poles=2, temperature_inputs=(2,), observed=(3,)).fit(read, y)
+    np.testing.assert_allclose(log_half_widths(model), alone, rtol=0.05)
+
+
+def test_a_logger_with_two_sampling_rates_is_one_stretch_of_noise(monkeypatch):
+    """Steps of 10, 10, 10, 60, 60 s over 36 h: a 60 s step is 6× the median but 10 min short of the shortest gap, so
+    the record stays one stretch, and its intervals are those of the gap rule switched off (was: 1729 stretches of
+    at most 4 rows, in which no autoregression sees the noise's 30 min correlation: intervals ~6× narrower)."""
+    times = np.cumsum(np.tile([10.0, 10.0, 10.0, 60.0, 60.0], 864)) - 10.0
+    X, drift = record(times, [1500.0, 3000.0, 4500.0])
+    rho = np.exp(-np.diff(times, prepend=0.0) / CORRELATION_S)   # AR(1) in time: 1 µm, 30 min
+    noise, rng = np.zeros(len(times)), np.random.default_rng(5)
+    noise[0] = rng.normal(0.0, NOISE_UM)
+    for row in range(1, len(times)):
+        noise[row] = rho[row] * noise[row - 1] + rng.normal(0.0, NOISE_UM * np.sqrt(1.0 - rho[row] ** 2))
+    assert GreyBoxRegressor._fitted_segments(np.ones(len(times), bool), [(0, len(times))], times) == [(0, len(times))]
+    fitted = log_half_widths(GreyBoxRegressor(n_poles=2, temperature_inputs=(2,)).fit(X[:, :3], drift + noise))
+    monkeypatch.setattr("models.greybox._GAP_STEPS", np.inf)
+    without = log_half_widths(GreyBoxRegressor(n_poles=2, temperature_inputs=(2,)).fit(X[:, :3], drift + noise))
+    assert np.all((fitted > without / 1.5) & (fitted < without * 1.5)), (fitted, without)
+
+
+def test_a_quantity_the_data_do_not_determine_takes_the_whole_range_alone(network, monkeypatch):
+    """The estimator says b alone is undetermined (as when an output whose scale cannot be estimated makes most of
+    its variance): b's interval is the whole range, τ's stay as they were (was: all three the whole range)."""
+    X, drift = network
+    y = drift + coloured(np.random.default_rng(6), len(drift))
+    fitted = GreyBoxRegressor(n_poles=2, temperature_inputs=(2,)).fit(X, y)
+
+    def b_undetermined(*args, **kwargs):
+        covariance, dof = sandwich_covariance(*args, **kwargs)
+        covariance[2, :] = covariance[:, 2] = np.inf
+        return covariance, np.r_[dof[:2], 1.0]
+
+    monkeypatch.setattr("models.greybox.sandwich_covariance", b_undetermined)
+    model = GreyBoxRegressor(n_poles=2, temperature_inputs=(2,)).fit(X, y)
+    np.testing.assert_array_equal(model.exponent_interval_, [0.5, 3.0])
+    np.testing.assert_array_equal(model.time_constants_interval_, fitted.time_constants_interval_)
