@@ -282,8 +282,9 @@ def joined_when_contiguous(datasets: Sequence[Dataset], names: Sequence[str]) ->
 
     A record cut into files (a day per file) is one history: the second file starts warm, so neither a
     time-series model nor a zero reference at its own start fits it alone. The files are found to continue
-    one another by their clocks, not by the order they were given in; where two records start one interval
-    after a third ends, the first of them in the canonical order continues it.
+    one another by their clocks, not by the order they were given in. Where the clocks leave it open (two
+    records end one interval before a third starts, e.g. a file whose clock restarts at 0 beside the first
+    day, or two start one interval after a third ends) nothing is guessed: the records are refused.
 
     Parameters
     ----------
@@ -300,31 +301,69 @@ def joined_when_contiguous(datasets: Sequence[Dataset], names: Sequence[str]) ->
     Raises
     ------
     TwinInputError
-        A record that starts with rows of another again (the same file twice, or files that overlap).
+        A record that starts with rows of another again (the same file twice, or files that overlap), or
+        records whose continuation is ambiguous (naming the files and their times).
     """
     ordered = in_canonical_order(datasets, names)
     _check_no_repeats(ordered, names)
-    runs: list[list[Dataset]] = []
-    tails: list[tuple[float, float]] = []   # per run, its last record's end and sampling interval, s
-    for ds in ordered:   # by start time: a record comes after every record it may continue
-        k = next((k for k, (end, dt) in enumerate(tails) if abs(ds.time_s[0] - end - dt) <= CONTINUES_WITHIN * dt
-                  and _continues(runs[k][-1], ds, names)), None)
-        if k is None:
-            runs.append([ds])
-            tails.append((np.nan, np.nan))
-            k = len(runs) - 1
-        else:
-            log.info("%s continues %s: trained on as one record", dataset_label(ds), dataset_label(runs[k][-1]))
-            runs[k].append(ds)
-        # a record of one row has no interval (NaN), so nothing continues it
-        tails[k] = (float(ds.time_s[-1]), sampling_interval(ds, strict=False) if len(ds) > 1 else np.nan)
+    successor = _successors(ordered, names)
+    continuing = set(successor.values())
     joined = []
-    for run in runs:
-        record = run[0]
-        for later in run[1:]:
-            record = continued_record(record, later, names)
+    for k, record in enumerate(ordered):
+        if k in continuing:
+            continue                     # joined to the record it continues
+        while k in successor:
+            k, earlier = successor[k], ordered[k]
+            log.info("%s continues %s: trained on as one record", dataset_label(ordered[k]), dataset_label(earlier))
+            record = continued_record(record, ordered[k], names)
         joined.append(record)
     return joined
+
+
+def _successors(ordered, names):
+    """``{i: j}``: record ``j`` continues record ``i`` (indices into ``ordered``); refuses ambiguous clocks."""
+    # a record of one row has no interval (NaN), so nothing continues it
+    tails = [(float(ds.time_s[-1]), sampling_interval(ds, strict=False) if len(ds) > 1 else np.nan)
+             if len(ds) else (np.nan, np.nan) for ds in ordered]
+    pairs = [(i, j) for i, (end, dt) in enumerate(tails) for j, later in enumerate(ordered)
+             if i != j and len(later) and abs(later.time_s[0] - end - dt) <= CONTINUES_WITHIN * dt
+             and _continues(ordered[i], later, names)]
+    _check_unambiguous(ordered, pairs)
+    return dict(pairs)
+
+
+def _check_unambiguous(ordered, pairs):
+    """Refuse a record that two or more records could each continue, or that two or more could each be
+    continued by: which history it belongs to would be a guess, and a wrong one joins unrelated states."""
+    for k in sorted({j for _, j in pairs}):
+        before = [ordered[i] for i, j in pairs if j == k]
+        if len(before) > 1:
+            raise TwinInputError(
+                f"{_with_span(before)} each end one sampling interval before {_record_file(ordered[k])} starts "
+                f"(t = {ordered[k].time_s[0]:.10g} s), so which of them it continues is ambiguous; "
+                f"{_HOW_TO_RESOLVE}")
+    for k in sorted({i for i, _ in pairs}):
+        after = [ordered[j] for i, j in pairs if i == k]
+        if len(after) > 1:
+            raise TwinInputError(
+                f"{_with_span(after)} each start one sampling interval after {_record_file(ordered[k])} ends "
+                f"(t = {ordered[k].time_s[-1]:.10g} s), so which of them continues it is ambiguous; "
+                f"{_HOW_TO_RESOLVE}")
+
+
+_HOW_TO_RESOLVE = ("give a history cut into files as one file, or shift the clock (time_s) of a record that "
+                   "does not continue it so that it no longer meets it")
+
+
+def _record_file(dataset):
+    """A record's file name for messages (its label when it has no file)."""
+    source = dataset.metadata.get("source")
+    return Path(str(source)).name if source else dataset_label(dataset)
+
+
+def _with_span(datasets):
+    """``"a.csv (0–29985 s) and b.csv (0–29985 s)"``: records with their time spans."""
+    return " and ".join(f"{_record_file(ds)} ({ds.time_s[0]:.10g}–{ds.time_s[-1]:.10g} s)" for ds in datasets)
 
 
 def _check_no_repeats(ordered, names):

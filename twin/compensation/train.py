@@ -378,6 +378,7 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
         cm, predictions, (kind, problem) = _first_sound_fit(selection, fit, loaded, params or {})
     cm.metadata["training_metrics"] = {label: score(cm.target_values(ds), predicted)
                                        for ds, label, predicted in zip(loaded, distinct_labels(loaded), predictions)}
+    _keep_time_spans(cm, loaded)
     # `twin evaluate` warns of a record far faster than these (SPEED_EXTRAPOLATION)
     cm.metadata["training_top_speed_rpm"] = {name: max(_top_running_speed(ds[name]) for ds in loaded)
                                              for name in _speed_inputs(cm)}
@@ -389,6 +390,15 @@ def train(datasets: Sequence[Dataset | Path | str], inputs: str | list[str], tar
     if out is not None:
         cm.save(out)
     return cm
+
+
+def _keep_time_spans(cm, loaded):
+    """Keep each training record's first and last time (s) and its clock's date-time origin (None for a
+    ``time_s`` clock) in the model file: ``twin evaluate --reference train`` refuses a record that starts
+    inside the training record, as it continues it (:func:`_check_starts_after_training`)."""
+    for entry, ds in zip(cm.training, loaded):      # the fit lists the records in the order it was given them
+        entry["time_span_s"] = [float(ds.time_s[0]), float(ds.time_s[-1])]
+        entry["time_origin"] = ds.metadata.get("import", {}).get("time_origin")
 
 
 def _check_speed_input(datasets, inputs, model):
@@ -558,6 +568,8 @@ def evaluate(model: CompensationModel | Path | str, datasets: Sequence[Dataset |
     rows, predictions = [], {}
     for ds, label in zip(loaded, distinct_labels(loaded)):
         _warn_faster_than_trained(cm, ds, label)
+        if reference == "train" and not cm.is_time_series:   # a time-series model's clocks: continuation_times
+            _check_starts_after_training(cm, ds, label, past)
         y, p, ran_over = _measured_and_predicted(cm, ds, label, reference, past, gap)
         rows.append({"dataset": label, **score(y, p)})
         predictions[label] = (ds.time_s, y, p)
@@ -614,6 +626,40 @@ def _check_reference(reference, history, gap):
     if reference == "own" and (history is not None or gap != "refuse"):
         raise TwinInputError("--history and --gap describe a record that continues the training one; they need "
                              "--reference train (each record is referenced to its own start without it)")
+
+
+def _check_starts_after_training(cm, ds, label, history):
+    """Refuse, for ``--reference train``, a record that starts inside the time span of the training record it
+    continues (``history``, else the model's first training record): its first rows were trained on, and the
+    change since the training start across them is no continuation. A record whose clock restarts (it starts no
+    later than the training record) is taken to follow it, as
+    :func:`~twin.compensation.protocol.continuation_times` does."""
+    if history is not None:
+        span, name = (float(history.time_s[0]), float(history.time_s[-1])), dataset_label(history)
+    else:
+        span, name = _training_span(cm, ds), (cm.training or [{}])[0].get("label", "?")
+    start = float(ds.time_s[0])
+    if span is not None and span[0] < start <= span[1]:
+        raise TwinInputError(f"{ds.metadata.get('source') or label}: time_s runs from {start:g} to "
+                             f"{float(ds.time_s[-1]):g} s and starts inside the training record {name} "
+                             f"({span[0]:g}–{span[1]:g} s), which --reference train continues after it ends; "
+                             "give the rows after the training record's end, or evaluate without --reference "
+                             "train")
+
+
+def _training_span(cm, ds):
+    """The first training record's time span (s) on ``ds``'s clock; None when the model file keeps none or
+    the two clocks differ in kind (date-time stamps against ``time_s``)."""
+    first = cm.training[0] if cm.training else {}
+    if "time_span_s" not in first:
+        return None                                   # a model file written before spans were kept
+    origins = first.get("time_origin"), ds.metadata.get("import", {}).get("time_origin")
+    if (origins[0] is None) != (origins[1] is None):
+        return None
+    import pandas as pd
+
+    shift = 0.0 if origins[0] is None else (pd.Timestamp(origins[0]) - pd.Timestamp(origins[1])).total_seconds()
+    return first["time_span_s"][0] + shift, first["time_span_s"][1] + shift
 
 
 def _measured_and_predicted(cm, ds, label, reference, past, gap):

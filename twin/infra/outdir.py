@@ -11,6 +11,13 @@ The rules:
 - a non-empty folder without the marker is refused unless ``overwrite`` is
   given; even then the twin only adds its files beside the others. Only the
   files listed in the old marker are ever replaced or removed;
+- the marker records the job that wrote the folder (the command line, without
+  ``--overwrite``, and the working folder it ran in). Only a re-run of that job
+  (or the job an interrupted commit's journal records) replaces and removes the
+  listed files by itself; another command, or the same command with other
+  inputs, is refused unless ``overwrite`` is given, so no result is lost to a
+  command that merely shares its folder. Calls through the Python API (no
+  command line) carry no job and match only each other;
 - results are written into a hidden staging folder inside the output folder
   and moved in when everything is there; the marker is written last, as the
   commit point. While files move, a journal (``.thermal-twin-output.partial.json``)
@@ -86,7 +93,8 @@ def check_output_folder(path: str | Path | None, overwrite: bool = False, inputs
     path : str or Path or None
         The folder (None: no folder).
     overwrite : bool
-        Accept a non-empty folder that is not a twin output (its files are kept).
+        Accept a non-empty folder that is not a twin output (its files are kept), or one holding the
+        result of another job (its listed files are replaced and removed).
     inputs : tuple of str or Path
         The command's inputs, which the folder must not be or hold.
 
@@ -99,8 +107,8 @@ def check_output_folder(path: str | Path | None, overwrite: bool = False, inputs
     ------
     TwinInputError
         One line naming the path: it is a file, is or holds an input, cannot be
-        created or written, or is a non-empty folder that is not a twin output
-        and ``overwrite`` is false.
+        created or written, or (``overwrite`` false) is a non-empty folder that
+        is not a twin output or holds another job's result.
     """
     if path is None:
         return None
@@ -109,8 +117,9 @@ def check_output_folder(path: str | Path | None, overwrite: bool = False, inputs
         raise TwinInputError(f"{out}: is a file; the output must be a folder")
     _check_inputs(out, inputs)
     _require_writable(out, out)
-    if out.exists() and not overwrite and _owned_files(out) is None:
-        if any(not _is_bookkeeping(entry.name) for entry in out.iterdir()):
+    if out.exists() and not overwrite:
+        _check_same_job(out)
+        if _owned_files(out) is None and any(not _is_bookkeeping(entry.name) for entry in out.iterdir()):
             raise TwinInputError(f"{out}: folder is not empty and is not a twin output (no {MARKER}); choose "
                                  "another folder, or pass --overwrite (overwrite=True) to write beside its "
                                  "files, which are kept")
@@ -163,17 +172,48 @@ def _safe_relative(name):
     return rel.as_posix()
 
 
-def _owned_files(folder):
-    """Files the twin wrote in ``folder`` (its marker and an unfinished commit's journal); ``None`` if neither."""
-    owned = None
+def _twin_records(folder):
+    """The marker and an unfinished commit's journal in ``folder`` that are the twin's (marker first)."""
+    records = []
     for name in (MARKER, JOURNAL):
         try:
             doc = json.loads((folder / name).read_text(encoding="utf-8"))
         except (OSError, ValueError):
             continue
         if isinstance(doc, dict) and doc.get("format") == MARKER_FORMAT and isinstance(doc.get("files"), list):
-            owned = (owned or set()) | {r for r in map(_safe_relative, doc["files"]) if r is not None}
-    return owned
+            records.append(doc)
+    return records
+
+
+def _owned_files(folder):
+    """Files the twin wrote in ``folder`` (its marker and an unfinished commit's journal); ``None`` if neither."""
+    records = _twin_records(folder)
+    if not records:
+        return None
+    return {r for doc in records for r in map(_safe_relative, doc["files"]) if r is not None}
+
+
+def _current_job():
+    """This process's job as a marker records it: the twin command line without ``--overwrite`` (which
+    only permits the write) and the working folder its relative paths mean; ``None`` outside the command
+    line."""
+    command = COMMAND.get()
+    if command is None:
+        return None
+    return {"argv": [a for a in shlex.split(command) if a != "--overwrite"], "cwd": os.getcwd()}
+
+
+def _check_same_job(out):
+    """Refuse ``out`` when its marker (or journal) records a job other than this one: its files are another
+    result, which only ``overwrite`` may replace."""
+    records = _twin_records(out)
+    if not records or records[0].get("job") == _current_job():
+        return
+    state = "a complete" if (out / MARKER).exists() else "an unfinished"
+    written_by = records[0].get("command") or "an unknown command"
+    raise TwinInputError(f"{out}: holds {state} result of another command or inputs ({written_by}: "
+                         f"{len(records[0]['files'])} files); choose another folder, or pass --overwrite "
+                         "(overwrite=True) to replace that result")
 
 
 def _write_json(path, document):
@@ -231,7 +271,8 @@ def _commit(staging, out, command):
         raise TwinInputError(f"{out}: the twin would replace {blocked[0]}{more}, which it did not write; move "
                              "it away or choose another folder")
     head = {"format": MARKER_FORMAT, "version": 1, "project_version": _project_version(),
-            "command": command or COMMAND.get() or shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]])}
+            "command": command or COMMAND.get() or shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]]),
+            "job": _current_job()}
     _write_json(out / JOURNAL, {**head, "files": sorted(owned | set(files))})
     (out / MARKER).unlink(missing_ok=True)
     for rel in sorted(owned - set(files)):
