@@ -70,23 +70,24 @@ NOISES = {
 
 #: name → (noise on the drift in µm, noise on the thermometer in K, each (rng, n_rows) → (n_rows,); the network's
 #: node the thermometer is on, 1 or 2); the node-1 thermometer's change spans 18 K
+_DRIFT_AR1 = NOISES["AR(1) 1 µm, 30 min (the test's)"]
+
+
+def _thermometer(sd_K, correlation_s):
+    """Noise of the thermometer, K: AR(1) of ``correlation_s`` (0: white)."""
+    return lambda rng, n: ar1_noise(rng, n, sd_K, correlation_s)
+
+
 OBSERVER_NOISES = {
-    "drift AR(1) 1 µm, 30 min; thermometer white 0.05 K": (NOISES["AR(1) 1 µm, 30 min (the test's)"],
-                                                           lambda rng, n: ar1_noise(rng, n, 0.05, 0.0), 1),
-    "drift AR(1) 1 µm, 30 min; thermometer white 0.1 K": (NOISES["AR(1) 1 µm, 30 min (the test's)"],
-                                                          lambda rng, n: ar1_noise(rng, n, 0.1, 0.0), 1),
-    "drift AR(1) 1 µm, 30 min; thermometer AR(1) 0.1 K, 30 min": (NOISES["AR(1) 1 µm, 30 min (the test's)"],
-                                                                  lambda rng, n: ar1_noise(rng, n, 0.1, 1800.0), 1),
-    "drift AR(1) 1 µm, 30 min; thermometer white 0.3 K (coarse)": (NOISES["AR(1) 1 µm, 30 min (the test's)"],
-                                                                   lambda rng, n: ar1_noise(rng, n, 0.3, 0.0), 1),
-    "drift white 0.5 µm; thermometer white 0.05 K": (NOISES["white 0.5 µm"],
-                                                     lambda rng, n: ar1_noise(rng, n, 0.05, 0.0), 1),
+    "drift AR(1) 1 µm, 30 min; thermometer white 0.05 K": (_DRIFT_AR1, _thermometer(0.05, 0.0), 1),
+    "drift AR(1) 1 µm, 30 min; thermometer white 0.1 K": (_DRIFT_AR1, _thermometer(0.1, 0.0), 1),
+    "drift AR(1) 1 µm, 30 min; thermometer AR(1) 0.1 K, 30 min": (_DRIFT_AR1, _thermometer(0.1, 1800.0), 1),
+    "drift AR(1) 1 µm, 30 min; thermometer white 0.3 K (coarse)": (_DRIFT_AR1, _thermometer(0.3, 0.0), 1),
+    "drift white 0.5 µm; thermometer white 0.05 K": (NOISES["white 0.5 µm"], _thermometer(0.05, 0.0), 1),
     # the two rows below were added, and their settings fixed, before the per-output estimator was first run on any
     # observer row: the independent check of it
-    "drift AR(1) 1 µm, 30 min; node-2 thermometer white 0.2 K": (NOISES["AR(1) 1 µm, 30 min (the test's)"],
-                                                                 lambda rng, n: ar1_noise(rng, n, 0.2, 0.0), 2),
-    "drift AR(1) 1 µm, 30 min; thermometer AR(1) 0.3 K, 2 h": (NOISES["AR(1) 1 µm, 30 min (the test's)"],
-                                                              lambda rng, n: ar1_noise(rng, n, 0.3, 7200.0), 1),
+    "drift AR(1) 1 µm, 30 min; node-2 thermometer white 0.2 K": (_DRIFT_AR1, _thermometer(0.2, 0.0), 2),
+    "drift AR(1) 1 µm, 30 min; thermometer AR(1) 0.3 K, 2 h": (_DRIFT_AR1, _thermometer(0.3, 7200.0), 1),
 }
 
 
