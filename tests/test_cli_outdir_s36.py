@@ -1,5 +1,6 @@
-"""`--out`: a folder holding another command's result (or the same command's with other inputs) is never
-emptied without `--overwrite`; the marker lets only a re-run of the job that wrote it replace its files."""
+"""`--out`: a folder holding another of the twin's commands' result is never emptied without `--overwrite`
+(`twin evaluate` had removed a `twin run`'s dataset); a re-run of the same command, with any arguments, replaces
+its own result as before, and a marker that names no command (an older version's) is any command's."""
 import json
 
 import pytest
@@ -55,15 +56,20 @@ def test_evaluate_into_a_run_folder_keeps_the_simulated_dataset(simulated, model
     assert "evaluate" in marker["command"] and f"{SHORT}.csv" not in tree(simulated)   # replaced, as asked
 
 
-def test_run_of_another_scenario_keeps_the_earlier_dataset(simulated, tmp_path, capsys):
+def test_a_rerun_of_the_same_command_with_other_arguments_replaces_its_result(simulated, tmp_path):
     other = tmp_path / "other_short.toml"
     other.write_text((SCENARIOS_DIR / f"{SHORT}.toml").read_text(encoding="utf-8").replace(
         f'name = "{SHORT}"', 'name = "other_short"'))
-    before = tree(simulated)
-    assert main(["run", str(other), "--out", str(simulated)]) == 2
-    err = one_error_line(capsys)
-    assert str(simulated) in err and f"twin run {SHORT}" in err and "--overwrite" in err
-    assert tree(simulated) == before
+    assert main(["run", str(other), "--out", str(simulated), "--no-views"]) == 0
+    files = tree(simulated)
+    assert "other_short.csv" in files and f"{SHORT}.csv" not in files      # the earlier run's listed files go
+
+
+def test_a_marker_of_an_older_version_names_no_command_and_is_any_commands(simulated, model):
+    marker = json.loads((simulated / MARKER).read_text())
+    (simulated / MARKER).write_text(json.dumps({k: v for k, v in marker.items() if k != "job"}))
+    path, data = model
+    assert main(["evaluate", str(path), str(data), "--out", str(simulated)]) == 0
 
 
 def test_a_rerun_of_the_same_job_needs_no_overwrite_even_after_one(simulated, capsys):

@@ -30,7 +30,7 @@ from .core.interrupt import (
 from .errors import user_errors
 from .fmu import cli as fmu_cli
 from .gap import cli as gap_cli
-from .infra.outdir import COMMAND
+from .infra.outdir import COMMAND, JOB
 from .infra.progress import close_bars
 from .live import cli as live_cli
 from .placement import cli as placement_cli
@@ -143,6 +143,7 @@ def main(argv: list[str] | None = None) -> int:
     recorded = COMMAND.set(shlex.join(["twin", *argv]))       # the command line result folders record
     try:
         args = build_parser().parse_args(argv)
+        JOB.set(_command_name(args))                           # which command a result folder records
         _notices_to_stderr()
         clear_interrupt()
         _on_sigint(_interrupt_once)
@@ -171,6 +172,7 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         clear_interrupt()                  # the command is over: a later one in this process starts afresh
         COMMAND.reset(recorded)
+        JOB.set(None)
         if previous is not None:
             _on_sigint(previous)
 

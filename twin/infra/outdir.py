@@ -11,13 +11,13 @@ The rules:
 - a non-empty folder without the marker is refused unless ``overwrite`` is
   given; even then the twin only adds its files beside the others. Only the
   files listed in the old marker are ever replaced or removed;
-- the marker records the job that wrote the folder (the command line, without
-  ``--overwrite``, and the working folder it ran in). Only a re-run of that job
-  (or the job an interrupted commit's journal records) replaces and removes the
-  listed files by itself; another command, or the same command with other
-  inputs, is refused unless ``overwrite`` is given, so no result is lost to a
-  command that merely shares its folder. Calls through the Python API (no
-  command line) carry no job and match only each other;
+- the marker records which of the twin's commands wrote the folder (``run``,
+  ``evaluate``, ``gap diagnose``…). Another command is refused unless
+  ``overwrite`` is given: ``twin evaluate --out`` into a ``twin run`` folder had
+  removed the run's dataset. A re-run of the same command, whatever its
+  arguments, replaces and removes the listed files by itself, as before. A
+  marker that names no command (an older version's, or one the Python API
+  wrote) is taken as any command's, as before;
 - results are written into a hidden staging folder inside the output folder
   and moved in when everything is there; the marker is written last, as the
   commit point. While files move, a journal (``.thermal-twin-output.partial.json``)
@@ -51,6 +51,9 @@ STAGING_PREFIX = ".thermal-twin-partial-"
 MARKER_FORMAT = "thermal-twin-output"
 #: The command a marker records when the caller names none; ``twin.cli.main`` sets it to ``twin <arguments>``.
 COMMAND = contextvars.ContextVar("thermal_twin_command", default=None)
+#: Which of the twin's commands is running (``run``, ``gap diagnose``), set by ``twin.cli.main``; None through the
+#: Python API. A marker records it, and a folder another command wrote is refused without ``overwrite``.
+JOB = contextvars.ContextVar("thermal_twin_job", default=None)
 
 
 def _is_bookkeeping(name):
@@ -193,27 +196,17 @@ def _owned_files(folder):
     return {r for doc in records for r in map(_safe_relative, doc["files"]) if r is not None}
 
 
-def _current_job():
-    """This process's job as a marker records it: the twin command line without ``--overwrite`` (which
-    only permits the write) and the working folder its relative paths mean; ``None`` outside the command
-    line."""
-    command = COMMAND.get()
-    if command is None:
-        return None
-    return {"argv": [a for a in shlex.split(command) if a != "--overwrite"], "cwd": os.getcwd()}
-
-
 def _check_same_job(out):
-    """Refuse ``out`` when its marker (or journal) records a job other than this one: its files are another
-    result, which only ``overwrite`` may replace."""
+    """Refuse ``out`` when its marker (or journal) names another of the twin's commands than the running one
+    (:data:`JOB`): its files are another command's result, which only ``overwrite`` may replace."""
     records = _twin_records(out)
-    if not records or records[0].get("job") == _current_job():
+    written, running = (records[0].get("job") if records else None), JOB.get()
+    if written is None or running is None or written == running:
         return
     state = "a complete" if (out / MARKER).exists() else "an unfinished"
-    written_by = records[0].get("command") or "an unknown command"
-    raise TwinInputError(f"{out}: holds {state} result of another command or inputs ({written_by}: "
-                         f"{len(records[0]['files'])} files); choose another folder, or pass --overwrite "
-                         "(overwrite=True) to replace that result")
+    raise TwinInputError(f"{out}: holds {state} result of twin {written} ({records[0].get('command')}: "
+                         f"{len(records[0]['files'])} files), which twin {running} would replace; choose another "
+                         "folder, or pass --overwrite (overwrite=True) to replace that result")
 
 
 def _write_json(path, document):
@@ -272,7 +265,7 @@ def _commit(staging, out, command):
                              "it away or choose another folder")
     head = {"format": MARKER_FORMAT, "version": 1, "project_version": _project_version(),
             "command": command or COMMAND.get() or shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]]),
-            "job": _current_job()}
+            "job": JOB.get()}
     _write_json(out / JOURNAL, {**head, "files": sorted(owned | set(files))})
     (out / MARKER).unlink(missing_ok=True)
     for rel in sorted(owned - set(files)):
