@@ -139,7 +139,8 @@ def check_mesh_size(size_m: float) -> float:
 
 
 def mm_hint(size_m: float) -> str:
-    """A hint that a mesh size over :data:`MAX_MESH_SIZE_M` was typed in mm, when it is a plausible size in mm.
+    """A hint that a mesh size over :data:`MAX_MESH_SIZE_M` was typed in mm, when it is a plausible size in mm
+    (2 mm to :data:`MAX_MESH_SIZE_M`).
 
     Parameters
     ----------
@@ -151,7 +152,8 @@ def mm_hint(size_m: float) -> str:
     str
         ``"; is it in mm? …"``, or ``""``.
     """
-    if size_m > MAX_MESH_SIZE_M and MIN_MESH_SIZE_M <= size_m * 1e-3 <= MAX_MESH_SIZE_M:
+    # under 2 mm no machine is meshed (0.6 given for 0.06?): the hint would mislead
+    if size_m > MAX_MESH_SIZE_M and 2e-3 <= size_m * 1e-3 <= MAX_MESH_SIZE_M:
         return f"; is it in mm? {size_m:g} mm is a mesh size of {size_m * 1e-3:g} m"
     return ""
 

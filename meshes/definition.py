@@ -11,7 +11,7 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .builder import BUILDER_VERSION, MAX_MESH_SIZE_M, MIN_MESH_SIZE_M
+from .builder import BUILDER_VERSION, MAX_MESH_SIZE_M, MIN_MESH_SIZE_M, mm_hint
 from .shapes import Box, Cylinder, HollowBox, StlPart
 from .tomlspec import DefinitionError, Table, duplicates, read_toml, resolve_definition
 
@@ -201,6 +201,15 @@ def load_geometry(machine: str | Path) -> MachineGeometry:
     return read_geometry(read_toml(path), path)
 
 
+def _mesh_size(mesh: Table) -> float:
+    """``[mesh] size_m`` (m), from :data:`MIN_MESH_SIZE_M` to :data:`MAX_MESH_SIZE_M`; one over the maximum is
+    refused with the hint that it reads as mm (:func:`~meshes.builder.mm_hint`): ``size_m = 35`` is 35 mm."""
+    size = mesh.number("size_m", DEFAULT_MESH_SIZE_M, minimum=MIN_MESH_SIZE_M)
+    if size > MAX_MESH_SIZE_M:
+        raise mesh.error("size_m", f"must be ≤ {MAX_MESH_SIZE_M:g}, got {size:g}{mm_hint(size)}")
+    return size
+
+
 def read_geometry(root: Table, path: Path) -> MachineGeometry:
     """The geometry (``[machine].name``, ``[mesh]``, ``[[parts]]``) of an already parsed machine file.
 
@@ -231,7 +240,7 @@ def read_geometry(root: Table, path: Path) -> MachineGeometry:
     return MachineGeometry(
         name=name,
         parts=parts,
-        mesh_size_m=mesh.number("size_m", DEFAULT_MESH_SIZE_M, minimum=MIN_MESH_SIZE_M, maximum=MAX_MESH_SIZE_M),
+        mesh_size_m=_mesh_size(mesh),
         envelope_epsilon=mesh.number("envelope_epsilon", 1e-4, minimum=1e-6, maximum=1e-2),
         stop_energy=mesh.number("stop_energy", 10.0, minimum=3.0),
         source=str(path),

@@ -10,7 +10,7 @@ import meshes.builder
 from meshes.builder import MAX_MESH_SIZE_M, check_mesh_size
 from meshes.tomlspec import DefinitionError
 from twin.cli import main
-from twin.core.dataset import QUIET_FILL_S, Dataset
+from twin.core.dataset import QUIET_FILL_S, Dataset, _check_row_lengths
 from twin.core.scenario import HOUR, load_scenario
 from twin.errors import TwinInputError
 
@@ -44,11 +44,16 @@ def test_an_ambient_log_in_ms_under_a_header_in_s_is_refused(tmp_path):
     assert "the times look like ms: write them in s (× 1e-3)" in message
 
 
-def test_a_log_coarser_than_the_scenario_is_taken_as_written(tmp_path):
-    """Daily readings for 30 days: 1 reading inside the 6 h, but the same times in ms would not reach the
-    scenario's end, so nothing says they are ms: the twin interpolates between readings, as documented."""
-    scenario = load_scenario(_ambient_scenario(tmp_path, np.arange(0.0, 30 * 24 * HOUR + 1, 24 * HOUR)))
-    assert scenario.duration_s == 6 * HOUR
+@pytest.mark.parametrize("times, hours", [
+    (np.arange(0.0, 30 * 24 * HOUR + 1, 24 * HOUR), 6),     # daily for 30 days: in ms, short of the end
+    (np.arange(0.0, 366 * 24 * HOUR, 24 * HOUR), 6),        # daily for a year: in ms, 8.8 h, 86.4 s apart
+    (np.arange(0.0, 30 * 24 * HOUR + 1, HOUR), 0.5)])       # hourly for a month under 0.5 h
+def test_a_log_coarser_than_the_scenario_is_taken_as_written(tmp_path, times, hours):
+    """1 reading inside the scenario, but readings a day apart or less read in s: nothing says they are ms (a
+    room is logged at least daily): the twin interpolates between readings, as documented."""
+    path = _ambient_scenario(tmp_path, times)
+    path.write_text(ETVE.replace("duration_h = 6", f"duration_h = {hours}"))
+    assert load_scenario(path).duration_s == hours * HOUR
 
 
 @pytest.mark.parametrize("times", [np.arange(0.0, 7 * 24 * HOUR + 1, 60.0),   # a week of 1-min readings
@@ -70,10 +75,15 @@ HEADER = "time_s,T01_degC,Z_um\n"
 
 @pytest.mark.parametrize("rows, message", [
     # the last row cut mid-number: T01 = "2" had been a reading of 2 °C and Z a NaN
-    ("0,20.1,1.0\n60,20.2,1.1\n120,2", (r"data row 3 \(line 4\) has 2 fields, the header 3 \(cut short\? it is "
-                                        r"the file's last row\)")),
-    ("0,20.1,1.0\n60,20.2\n120,20.3,1.2\n", r"data row 2 \(line 3\) has 2 fields, the header 3$"),
-    ("0,20.1,1.0,9\n60,20.2,1.1,9\n", r"data row 1 \(line 2\) has 4 fields, the header 3$"),
+    ("0,20.1,1.0\n60,20.2,1.1\n120,2", (r"data row 3 \(line 4, '120,2'\) has 2 fields, the header 3 \(cut short\? "
+                                        r"it is the file's last row\)")),
+    ("0,20.1,1.0\n60,20.2\n120,20.3,1.2\n", r"data row 2 \(line 3, '60,20.2'\) has 2 fields, the header 3$"),
+    ("0,20.1,1.0,9\n60,20.2,1.1,9\n", r"data row 1 \(line 2, '0,20.1,1.0,9'\) has 4 fields, the header 3$"),
+    # pandas would take the time column as the index and shift every channel by one column
+    ("0,20.1,1.0,\n60,20.2,1.1,\n", (r"data row 1 \(line 2, '0,20.1,1.0,'\) has 4 fields, the header 3 \(a "
+                                     r"trailing comma on each row\? remove it\)$")),
+    ("# logger v2 firmware 1.3\n0,20.1,1.0\n", r"data row 1 \(line 2, '# logger v2 firmware 1\.3'\) has 1 fields"),
+    ("0,20.1,1.0\n60,20.2,1.1\n" + "9" * 100 + "\n", rf"data row 3 \(line 4, '{'9' * 60}'\) has 1"),
 ])
 def test_a_row_with_another_number_of_fields_than_the_header_is_refused(tmp_path, rows, message):
     path = tmp_path / "m.csv"
@@ -81,6 +91,18 @@ def test_a_row_with_another_number_of_fields_than_the_header_is_refused(tmp_path
     with pytest.raises(TwinInputError, match=rf"^{path}: {message}"):
         Dataset.from_measured_csv(path, nan_policy="interpolate")
 
+
+
+def test_a_line_of_spaces_is_skipped_as_pandas_skips_it(tmp_path):
+    path = tmp_path / "m.csv"
+    path.write_text(HEADER + "0,20.1,1.0\n  \n60,20.2,1.1\n")
+    ds = Dataset.from_measured_csv(path)
+    assert ds["T01"].tolist() == [20.1, 20.2] and ds["Z"].tolist() == [1.0, 1.1]
+
+
+def test_a_quoted_field_after_a_space_is_split_as_pandas_splits_it():
+    """``0,20, "a,b"`` has 3 fields for pandas (spaces after a comma skipped, then the quotes hold the comma)."""
+    _check_row_lengths("m.csv", 'time_s,T01_degC,note\n0,20, "a,b"\n')
 
 def _record_with_nans(tmp_path, nan_rows, n=600, step_s=15.0):
     """``n`` rows every ``step_s`` s, T01 missing at ``nan_rows``."""
@@ -119,13 +141,23 @@ def test_a_filled_first_row_is_warned_of_and_a_long_one_refused(tmp_path, caplog
            "that reading back to the first row" in caplog.text
     rows = int(QUIET_FILL_S / 15.0) + 1
     with pytest.raises(TwinInputError, match=rf"no reading before t = {rows * 15} s \({rows} rows, {rows * 15} s\): "
-                                             r".*cut the record to start at its first reading or choose "
-                                             r"nan_policy='drop'"):
+                                             r".*cut the record to start at its first reading or drop the "
+                                             r"incomplete rows \(--nan-policy drop; nan_policy='drop' in Python\)"):
         Dataset.from_measured_csv(_record_with_nans(tmp_path, range(rows)), nan_policy="interpolate")
 
 
+
+def test_a_slow_logger_missing_its_first_reading_is_filled_with_a_warning(tmp_path, caplog):
+    """A 15-min logger whose first T01 reading is missing: one sampling interval (900 s > QUIET_FILL_S) held back."""
+    with caplog.at_level(logging.WARNING, logger="thermal_twin"):
+        ds = Dataset.from_measured_csv(_record_with_nans(tmp_path, {0}, n=40, step_s=900.0), nan_policy="interpolate")
+    assert ds["T01"][0] == ds["T01"][1] and "no reading before t = 900 s (1 rows, 900 s)" in caplog.text
+    with pytest.raises(TwinInputError, match=r"no reading before t = 1800 s \(2 rows, 1800 s\)"):
+        Dataset.from_measured_csv(_record_with_nans(tmp_path, {0, 1}, n=40, step_s=900.0), nan_policy="interpolate")
+
 @pytest.mark.parametrize("value, hint", [("35", "; is it in mm? 35 mm is a mesh size of 0.035 m"),
-                                         ("2000", ""), ("0.6", "; is it in mm? 0.6 mm is a mesh size of 0.0006 m")])
+                                         ("2000", ""), ("0.6", ""),    # 0.6 mm: no machine is meshed so fine
+                                         ("2", "; is it in mm? 2 mm is a mesh size of 0.002 m")])
 def test_a_mesh_size_in_mm_is_refused_before_any_meshing(monkeypatch, capsys, value, hint):
     def mesher_must_not_run(*args):
         raise AssertionError("fTetWild was started")

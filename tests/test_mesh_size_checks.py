@@ -51,5 +51,6 @@ def test_a_machine_file_mesh_size_in_mm_is_refused_naming_the_field(tmp_path):
         (tmp_path / stl.name).write_bytes(stl.read_bytes())
     path = tmp_path / "mini_machine.toml"
     path.write_text(text)
-    with pytest.raises(DefinitionError, match=r"mesh\.size_m.*35"):
+    with pytest.raises(DefinitionError, match=r"mesh\.size_m must be ≤ 0\.5, got 35; is it in mm\? 35 mm is a "
+                                              r"mesh size of 0\.035 m$"):
         load_geometry(path)

@@ -79,3 +79,39 @@ def test_reference_train_refuses_a_record_that_starts_inside_the_training_record
     after.write_text(lines[0] + "".join(lines[201:401]))                     # continues it: accepted
     assert main(["evaluate", str(model), str(after), "--reference", "train"]) == 0
     assert main(["evaluate", str(model), str(training), "--reference", "train"]) == 0   # a clock from its start
+
+
+
+def write_stamped(path, first, rows, offset="", seed=1):
+    """A measured record of ``rows`` rows every 60 s from the date-time ``first``, its stamps ending in ``offset``
+    (``"+01:00"``, or ``""`` for none)."""
+    import pandas as pd
+
+    plain = write_record(path, 0.0, seed=seed, rows=rows).read_text().splitlines()
+    stamps = pd.date_range(first, periods=rows, freq="60s")
+    path.write_text("time_s,T01_degC,Z_um\n" + "".join(f"{t.isoformat(sep=' ')}{offset},{line.split(',', 1)[1]}\n"
+                                                        for t, line in zip(stamps, plain[1:])))
+    return path
+
+
+def test_reference_train_refuses_stamps_with_and_without_offset(tmp_path, capsys):
+    trained = write_stamped(tmp_path / "tr_tz.csv", "2026-03-02 08:00:00", 200, "+01:00")
+    assert main(train_args(trained, out=tmp_path / "m_tz.json")) == 0
+    naive = write_stamped(tmp_path / "ev_naive.csv", "2026-03-02 12:00:00", 200)
+    assert main(["evaluate", str(tmp_path / "m_tz.json"), str(naive), "--reference", "train"]) == 2
+    err = one_error_line(capsys)
+    assert "ev_naive.csv" in err and "without a UTC offset" in err and "tr_tz" in err and "one clock" in err
+
+
+def test_stamped_spans_are_date_times_and_several_records_name_history(tmp_path, capsys):
+    first = write_stamped(tmp_path / "first.csv", "2026-03-02 08:00:00", 200)
+    inside = write_stamped(tmp_path / "inside.csv", "2026-03-02 09:00:00", 200, seed=2)
+    assert main(train_args(first, out=tmp_path / "one.json")) == 0
+    assert main(["evaluate", str(tmp_path / "one.json"), str(inside), "--reference", "train"]) == 2
+    err = one_error_line(capsys)
+    assert "2026-03-02 09:00:00 to 2026-03-02 12:19:00" in err and "(2026-03-02 08:00:00–2026-03-02 11:19:00)" in err
+    assert "--history" not in err
+    later = write_stamped(tmp_path / "later.csv", "2026-03-09 08:00:00", 200, seed=3)
+    assert main(train_args(first, later, out=tmp_path / "two.json")) == 0
+    assert main(["evaluate", str(tmp_path / "two.json"), str(inside), "--reference", "train"]) == 2
+    assert "first training record" in (err := one_error_line(capsys)) and "--history" in err

@@ -33,7 +33,7 @@ from models import metrics
 from models.registry import model_traits
 from models.speed import STANDSTILL_RPM, running
 
-from ..core.clock import on_one_clock
+from ..core.clock import on_one_clock, stamp
 from ..core.dataset import Dataset, finite_or_none, name_listing, sidecar_path
 from ..core.machine import build_machine
 from ..core.machine_definition import MachineDefinition, load_machine
@@ -634,31 +634,59 @@ def _check_starts_after_training(cm, ds, label, history):
     change since the training start across them is no continuation. A record whose clock restarts (it starts no
     later than the training record) is taken to follow it, as
     :func:`~twin.compensation.protocol.continuation_times` does."""
+    source = ds.metadata.get("source") or label
     if history is not None:
         span, name = (float(history.time_s[0]), float(history.time_s[-1])), dataset_label(history)
     else:
-        span, name = _training_span(cm, ds), (cm.training or [{}])[0].get("label", "?")
+        span, name = _training_span(cm, ds, source), (cm.training or [{}])[0].get("label", "?")
     start = float(ds.time_s[0])
-    if span is not None and span[0] < start <= span[1]:
-        raise TwinInputError(f"{ds.metadata.get('source') or label}: time_s runs from {start:g} to "
-                             f"{float(ds.time_s[-1]):g} s and starts inside the training record {name} "
-                             f"({span[0]:g}–{span[1]:g} s), which --reference train continues after it ends; "
-                             "give the rows after the training record's end, or evaluate without --reference "
-                             "train")
+    if span is None or not span[0] < start <= span[1]:
+        return
+    origin = ds.metadata.get("import", {}).get("time_origin")
+    # with several training records, the first is the one continued unless --history names another
+    which = (" (the model's first training record; give the one it continues with --history)"
+             if history is None and len(cm.training) > 1 else "")
+    raise TwinInputError(f"{source}: {'its stamps' if origin else 'time_s'} run from "
+                         f"{_span_text(origin, start, float(ds.time_s[-1]), ' to ')} and it starts inside the "
+                         f"training record {name} ({_span_text(origin, *span, '–')}){which}, which --reference "
+                         "train continues after it ends; give the rows after the training record's end, or "
+                         "evaluate without --reference train")
 
 
-def _training_span(cm, ds):
+def _span_text(origin, first_s, last_s, between):
+    """``first_s``…``last_s`` (s on a record's clock) as a message shows them: date-times from the clock's
+    ``origin`` (:func:`~twin.core.clock.stamp`) for a stamped record, s for a ``time_s`` one."""
+    if not origin:
+        return f"{first_s:g}{between}{last_s:g} s"
+    return f"{stamp(origin, first_s)}{between}{stamp(origin, last_s)}"
+
+
+def _training_span(cm, ds, source):
     """The first training record's time span (s) on ``ds``'s clock; None when the model file keeps none or
-    the two clocks differ in kind (date-time stamps against ``time_s``)."""
+    one clock has date-time stamps and the other ``time_s`` (no common clock to compare them on).
+
+    Stamps with a UTC offset against stamps without one are refused, as :func:`~twin.core.clock.on_one_clock`
+    refuses them among records read together: the check would need a guess of the offset, and skipping it
+    would let a record that starts inside the training record through."""
     first = cm.training[0] if cm.training else {}
     if "time_span_s" not in first:
         return None                                   # a model file written before spans were kept
     origins = first.get("time_origin"), ds.metadata.get("import", {}).get("time_origin")
-    if (origins[0] is None) != (origins[1] is None):
+    if not origins[0] and not origins[1]:
+        return tuple(first["time_span_s"])           # both on time_s
+    if not origins[0] or not origins[1]:
         return None
     import pandas as pd
 
-    shift = 0.0 if origins[0] is None else (pd.Timestamp(origins[0]) - pd.Timestamp(origins[1])).total_seconds()
+    trained, given = pd.Timestamp(origins[0]), pd.Timestamp(origins[1])
+    if (trained.tzinfo is None) != (given.tzinfo is None):
+        with_offset = "with" if given.tzinfo is not None else "without"
+        raise TwinInputError(f"{source} has date-time stamps {with_offset} a UTC offset and the model's training "
+                             f"record {first.get('label', '?')} was read from stamps "
+                             f"{'without' if with_offset == 'with' else 'with'} one: they cannot be put on one "
+                             "clock to check that it starts after the training record; give its stamps as the "
+                             "training record's were")
+    shift = (trained - given).total_seconds()
     return first["time_span_s"][0] + shift, first["time_span_s"][1] + shift
 
 

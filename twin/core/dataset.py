@@ -676,13 +676,15 @@ def _nan_runs(time_s, bad):
 
 def _check_reference_fill(path, time_s, name, run):
     """Filling a channel's first rows holds its first reading back to the record's first row, the reference its
-    changes are taken from (an extrapolation): warned of up to :data:`QUIET_FILL_S`, refused beyond."""
+    changes are taken from (an extrapolation): warned of up to :data:`QUIET_FILL_S` or one median sampling
+    interval, whichever is longer (a 15-min logger that missed its first reading), refused beyond."""
     _, first, span_s = run
     where = f"{path}: column {name!r} has no reading before t = {time_s[first]:g} s ({first} rows, {span_s:g} s)"
-    if span_s > QUIET_FILL_S:
+    if span_s > max(QUIET_FILL_S, float(np.median(np.diff(time_s)))):
         raise TwinInputError(f"{where}: nan_policy='interpolate' would hold that reading back to the first row, "
-                             "the reference of the record's changes; cut the record to start at its first reading "
-                             "or choose nan_policy='drop'")
+                             "the reference of the record's changes, over more than one sampling interval and "
+                             f"{QUIET_FILL_S:g} s; cut the record to start at its first reading or drop the "
+                             "incomplete rows (--nan-policy drop; nan_policy='drop' in Python)")
     log.warning("%s: nan_policy='interpolate' holds that reading back to the first row, the reference of the "
                 "record's changes", where)
 
@@ -850,17 +852,32 @@ def _check_header_once(path, text):
 
 def _check_row_lengths(path, text):
     """Refuse a data row with fewer or more fields than the header: pandas fills a row cut short (the last one of a
-    file copied while the logger wrote it) with NaNs, read as missing or, cut mid-number, as a wrong value."""
-    reader = csv.reader(io.StringIO(text))
-    fields = [(reader.line_num, len(row)) for row in reader if row]   # blank lines are skipped, as pandas does
-    if not fields:
+    file copied while the logger wrote it) with NaNs, read as missing or, cut mid-number, as a wrong value; a
+    trailing comma on each row would make it take the time column as the index. Rows are split as pandas splits
+    them (spaces after a comma skipped); a row of blank fields is skipped, as pandas skips a blank line."""
+    reader = csv.reader(io.StringIO(text), skipinitialspace=True)
+    rows = [(reader.line_num, row) for row in reader if any(field.strip() for field in row)]
+    if not rows:
         return
-    expected = fields[0][1]
-    row = next((i for i, (_, n) in enumerate(fields) if n != expected), None)
-    if row is not None:
-        line, n = fields[row]
-        cut = " (cut short? it is the file's last row)" if row == len(fields) - 1 and n < expected else ""
-        raise TwinInputError(f"{path}: data row {row} (line {line}) has {n} fields, the header {expected}{cut}")
+    expected = len(rows[0][1])
+    bad = next((i for i, (_, row) in enumerate(rows) if len(row) != expected), None)
+    if bad is None:
+        return
+    line, row = rows[bad]
+    quoted = text.splitlines()[line - 1][:60]
+    raise TwinInputError(f"{path}: data row {bad} (line {line}, {quoted!r}) has {len(row)} fields, the header "
+                         f"{expected}{_row_length_hint(rows, bad, expected)}")
+
+
+def _row_length_hint(rows, bad, expected):
+    """Why a data row (``rows[bad]``, ``(line, fields)``) may have another number of fields than the header's
+    ``expected``: the file's last row cut short, or a trailing comma on every data row; ``""`` for neither."""
+    data = [row for _, row in rows[1:]]
+    if all(len(row) == expected + 1 and not row[-1].strip() for row in data):
+        return " (a trailing comma on each row? remove it)"
+    if bad == len(rows) - 1 and len(rows[bad][1]) < expected:
+        return " (cut short? it is the file's last row)"
+    return ""
 
 
 def _parse_csv(path, text, time_column=None):

@@ -44,12 +44,16 @@ BYTES_PER_STEP = 8 * 16 * 6
 #: short (a file 0 … 72000 s under a 24 h scenario is not a 50-day record in minutes).
 UNIT_GUESS_MAX_COVER = 8.0
 #: An ambient CSV of more than COARSE_LOG_READINGS readings, fewer than 2 of which fall within the scenario's
-#: 0 … duration, while its times divided by 1000 would put 2 or more inside and still reach the end, is refused as
-#: a log in ms under a header in s (72 h of 10-min readings in ms: steps of 600000 "s", 1 reading in a 6 h ETVE,
-#: which the twin would replay as a straight line). A longer log in s has many readings inside (a week of 1-min
-#: readings: 361 in 6 h); a short hand-written profile, or a log really coarser than the scenario (daily readings
-#: for a 6 h run), is taken as written: between readings the twin interpolates, as it says.
+#: 0 … duration, while its times divided by 1000 would put 2 or more inside and still reach the end, and whose
+#: median step is longer than MS_LOG_STEP_S[0] read in s (no one logs a room's air less than daily: it has a day's
+#: cycle) but at most MS_LOG_STEP_S[1] read in ms (a logger's), is refused as a log in ms under a header in s
+#: (72 h of 10-min readings in ms: steps of 600000 "s", 1 reading in a 6 h ETVE, which the twin would replay as a
+#: straight line). A longer log in s has many readings inside (a week of 1-min readings: 361 in 6 h); a short
+#: hand-written profile, or a log really coarser than the scenario (daily readings for a year, hourly ones for a
+#: month, under a 6 h run), is taken as written: between readings the twin interpolates, as it says. A log in ms
+#: of one reading every 86.4 s or faster cannot be told from daily readings in s by its step and is taken as s.
 COARSE_LOG_READINGS = 10
+MS_LOG_STEP_S = (86400.0, 600.0)
 TOP_KEYS = {"scenario", "initial", "ambient", "segments", "events", "noise", "outputs", "iso230_3"}
 
 
@@ -708,18 +712,22 @@ def _check_covers(where: str, column: str, t: np.ndarray, duration_s: float) -> 
 def _check_readings_inside(where: str, column: str, t: np.ndarray, duration_s: float) -> None:
     """Refuse an ambient log of many readings (over :data:`COARSE_LOG_READINGS`) that, covering the scenario
     (:func:`_check_covers`), has fewer than 2 of its times ``t`` (s, increasing) within 0 … ``duration_s`` s, when
-    the same times in ms would put 2 or more inside and reach the scenario's end: the scenario would see a straight
-    line between two readings of a log in ms."""
+    the same times in ms would put 2 or more inside and reach the scenario's end, and its median step is more than
+    a day in s but a logger's in ms (:data:`MS_LOG_STEP_S`): the scenario would see a straight line between two
+    readings of a log in ms."""
     def inside(times):
         return int(np.count_nonzero((times >= 0.0) & (times <= duration_s)))
 
     in_ms = t * 1e-3
     if inside(t) >= 2 or len(t) <= COARSE_LOG_READINGS or in_ms[-1] < duration_s or inside(in_ms) < 2:
         return
+    step_s = float(np.median(np.diff(t)))
+    if not MS_LOG_STEP_S[0] < step_s <= MS_LOG_STEP_S[1] * 1e3:   # a coarse log in s: taken as written
+        return
     raise DefinitionError(f"{where}: column {column!r} has {inside(t)} of its {len(t)} readings within the "
-                          f"scenario's 0 … {duration_s:g} s ({duration_s / HOUR:g} h), readings {np.median(np.diff(t)):g} "
-                          "s apart, and the twin would replay a straight line between two of them: the times look "
-                          "like ms: write them in s (× 1e-3)")
+                          f"scenario's 0 … {duration_s:g} s ({duration_s / HOUR:g} h), readings {step_s:g} s "
+                          f"apart (over a day; {step_s * 1e-3:g} s if they are ms), and the twin would replay a "
+                          "straight line between two of them: the times look like ms: write them in s (× 1e-3)")
 
 
 def _memory_limit_bytes():
