@@ -4,7 +4,7 @@ Usage::
 
     python bench/greybox_intervals.py                 # 100 draws per noise kind, about 2 min
     python bench/greybox_intervals.py --draws 40
-    python bench/greybox_intervals.py --observer      # the observer form, about 1 min
+    python bench/greybox_intervals.py --observer      # the observer form, about 2 min
 
 The truth and the draws are those of ``tests/test_models_greybox_intervals.py``: the two-node network of
 ``tests/test_models_greybox.py`` (``solve_ivp``, time constants from its eigenvalues, P ∝ n^1.6 at 1500, 3000
@@ -162,7 +162,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--draws", type=int, default=100, help="fits per noise kind (default 100)")
     parser.add_argument("--observer", action="store_true",
-                        help="fit the observer form, the node-1 thermometer observed (the model's rule only)")
+                        help="fit the observer form, a thermometer on node 1 or 2 observed (the model's rule only)")
     args = parser.parse_args()
     X, drift = record(np.arange(0.0, 48 * 3600.0, STEP_S), [1500.0, 3000.0, 4500.0])
     print(f"{args.draws} draws per noise kind; coverage of tau1, tau2, b (nominal 90 %); median half-width / estimate")

@@ -175,3 +175,15 @@ def test_a_mesh_size_argument_over_the_bound_is_refused():
     assert check_mesh_size(MAX_MESH_SIZE_M) == MAX_MESH_SIZE_M
     with pytest.raises(DefinitionError, match=r"to 0\.5 m, got 35 m; is it in mm\? 35 mm is a mesh size of 0\.035 m"):
         check_mesh_size(35)
+
+
+def test_a_slow_loggers_missing_first_reading_is_not_called_a_straight_line(tmp_path, caplog):
+    """A 15-min logger without its first reading: held back one step (warned of as such); it had also been reported
+    as "filled 1 rows in a row with a straight line over 0.25 h"."""
+    path = tmp_path / "slow.csv"
+    path.write_text(HEADER + "".join(f"{900 * k},{'' if k == 0 else 20 + 0.1 * k},{0.01 * k:.2f}\n"
+                                     for k in range(20)))
+    with caplog.at_level(logging.WARNING, logger="thermal_twin"):
+        ds = Dataset.from_measured_csv(path, nan_policy="interpolate")
+    assert ds["T01"][0] == pytest.approx(20.1)
+    assert "holds that reading back" in caplog.text and "straight line" not in caplog.text

@@ -94,3 +94,13 @@ def test_averaging_the_reference_over_a_rest_row_and_running_rows_is_refused(rec
                                              r"--reference-samples 1$"):
         train([records[0]], "spindle,T05", "Z", "mlr", reference_samples=3)
     train([records[0]], "T05,T06", "Z", "mlr", reference_samples=3)     # a model on temperatures: no rest row
+
+
+def test_reference_train_takes_a_record_from_zero_as_a_restarted_clock_after_a_rest_row(records, tmp_path):
+    """The rest row sits one interval before a twin record's start (−120 s here), where no clock read: a record
+    whose clock starts at 0 again had been refused as starting inside the training record (−120 … 28680 s)."""
+    training, test = records
+    model = train([training], "spindle,T05", "Z", model="mlr", out=tmp_path / "m.json")
+    assert model.training[0]["time_span_s"][0] == training.time_s[0] == 0.0
+    evaluation = evaluate(model, [test], reference="train", plots=False)
+    assert len(evaluation.rows) == 1

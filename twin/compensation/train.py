@@ -397,7 +397,7 @@ def _keep_time_spans(cm, loaded):
     ``time_s`` clock) in the model file: ``twin evaluate --reference train`` refuses a record that starts
     inside the training record, as it continues it (:func:`_check_starts_after_training`)."""
     for entry, ds in zip(cm.training, loaded):      # the fit lists the records in the order it was given them
-        entry["time_span_s"] = [float(ds.time_s[0]), float(ds.time_s[-1])]
+        entry["time_span_s"] = [_first_row_s(ds), float(ds.time_s[-1])]
         entry["time_origin"] = ds.metadata.get("import", {}).get("time_origin")
 
 
@@ -636,10 +636,10 @@ def _check_starts_after_training(cm, ds, label, history):
     :func:`~twin.compensation.protocol.continuation_times` does."""
     source = ds.metadata.get("source") or label
     if history is not None:
-        span, name = (float(history.time_s[0]), float(history.time_s[-1])), dataset_label(history)
+        span, name = (_first_row_s(history), float(history.time_s[-1])), dataset_label(history)
     else:
         span, name = _training_span(cm, ds, source), (cm.training or [{}])[0].get("label", "?")
-    start = float(ds.time_s[0])
+    start = _first_row_s(ds)
     if span is None or not span[0] < start <= span[1]:
         return
     origin = ds.metadata.get("import", {}).get("time_origin")
@@ -651,6 +651,12 @@ def _check_starts_after_training(cm, ds, label, history):
                          f"training record {name} ({_span_text(origin, *span, '–')}){which}, which --reference "
                          "train continues after it ends; give the rows after the training record's end, or "
                          "evaluate without --reference train")
+
+
+def _first_row_s(dataset):
+    """Time of a record's first row of its own, s: after the rest row a twin run's record gets one sampling
+    interval before its start (:func:`~twin.compensation.records.with_rest_start`), which no clock read."""
+    return float(dataset.time_s[1] if "rest_row_s" in dataset.metadata else dataset.time_s[0])
 
 
 def _span_text(origin, first_s, last_s, between):

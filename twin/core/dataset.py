@@ -657,11 +657,13 @@ def _interpolated(path, time_s, column, name):
     if runs[0][0] == 0:
         _check_reference_fill(path, time_s, name, runs[0])
     column[bad] = np.interp(time_s[bad], time_s[~bad], column[~bad])
+    for start, stop, span_s in runs[1 if runs[0][0] == 0 else 0:]:   # the first rows' fill is checked above
+        if span_s > QUIET_FILL_S:
+            how = "with a straight line" if stop < len(bad) else "by holding its last reading"
+            log.warning("%s: column %r: nan_policy='interpolate' filled %d rows in a row %s over %.2g h (t = %g … "
+                        "%g s; %d values filled in all): the drift in a gap that long is a guess", path, name,
+                        stop - start, how, span_s / 3600.0, time_s[start], time_s[stop - 1], bad.sum())
     start, stop, span_s = max(runs, key=lambda run: run[2])
-    if span_s > QUIET_FILL_S:
-        log.warning("%s: column %r: nan_policy='interpolate' filled %d rows in a row with a straight line over "
-                    "%.2g h (t = %g … %g s; %d values filled in all): the drift in a gap that long is a guess",
-                    path, name, stop - start, span_s / 3600.0, time_s[start], time_s[stop - 1], bad.sum())
     return {"values": int(bad.sum()), "longest_run_rows": stop - start, "longest_run_s": span_s}
 
 
@@ -854,30 +856,29 @@ def _check_row_lengths(path, text):
     """Refuse a data row with fewer or more fields than the header: pandas fills a row cut short (the last one of a
     file copied while the logger wrote it) with NaNs, read as missing or, cut mid-number, as a wrong value; a
     trailing comma on each row would make it take the time column as the index. Rows are split as pandas splits
-    them (spaces after a comma skipped); a row of blank fields is skipped, as pandas skips a blank line."""
+    them (spaces after a comma skipped); a blank line, or one of spaces, is skipped, as pandas skips it. The file
+    is read as a stream: only the first bad row is kept (a week of 1 Hz logging is 600 000 rows)."""
     reader = csv.reader(io.StringIO(text), skipinitialspace=True)
-    rows = [(reader.line_num, row) for row in reader if any(field.strip() for field in row)]
-    if not rows:
-        return
-    expected = len(rows[0][1])
-    bad = next((i for i, (_, row) in enumerate(rows) if len(row) != expected), None)
+    expected, bad, data_rows, trailing_comma = None, None, 0, True
+    for row in reader:
+        n = len(row)
+        if n <= 1 and not (row and row[0].strip()):    # a blank line, or one of spaces
+            continue
+        if expected is None:
+            expected = n
+            continue
+        data_rows += 1
+        if trailing_comma and (n != expected + 1 or row[-1].strip()):
+            trailing_comma = False
+        if bad is None and n != expected:
+            bad = (data_rows, reader.line_num, row)
     if bad is None:
         return
-    line, row = rows[bad]
-    quoted = text.splitlines()[line - 1][:60]
-    raise TwinInputError(f"{path}: data row {bad} (line {line}, {quoted!r}) has {len(row)} fields, the header "
-                         f"{expected}{_row_length_hint(rows, bad, expected)}")
-
-
-def _row_length_hint(rows, bad, expected):
-    """Why a data row (``rows[bad]``, ``(line, fields)``) may have another number of fields than the header's
-    ``expected``: the file's last row cut short, or a trailing comma on every data row; ``""`` for neither."""
-    data = [row for _, row in rows[1:]]
-    if all(len(row) == expected + 1 and not row[-1].strip() for row in data):
-        return " (a trailing comma on each row? remove it)"
-    if bad == len(rows) - 1 and len(rows[bad][1]) < expected:
-        return " (cut short? it is the file's last row)"
-    return ""
+    number, line, row = bad
+    hint = (" (a trailing comma on each row? remove it)" if trailing_comma else
+            " (cut short? it is the file's last row)" if number == data_rows and len(row) < expected else "")
+    raise TwinInputError(f"{path}: data row {number} (line {line}, {','.join(row)[:60]!r}) has {len(row)} fields, "
+                         f"the header {expected}{hint}")
 
 
 def _parse_csv(path, text, time_column=None):
