@@ -321,34 +321,28 @@ def joined_when_contiguous(datasets: Sequence[Dataset], names: Sequence[str]) ->
 
 
 def _successors(ordered, names):
-    """``{i: j}``: record ``j`` continues record ``i`` (indices into ``ordered``); refuses ambiguous clocks."""
-    # a record of one row has no interval (NaN), so nothing continues it
-    tails = [(float(ds.time_s[-1]), sampling_interval(ds, strict=False) if len(ds) > 1 else np.nan)
-             if len(ds) else (np.nan, np.nan) for ds in ordered]
-    pairs = [(i, j) for i, (end, dt) in enumerate(tails) for j, later in enumerate(ordered)
-             if i != j and len(later) and abs(later.time_s[0] - end - dt) <= CONTINUES_WITHIN * dt
-             and _continues(ordered[i], later, names)]
-    _check_unambiguous(ordered, pairs)
+    """``{i: j}``: record ``j`` continues record ``i`` (:func:`_continues`; indices into ``ordered``); refuses
+    ambiguous clocks."""
+    pairs = [(i, j) for i, first in enumerate(ordered) for j, later in enumerate(ordered)
+             if i != j and len(later) and _continues(first, later, names)]
+    # which of two records a third continues, or which of two continues one, would be a guess, and a wrong one
+    # joins unrelated states
+    _refuse_shared(ordered, [(j, i) for i, j in pairs], 0,
+                   "each end one sampling interval before {} starts (t = {:.10g} s), so which of them it continues")
+    _refuse_shared(ordered, pairs, -1,
+                   "each start one sampling interval after {} ends (t = {:.10g} s), so which of them continues it")
     return dict(pairs)
 
 
-def _check_unambiguous(ordered, pairs):
-    """Refuse a record that two or more records could each continue, or that two or more could each be
-    continued by: which history it belongs to would be a guess, and a wrong one joins unrelated states."""
-    for k in sorted({j for _, j in pairs}):
-        before = [ordered[i] for i, j in pairs if j == k]
-        if len(before) > 1:
-            raise TwinInputError(
-                f"{_with_span(before)} each end one sampling interval before {_record_file(ordered[k])} starts "
-                f"(t = {ordered[k].time_s[0]:.10g} s), so which of them it continues is ambiguous; "
-                f"{_HOW_TO_RESOLVE}")
-    for k in sorted({i for i, _ in pairs}):
-        after = [ordered[j] for i, j in pairs if i == k]
-        if len(after) > 1:
-            raise TwinInputError(
-                f"{_with_span(after)} each start one sampling interval after {_record_file(ordered[k])} ends "
-                f"(t = {ordered[k].time_s[-1]:.10g} s), so which of them continues it is ambiguous; "
-                f"{_HOW_TO_RESOLVE}")
+def _refuse_shared(ordered, links, row, meeting):
+    """Refuse a record ``k`` that two or more others meet (``links``: ``(k, other)`` index pairs into ``ordered``),
+    naming them, ``k`` and its time at ``row`` (0: its start, -1: its end) in the ``meeting`` sentence."""
+    for k in sorted({k for k, _ in links}):
+        others = [ordered[other] for m, other in links if m == k]
+        if len(others) > 1:
+            record = ordered[k]
+            raise TwinInputError(f"{_with_span(others)} {meeting.format(_record_file(record), record.time_s[row])} "
+                                 f"is ambiguous; {_HOW_TO_RESOLVE}")
 
 
 _HOW_TO_RESOLVE = ("give a history cut into files as one file, or shift the clock (time_s) of a record that "

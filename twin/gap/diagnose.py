@@ -566,7 +566,7 @@ def _better_start(d, after_winner, after_nominal):
 
 
 #: What a value of each kind :func:`_checked_number` takes is, for its message.
-KIND_WORDS = {Real: "a number", Integral: "a whole number"}
+_KIND_WORDS = {Real: "a number", Integral: "a whole number"}
 
 
 def _checked_number(name: str, value, rule: str, within: Callable[[float], bool], kind: type = Real) -> float:
@@ -576,7 +576,7 @@ def _checked_number(name: str, value, rule: str, within: Callable[[float], bool]
     read a string ("60") or a bool as a number."""
     number = _as_number(value, kind)
     if number is None:
-        raise TwinInputError(f"{name} must {rule}, got {value!r} (not {KIND_WORDS[kind]})")
+        raise TwinInputError(f"{name} must {rule}, got {value!r} (not {_KIND_WORDS[kind]})")
     if not within(number):
         raise TwinInputError(f"{name} must {rule}, got {number:g}")
     return number

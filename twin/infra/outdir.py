@@ -121,8 +121,10 @@ def check_output_folder(path: str | Path | None, overwrite: bool = False, inputs
     _check_inputs(out, inputs)
     _require_writable(out, out)
     if out.exists() and not overwrite:
-        _check_same_job(out)
-        if _owned_files(out) is None and any(not _is_bookkeeping(entry.name) for entry in out.iterdir()):
+        records = _twin_records(out)
+        if records:
+            _check_same_job(out, records)
+        elif any(not _is_bookkeeping(entry.name) for entry in out.iterdir()):
             raise TwinInputError(f"{out}: folder is not empty and is not a twin output (no {MARKER}); choose "
                                  "another folder, or pass --overwrite (overwrite=True) to write beside its "
                                  "files, which are kept")
@@ -196,11 +198,11 @@ def _owned_files(folder):
     return {r for doc in records for r in map(_safe_relative, doc["files"]) if r is not None}
 
 
-def _check_same_job(out):
-    """Refuse ``out`` when its marker (or journal) names another of the twin's commands than the running one
-    (:data:`JOB`): its files are another command's result, which only ``overwrite`` may replace."""
-    records = _twin_records(out)
-    written, running = (records[0].get("job") if records else None), JOB.get()
+def _check_same_job(out, records):
+    """Refuse ``out`` when its marker (or journal), the first of its ``records`` (:func:`_twin_records`), names
+    another of the twin's commands than the running one (:data:`JOB`): its files are another command's result,
+    which only ``overwrite`` may replace."""
+    written, running = records[0].get("job"), JOB.get()
     if written is None or running is None or written == running:
         return
     state = "a complete" if (out / MARKER).exists() else "an unfinished"
